@@ -1,0 +1,1 @@
+//! Batch regression of fit quality over many scans.

@@ -1,0 +1,1 @@
+//! Fitting analytic NDFs to an empirical NDF with Levenberg-Marquardt.

@@ -1,0 +1,32 @@
+//! # ndfit
+//!
+//! Empirical normal distribution functions (NDFs) of measured heightfield scans, and fits of analytic
+//! NDFs to them: above all the five-parameter Ellipsoid NDF of Walter, Dong, Marschner and Greenberg,
+//! with Levenberg-Marquardt.
+//!
+//! The layers, each apart from the next:
+//! - [`models`]: pure math of the analytic NDFs (no I/O);
+//! - [`io`]: readers and writers of scan files, into one [`Heightfield`] type;
+//! - [`preprocess`], [`ndf`]: form removal, normals and the binned empirical NDF;
+//! - [`fit`]: least-squares fits, model selection and uncertainty;
+//! - [`synth`]: synthetic scans with known truth;
+//! - [`batch`], [`scale`], [`bench`]: the batch regression runner, footprint filtering, measurements;
+//! - the `ndfit` binary (`src/cli/`) is a thin layer that parses arguments into these.
+
+#![warn(missing_docs)]
+
+pub mod batch;
+pub mod bench;
+pub mod error;
+pub mod fit;
+pub mod heightfield;
+pub mod io;
+pub mod models;
+pub mod ndf;
+pub mod plot;
+pub mod preprocess;
+pub mod scale;
+pub mod synth;
+
+pub use error::{Error, ErrorKind, Result};
+pub use heightfield::{Heightfield, ScanMeta};

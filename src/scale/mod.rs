@@ -1,0 +1,1 @@
+//! The NDF at the footprint a renderer sees (Tokuyoshi NDF filtering).

@@ -1,0 +1,1 @@
+//! Synthetic scans with known truth: ellipsoid caps, Gaussian random surfaces, tilted planes.

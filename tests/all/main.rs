@@ -1,0 +1,10 @@
+//! The one integration-test binary, with themed modules.
+
+mod common;
+
+mod cli;
+mod fit;
+mod models;
+mod ndf;
+mod readers;
+mod synth;
