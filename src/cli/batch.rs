@@ -1,13 +1,239 @@
-//! `ndfit batch`.
+//! `ndfit batch DIR|MANIFEST.csv -o OUT_DIR [--model MODEL] [--jobs N] [--baseline FILE] [--resume]`:
+//! fit every scan, write `OUT_DIR/summary.json` and `summary.csv`, compare against a baseline, and exit
+//! 0 (clean), 1 (some fit regressed) or 2 (some scan could not be read or fitted). See
+//! `data_formats/batch.md`.
 
+mod job;
+mod worker;
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context;
+use ndfit::batch::{self, summary, Baseline, RunOptions, ScanSpec, Tolerances};
+
+pub use job::JobConfig;
+
+/// How each scan's job is isolated from the others.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Isolate {
+    /// In this process, on a worker thread; a panic is caught and becomes the scan's error entry.
+    Thread,
+    /// In a child `ndfit` process per scan: also survives aborts, stack overflows and crashes, and
+    /// enforces `--timeout`. Costs one process start per scan.
+    Process,
+}
 
 /// Arguments of `ndfit batch`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// A folder of scans (searched recursively; files recognised by format) or a manifest CSV with a
+    /// `path` column and per-scan options (see data_formats/batch.md).
+    #[arg(required_unless_present = "worker")]
+    pub input: Option<PathBuf>,
+    /// Output folder: summary.json, summary.csv, fits/, scans/ (per-scan records), optional ndf/.
+    #[arg(short = 'o', long = "out", required_unless_present = "worker")]
+    pub out: Option<PathBuf>,
+    /// Model to fit: ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid or auto (a manifest's `model`
+    /// column overrides it per scan).
+    #[arg(long, default_value = "ellipsoid")]
+    pub model: String,
+    /// Scans fitted at once (default: the number of cores). Results do not depend on it.
+    #[arg(long, short = 'j')]
+    pub jobs: Option<usize>,
+    /// An earlier run's summary.json to compare against: exit 1 when some fit regressed.
+    #[arg(long)]
+    pub baseline: Option<PathBuf>,
+    /// Skip scans whose record in OUT_DIR is finished and still matches (same settings, file, baseline).
+    #[arg(long)]
+    pub resume: bool,
+    /// Absolute tolerance on the quality measure kl (nats; 5e-5 is a 1% RMS change of D).
+    #[arg(long, default_value_t = Tolerances::default().kl_abs)]
+    pub tol_kl: f64,
+    /// Tolerance on kl relative to the baseline's kl.
+    #[arg(long, default_value_t = Tolerances::default().kl_rel)]
+    pub tol_kl_rel: f64,
+    /// A parameter changed when it moved by more than this many combined standard errors.
+    #[arg(long, default_value_t = Tolerances::default().param_sigma)]
+    pub tol_sigma: f64,
+    /// Count parameter changes beyond --tol-sigma as regressions (exit 1), not only report them.
+    #[arg(long)]
+    pub params_regress: bool,
+    /// Do not count baseline scans missing from this run as a regression.
+    #[arg(long)]
+    pub allow_missing: bool,
+    /// Print every scan in the regression table, not only those that differ.
+    #[arg(long)]
+    pub table_all: bool,
+    /// Also write each scan's empirical NDF as OUT_DIR/ndf/<path>.ndf.csv.
+    #[arg(long)]
+    pub write_ndf: bool,
+    /// Isolation of each scan's job.
+    #[arg(long, value_enum, default_value = "thread")]
+    pub isolate: Isolate,
+    /// With --isolate process: give up on a scan after this many seconds (an `error` entry).
+    #[arg(long)]
+    pub timeout: Option<f64>,
+    /// Options applied to every scan, as for `ndfit fit` (e.g. `-- --dx 1e-6 --form poly2`).
+    #[arg(last = true)]
+    pub scan_options: Vec<String>,
+    /// Internal: run one scan's job from a request on standard input (used by --isolate process).
+    #[arg(long, hide = true)]
+    pub worker: bool,
+    /// Testing aid: sleep this many milliseconds in each scan's job (to interrupt a batch midway).
+    #[arg(long, hide = true, default_value_t = 0)]
+    pub debug_delay_ms: u64,
+}
 
 /// Run `ndfit batch`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let _ = args;
-    anyhow::bail!("'ndfit batch' is not implemented yet")
+    batch::install_panic_hook();
+    if args.worker {
+        return worker::serve();
+    }
+    let (Some(input), Some(out)) = (args.input.clone(), args.out.clone()) else {
+        anyhow::bail!("batch needs an input folder or manifest and -o OUT_DIR");
+    };
+    let model = args.model.clone();
+    check_model(&model).context("--model")?;
+    let jobs = match args.jobs {
+        Some(0) => anyhow::bail!("--jobs must be at least 1"),
+        Some(n) => n,
+        None => std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+    };
+    if let Some(t) = args.timeout {
+        anyhow::ensure!(t.is_finite() && t > 0.0, "--timeout must be a positive number of seconds");
+        anyhow::ensure!(args.isolate == Isolate::Process, "--timeout needs --isolate process");
+    }
+    let tolerances = Tolerances {
+        kl_abs: args.tol_kl,
+        kl_rel: args.tol_kl_rel,
+        param_sigma: args.tol_sigma,
+        params_regress: args.params_regress,
+        ..Tolerances::default()
+    };
+    anyhow::ensure!(
+        [tolerances.kl_abs, tolerances.kl_rel, tolerances.param_sigma].iter().all(|t| t.is_finite() && *t >= 0.0),
+        "tolerances must be finite and non-negative"
+    );
+
+    let specs = collect_specs(&input, &out)?;
+    anyhow::ensure!(!specs.is_empty(), "{}: no scans found", input.display());
+    let cfg = JobConfig {
+        model: model.clone(),
+        scan_options: args.scan_options.clone(),
+        write_ndf: args.write_ndf,
+        debug_delay_ms: args.debug_delay_ms,
+    };
+    // Every per-scan option is checked before anything runs, so a typo fails the run at once.
+    for s in &specs {
+        job::parse_scan_options(&cfg, s).map_err(|f| anyhow::anyhow!("{}", f.message))?;
+        if let Some(m) = &s.model {
+            check_model(m).with_context(|| format!("{}: model", s.key))?;
+        }
+    }
+    let baseline = match &args.baseline {
+        Some(p) => Some(Baseline::read(p)?),
+        None => None,
+    };
+    let settings = serde_json::json!({
+        "ndfit": env!("CARGO_PKG_VERSION"),
+        "config": cfg.settings(),
+        "baseline": baseline.is_some(),
+    })
+    .to_string();
+    let opts = RunOptions { out_dir: out.clone(), jobs, resume: args.resume, settings, tolerances };
+
+    let bar = progress_bar(specs.len() as u64);
+    let progress = |p: batch::runner::Progress<'_>| {
+        let e = &p.brief.entry;
+        let what = match (&e.error, p.brief.reused) {
+            (Some(err), _) => format!("error {err}"),
+            (None, true) => format!("ok (resumed) {}", e.path),
+            (None, false) => format!("ok {} ({:.2} s)", e.path, e.time_s),
+        };
+        match &bar {
+            Some(b) => {
+                b.set_message(e.path.clone());
+                b.inc(1);
+            }
+            None => eprintln!("ndfit batch: [{}/{}] {what}", p.done, p.total),
+        }
+    };
+    let timeout = args.timeout.map(Duration::from_secs_f64);
+    let outcome = match args.isolate {
+        Isolate::Thread => batch::run(&specs, baseline.as_ref(), &|s, c| job::fit_scan(&cfg, s, c), &opts, &progress)?,
+        Isolate::Process => {
+            let exe = std::env::current_exe().context("cannot find the ndfit executable for --isolate process")?;
+            batch::run(&specs, baseline.as_ref(), &|s, c| worker::run_in_child(&exe, &cfg, s, c, timeout), &opts, &progress)?
+        }
+    };
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+
+    let allow_missing = args.allow_missing || baseline.is_none();
+    let code = outcome.exit_code(allow_missing);
+    let header = summary::Header {
+        schema: summary::SCHEMA,
+        ndfit_version: env!("CARGO_PKG_VERSION"),
+        input: input.display().to_string(),
+        model,
+        baseline: args.baseline.as_ref().map(|p| p.display().to_string()),
+        tolerances,
+        counts: outcome.counts(),
+        exit_status: code,
+        missing_from_run: outcome.missing.clone(),
+    };
+    summary::write_summary_json(&out, &header, &outcome)?;
+    summary::write_summary_csv(&out, &outcome)?;
+
+    if baseline.is_some() {
+        print!("{}", summary::regression_table(&outcome, args.table_all));
+    } else {
+        let c = outcome.counts();
+        println!("{} scans: {} ok, {} error", c.scans, c.ok, c.error);
+    }
+    for b in outcome.briefs.iter().filter(|b| b.entry.error.is_some()) {
+        eprintln!("ndfit: {}", b.entry.error.as_deref().unwrap_or_default());
+    }
+    if !allow_missing && !outcome.missing.is_empty() {
+        eprintln!("ndfit batch: {} baseline scan(s) missing from this run (--allow-missing to accept)", outcome.missing.len());
+    }
+    Ok(ExitCode::from(code))
+}
+
+/// The scans of a folder (walked) or a manifest (`.csv` file). The output folder is never walked.
+fn collect_specs(input: &Path, out: &Path) -> anyhow::Result<Vec<ScanSpec>> {
+    if input.is_file() {
+        return Ok(batch::manifest::read_manifest(input)?);
+    }
+    Ok(batch::discover::walk(input, &[out.to_path_buf()], &detect_by_content)?)
+}
+
+/// Whether a file without a scan extension is a scan by its content (the readers' detection).
+fn detect_by_content(path: &Path) -> bool {
+    let _ = path;
+    false
+}
+
+fn check_model(m: &str) -> anyhow::Result<()> {
+    if m == "auto" {
+        return Ok(());
+    }
+    m.parse::<ndfit::models::ModelId>().map(|_| ()).map_err(|e| anyhow::anyhow!("{}", e.message()))
+}
+
+/// An indicatif bar on a terminal; `None` (plain lines) otherwise.
+fn progress_bar(n: u64) -> Option<indicatif::ProgressBar> {
+    if !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let b = indicatif::ProgressBar::new(n);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} scans, {elapsed} elapsed, eta {eta}  {wide_msg}") {
+        b.set_style(style);
+    }
+    Some(b)
 }

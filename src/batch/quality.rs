@@ -1,0 +1,146 @@
+//! How well a fitted model describes a scan's data, on a scale comparable across models and runs.
+//!
+//! Every measure here is computed by the batch itself from the empirical NDF and the fitted model's
+//! `D(m)` (the fitter's self-reported objective is not trusted for the regression decision), following
+//! `data_formats/objective.md`:
+//! - `deviance`: the Poisson deviance `F = sum_k 2 (E_k - c_k + c_k ln(c_k/E_k))` with expected counts
+//!   `E_k = N D(m_k) W_k` (midpoint rule), bins with `W_k = 0` left out;
+//! - `kl = F / (2N)`: the deviance per sample. With `sum E_k = N` it is exactly the binned Kullback-Leibler
+//!   divergence `sum p_k ln(p_k / q_k)` of the model's bin probabilities `q_k` from the data's `p_k`, in
+//!   nats: a quantity that does not grow with the scan size, so one tolerance serves every scan. A
+//!   relative density error `eps(m)` small everywhere costs `kl ~ E[eps^2]/2`.
+//! - `ndf_delta`: the NDF difference metric `delta(D_fit; D_emp)` of objective.md (reference: the
+//!   empirical NDF, weights `d_k W_k` over bins with data), the RMS relative error of the fitted D.
+
+use serde_json::Value;
+
+use crate::error::{Error, Result};
+use crate::models::{Model, ModelId, Ndf};
+use crate::ndf::EmpiricalNdf;
+
+/// Goodness of a model against one empirical NDF.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Quality {
+    /// Poisson deviance `F` over all bins with `W_k > 0`.
+    pub deviance: f64,
+    /// `F / (2N)`: binned KL divergence of the model from the data (nats), the regression measure.
+    pub kl: f64,
+    /// NDF difference metric `delta(D_fit; D_emp)` (objective.md), dimensionless.
+    pub ndf_delta: f64,
+    /// Number of samples `N` in the NDF.
+    pub n_samples: u64,
+    /// Number of bins with data (`c_k > 0`), `K` of objective.md.
+    pub n_bins: usize,
+}
+
+/// Score `model` against `ndf`. Errors only when the NDF has no samples.
+pub fn quality(ndf: &EmpiricalNdf, model: &dyn Ndf) -> Result<Quality> {
+    let n: u64 = ndf.bins.iter().map(|b| b.count).sum();
+    if n == 0 {
+        return Err(Error::new(crate::ErrorKind::BadData, "the empirical NDF holds no samples"));
+    }
+    let nf = n as f64;
+    let (mut dev, mut n_bins) = (0.0f64, 0usize);
+    let (mut dw, mut dsum) = (0.0f64, 0.0f64);
+    for b in &ndf.bins {
+        // Bins without projected area carry no data and no model mass (objective.md).
+        if !(b.proj_solid_angle > 0.0) {
+            continue;
+        }
+        let d = model.d(b.m);
+        // A model that is NaN or negative somewhere is as wrong as a zero there; zero mass under data
+        // gives an infinite deviance, which the floor below keeps finite but enormous (and comparable).
+        let d = if d.is_finite() && d > 0.0 { d } else { 0.0 };
+        let e = (nf * d * b.proj_solid_angle).max(f64::MIN_POSITIVE);
+        let c = b.count as f64;
+        dev += if b.count == 0 { 2.0 * e } else { 2.0 * (e - c + c * (c.ln() - e.ln())) };
+        if b.count > 0 {
+            n_bins += 1;
+            let d_emp = c / (nf * b.proj_solid_angle);
+            let w = d_emp * b.proj_solid_angle;
+            dw += w * (d / d_emp - 1.0).powi(2);
+            dsum += w;
+        }
+    }
+    // Rounding can leave a deviance of a perfect model a few ulps below zero.
+    let dev = dev.max(0.0);
+    Ok(Quality { deviance: dev, kl: dev / (2.0 * nf), ndf_delta: (dw / dsum).sqrt(), n_samples: n, n_bins })
+}
+
+/// The model a fit JSON (`ndfit.fit/1`) describes: its `model` id and its `params` by name.
+pub fn model_of_fit(fit: &Value) -> Result<Model> {
+    let id_str = fit.get("model").and_then(Value::as_str).ok_or_else(|| Error::corrupt("fit has no 'model'"))?;
+    let id: ModelId = id_str.parse()?;
+    let params = fit.get("params").ok_or_else(|| Error::corrupt("fit has no 'params'"))?;
+    let p = id
+        .param_names()
+        .iter()
+        .map(|name| {
+            params
+                .get(*name)
+                .and_then(Value::as_f64)
+                .ok_or_else(|| Error::corrupt(format!("fit of model {id} has no number 'params.{name}'")))
+        })
+        .collect::<Result<Vec<f64>>>()?;
+    Model::from_params(id, &p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::models::Ggx;
+    use crate::ndf::NdfBin;
+    use nalgebra::Vector3;
+    use std::f64::consts::PI;
+
+    fn bin(count: u64, w: f64) -> NdfBin {
+        NdfBin { m: Vector3::new(0.0, 0.0, 1.0), d: 0.0, stderr: 0.0, count, solid_angle: w, proj_solid_angle: w }
+    }
+
+    /// GGX with alpha = 1 is the uniform distribution `D = 1/pi` over the hemisphere (every unit m gives
+    /// `x^2 + y^2 + z^2 = 1`), so the expected counts are `N W / pi`, set here by choosing W.
+    #[test]
+    fn deviance_and_kl_match_hand_computation() {
+        let g = Ggx::new(1.0, 1.0, 0.0).unwrap();
+        // N = 15; E = (8, 2, 5) from W = E pi / N; c = (10, 0, 5); plus a bin with W = 0 (ignored).
+        let w = |e: f64| e * PI / 15.0;
+        let ndf = EmpiricalNdf { bins: vec![bin(10, w(8.0)), bin(0, w(2.0)), bin(5, w(5.0)), bin(0, 0.0)], n_samples: 15 };
+        let q = quality(&ndf, &g).unwrap();
+        // Hand: F = 2[(8 - 10 + 10 ln(10/8)) + 2 + 0] = 2[0.23143551314209755 + 2].
+        let f = 2.0 * ((8.0 - 10.0 + 10.0 * (1.25f64).ln()) + 2.0);
+        assert!((q.deviance - f).abs() < 1e-12 * f, "{} vs {f}", q.deviance);
+        assert!((q.kl - f / 30.0).abs() < 1e-14);
+        // KL of p = (10,0,5)/15 from q = (8,2,5)/15: (10/15) ln(10/8) = 0.1487...; equal to F/2N since sum E = N.
+        let kl_direct = (10.0 / 15.0) * (10.0f64 / 8.0).ln();
+        assert!((q.kl - kl_direct).abs() < 1e-12, "{} vs {kl_direct}", q.kl);
+        assert_eq!(q.n_bins, 2);
+        assert_eq!(q.n_samples, 15);
+        // delta: weights d_k W_k = c_k/N: (10/15)(8/10 - 1)^2 + (5/15)(0)^2 over 1 => sqrt(0.04 * 2/3).
+        assert!((q.ndf_delta - (0.04f64 * 2.0 / 3.0).sqrt()).abs() < 1e-12, "{}", q.ndf_delta);
+    }
+
+    #[test]
+    fn perfect_model_scores_zero_and_zero_mass_stays_finite() {
+        let g = Ggx::new(1.0, 1.0, 0.0).unwrap();
+        let w = |e: f64| e * PI / 30.0;
+        let ndf = EmpiricalNdf { bins: vec![bin(10, w(10.0)), bin(20, w(20.0))], n_samples: 30 };
+        let q = quality(&ndf, &g).unwrap();
+        assert!(q.deviance < 1e-12 && q.ndf_delta < 1e-12, "{q:?}");
+        // A model with (numerically) no mass at the data: large, finite, not NaN.
+        let tilted = Ggx::new(1e-4, 1e-4, 0.0).unwrap();
+        let far = NdfBin { m: Vector3::new(0.8, 0.0, 0.6), ..bin(30, 0.1) };
+        let q = quality(&EmpiricalNdf { bins: vec![far], n_samples: 30 }, &tilted).unwrap();
+        assert!(q.deviance.is_finite() && q.deviance > 1e3, "{q:?}");
+        assert!(quality(&EmpiricalNdf { bins: vec![bin(0, 1.0)], n_samples: 0 }, &g).is_err());
+    }
+
+    #[test]
+    fn model_of_fit_reads_params_by_name() {
+        let fit = serde_json::json!({"model": "ggx-aniso", "params": {"theta_z": 0.3, "alpha_x": 0.2, "alpha_y": 0.1}});
+        let m = model_of_fit(&fit).unwrap();
+        assert_eq!(m.id(), ModelId::GgxAniso);
+        assert_eq!(m.params(), vec![0.2, 0.1, 0.3]);
+        assert!(model_of_fit(&serde_json::json!({"model": "ggx", "params": {}})).is_err());
+        assert!(model_of_fit(&serde_json::json!({"model": "nope", "params": {}})).is_err());
+    }
+}

@@ -1,0 +1,303 @@
+//! Integration tests: the batch runner (`ndfit::batch`) with fake jobs (machinery: walk, manifest,
+//! errors, panics, atomic writes, resume, baseline comparison, exit codes, --jobs independence), then
+//! `ndfit batch` end to end on synthetic scans.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use ndfit::batch::{
+    self, discover, summary, Baseline, JobContext, JobFailure, JobOutput, Quality, RunOptions, RunOutcome, ScanSpec,
+    Tolerances,
+};
+use serde_json::{json, Value};
+
+/// A fake scan file: the job reads it and returns what it says (`alpha`, `kl`), or fails or panics.
+fn fake_scan(dir: &Path, name: &str, body: &str) {
+    let p = dir.join(name);
+    std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+    std::fs::write(p, body).unwrap();
+}
+
+fn q(kl: f64) -> Quality {
+    Quality { deviance: kl * 2e4, kl, ndf_delta: kl.sqrt(), n_samples: 10_000, n_bins: 100 }
+}
+
+/// The fake job: deterministic in the file's content, with a content-dependent sleep so completion order
+/// differs from path order when several jobs run.
+fn fake_job(spec: &ScanSpec, ctx: &JobContext<'_>) -> Result<JobOutput, JobFailure> {
+    let text = std::fs::read_to_string(&spec.file).map_err(|e| JobFailure::new("io", format!("{}: {e}", spec.file.display())))?;
+    if text.starts_with("PANIC") {
+        let v: Vec<u8> = Vec::new();
+        let _ = v[text.len()]; // index out of bounds: a panic inside "a dependency"
+    }
+    let v: Value = serde_json::from_str(&text).map_err(|e| JobFailure::new("corrupt", format!("{}: not a scan: {e}", spec.file.display())))?;
+    let alpha = v["alpha"].as_f64().unwrap_or(0.1);
+    let kl = v["kl"].as_f64().unwrap_or(1e-3);
+    std::thread::sleep(std::time::Duration::from_millis((alpha * 100.0) as u64 % 40));
+    let model = spec.model.clone().unwrap_or_else(|| v["model"].as_str().unwrap_or("ggx").to_string());
+    // Same-bins score of the baseline model: the fake "data" says what any other model scores.
+    let same_bins = ctx.baseline.and_then(|b| b.quality).map(|bq| q(v["kl_baseline_model"].as_f64().unwrap_or(bq.kl)));
+    Ok(JobOutput {
+        fit: json!({"schema": "ndfit.fit/1", "model": model, "params": {"alpha": alpha}, "stderr": {"alpha": 0.001},
+                    "timings": {"total_s": 0.001}}),
+        quality: Some(q(kl)),
+        baseline_on_same_bins: same_bins,
+    })
+}
+
+fn opts(out: &Path, jobs: usize) -> RunOptions {
+    RunOptions { out_dir: out.to_path_buf(), jobs, resume: false, settings: "test".into(), tolerances: Tolerances::default() }
+}
+
+fn run_dir(dir: &Path, o: &RunOptions, baseline: Option<&Baseline>, job: &batch::Job<'_>) -> RunOutcome {
+    let specs = discover::walk(dir, &[o.out_dir.clone()], &|_: &Path| false).unwrap();
+    let outcome = batch::run(&specs, baseline, job, o, &|_| {}).unwrap();
+    let header = summary::Header {
+        schema: summary::SCHEMA,
+        ndfit_version: "test",
+        input: dir.display().to_string(),
+        model: "ggx".into(),
+        baseline: None,
+        tolerances: o.tolerances,
+        counts: outcome.counts(),
+        exit_status: outcome.exit_code(true),
+        missing_from_run: outcome.missing.clone(),
+    };
+    summary::write_summary_json(&o.out_dir, &header, &outcome).unwrap();
+    summary::write_summary_csv(&o.out_dir, &outcome).unwrap();
+    outcome
+}
+
+/// summary.json with everything that legitimately varies between runs (timings) removed.
+fn stable_summary(out: &Path) -> Value {
+    let mut v: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    strip_times(&mut v);
+    v
+}
+
+fn strip_times(v: &mut Value) {
+    match v {
+        Value::Object(o) => {
+            o.retain(|k, _| !(k == "time_s" || k == "timings" || k.ends_with("_ms") || k == "input"));
+            o.values_mut().for_each(strip_times);
+        }
+        Value::Array(a) => a.iter_mut().for_each(strip_times),
+        _ => {}
+    }
+}
+
+fn entries(out: &Path) -> BTreeMap<String, Value> {
+    let v: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    v["entries"].as_array().unwrap().iter().map(|e| (e["path"].as_str().unwrap().to_string(), e.clone())).collect()
+}
+
+/// Every file under `dir` parses as what its name says (no half-written output), and no temp file is left.
+fn assert_outputs_complete(dir: &Path) {
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            let name = e.file_name().to_string_lossy().into_owned();
+            if p.is_dir() {
+                stack.push(p);
+                continue;
+            }
+            assert!(!name.ends_with(".tmp"), "temporary file left: {}", p.display());
+            if name.ends_with(".json") {
+                let bytes = std::fs::read(&p).unwrap();
+                assert!(serde_json::from_slice::<Value>(&bytes).is_ok(), "half-written JSON {}", p.display());
+            }
+        }
+    }
+}
+
+fn good_folder(dir: &Path) {
+    fake_scan(dir, "a.x3p", r#"{"alpha": 0.31, "kl": 0.002}"#);
+    fake_scan(dir, "sub/b.x3p", r#"{"alpha": 0.12, "kl": 0.001}"#);
+    fake_scan(dir, "sub/deeper/c.plu", r#"{"alpha": 0.57, "kl": 0.004}"#);
+    fake_scan(dir, "d.sur", r#"{"alpha": 0.05, "kl": 0.003}"#);
+    fake_scan(dir, "notes.md", "not a scan");
+}
+
+#[test]
+fn bad_and_panicking_scans_become_error_entries_and_the_batch_goes_on() {
+    let t = tempfile::tempdir().unwrap();
+    let (dir, out) = (t.path().join("in"), t.path().join("out"));
+    good_folder(&dir);
+    fake_scan(&dir, "corrupt.x3p", "PK\u{3}\u{4} truncated");
+    fake_scan(&dir, "sub/panics.opd", "PANIC");
+    batch::install_panic_hook();
+    let o = run_dir(&dir, &opts(&out, 2), None, &fake_job);
+    let c = o.counts();
+    assert_eq!((c.scans, c.ok, c.error), (6, 4, 2), "{c:?}");
+    assert_eq!(o.exit_code(true), 2);
+    let e = entries(&out);
+    assert_eq!(e.keys().cloned().collect::<Vec<_>>(), ["a.x3p", "corrupt.x3p", "d.sur", "sub/b.x3p", "sub/deeper/c.plu", "sub/panics.opd"]);
+    assert_eq!(e["corrupt.x3p"]["status"], "error");
+    assert!(e["corrupt.x3p"]["error"].as_str().unwrap().contains("corrupt.x3p"));
+    assert_eq!(e["sub/panics.opd"]["error_kind"], "panic");
+    let msg = e["sub/panics.opd"]["error"].as_str().unwrap();
+    assert!(msg.contains("index out of bounds") && msg.contains("tests/all/batch.rs"), "{msg}");
+    assert_eq!(e["a.x3p"]["status"], "ok");
+    assert_eq!(e["a.x3p"]["fit"]["params"]["alpha"], 0.31);
+    // Per-scan fit files mirror the folder layout; the CSV has one row per scan.
+    let fit: Value = serde_json::from_slice(&std::fs::read(out.join("fits/sub/deeper/c.plu.fit.json")).unwrap()).unwrap();
+    assert_eq!(fit["params"]["alpha"], 0.57);
+    let csv = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 7, "{csv}");
+    assert!(csv.lines().next().unwrap().starts_with("path,status,model,alpha,"));
+    assert_outputs_complete(&out);
+}
+
+#[test]
+fn results_do_not_depend_on_jobs() {
+    let t = tempfile::tempdir().unwrap();
+    let dir = t.path().join("in");
+    for i in 0..12 {
+        // Sleeps vary with alpha, so with 3 jobs completion order differs from path order.
+        fake_scan(&dir, &format!("s{i:02}.x3p"), &format!(r#"{{"alpha": {}, "kl": {}}}"#, 0.37 * ((i * 7) % 12) as f64 / 12.0 + 0.01, 1e-3 * i as f64));
+    }
+    let mut got = Vec::new();
+    for jobs in [1, 2, 3] {
+        let out = t.path().join(format!("out{jobs}"));
+        run_dir(&dir, &opts(&out, jobs), None, &fake_job);
+        got.push(stable_summary(&out));
+        let csv = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+        let keys: Vec<&str> = csv.lines().skip(1).map(|l| l.split(',').next().unwrap()).collect();
+        let mut sorted = keys.clone();
+        sorted.sort();
+        assert_eq!(keys, sorted, "CSV ordered by path");
+    }
+    assert_eq!(got[0], got[1]);
+    assert_eq!(got[0], got[2]);
+}
+
+#[test]
+fn resume_skips_finished_scans_and_reruns_changed_ones() {
+    let t = tempfile::tempdir().unwrap();
+    let (dir, out) = (t.path().join("in"), t.path().join("out"));
+    good_folder(&dir);
+    let calls = AtomicUsize::new(0);
+    let counting = |s: &ScanSpec, c: &JobContext<'_>| {
+        calls.fetch_add(1, Ordering::SeqCst);
+        fake_job(s, c)
+    };
+    let mut o = opts(&out, 2);
+    run_dir(&dir, &o, None, &counting);
+    let full = stable_summary(&out);
+    assert_eq!(calls.swap(0, Ordering::SeqCst), 4);
+
+    // Simulate an interrupted run: one record and the summaries never written, a temp file left behind.
+    std::fs::remove_file(out.join("scans/sub/b.x3p.json")).unwrap();
+    std::fs::remove_file(out.join("summary.json")).unwrap();
+    std::fs::write(out.join("scans/.a.x3p.json.XyZ123.tmp"), "{\"path\": \"a.x3").unwrap();
+    o.resume = true;
+    let r = run_dir(&dir, &o, None, &counting);
+    assert_eq!(calls.swap(0, Ordering::SeqCst), 1, "only the unfinished scan runs again");
+    assert_eq!(r.counts().reused, 3);
+    assert_eq!(stable_summary(&out), full);
+    assert_outputs_complete(&out);
+
+    // A changed scan file, or changed settings, invalidate the finished record.
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    fake_scan(&dir, "d.sur", r#"{"alpha": 0.06, "kl": 0.003}"#);
+    run_dir(&dir, &o, None, &counting);
+    assert_eq!(calls.swap(0, Ordering::SeqCst), 1);
+    assert_eq!(entries(&out)["d.sur"]["fit"]["params"]["alpha"], 0.06);
+    o.settings = "other model".into();
+    run_dir(&dir, &o, None, &counting);
+    assert_eq!(calls.swap(0, Ordering::SeqCst), 4);
+}
+
+#[test]
+fn baseline_comparison_sets_the_exit_status() {
+    let t = tempfile::tempdir().unwrap();
+    let (dir, out0, out1) = (t.path().join("in"), t.path().join("base"), t.path().join("run"));
+    good_folder(&dir);
+    run_dir(&dir, &opts(&out0, 2), None, &fake_job);
+    let base = Baseline::read(&out0.join("summary.json")).unwrap();
+    assert_eq!(base.entries.len(), 4);
+
+    // Against itself: every verdict "same", exit 0.
+    let o = run_dir(&dir, &opts(&out1, 2), Some(&base), &fake_job);
+    assert_eq!(o.exit_code(false), 0);
+    assert!(entries(&out1).values().all(|e| e["baseline"]["verdict"] == "same"));
+
+    // b got worse beyond tolerance (0.001 -> 0.0012 > max(5e-5, 5% of 0.001)), c slightly (within).
+    fake_scan(&dir, "sub/b.x3p", r#"{"alpha": 0.12, "kl": 0.0012}"#);
+    fake_scan(&dir, "sub/deeper/c.plu", r#"{"alpha": 0.57, "kl": 0.00415}"#);
+    let o = run_dir(&dir, &opts(&out1, 2), Some(&base), &fake_job);
+    assert_eq!(o.exit_code(false), 1);
+    let e = entries(&out1);
+    assert_eq!(e["sub/b.x3p"]["baseline"]["verdict"], "regressed");
+    assert_eq!(e["sub/deeper/c.plu"]["baseline"]["verdict"], "same");
+    let table = summary::regression_table(&o, false);
+    assert!(table.contains("REGRESSED") && table.contains("sub/b.x3p"), "{table}");
+    assert!(!table.contains("sub/deeper/c.plu"), "{table}");
+
+    // A parameter beyond 3 combined standard errors is reported; with params_regress it regresses.
+    fake_scan(&dir, "sub/b.x3p", r#"{"alpha": 0.13, "kl": 0.001}"#);
+    let o = run_dir(&dir, &opts(&out1, 2), Some(&base), &fake_job);
+    assert_eq!(o.exit_code(false), 0);
+    assert_eq!(entries(&out1)["sub/b.x3p"]["baseline"]["param_changes"][0]["name"], "alpha");
+    let mut strict = opts(&out1, 2);
+    strict.tolerances.params_regress = true;
+    assert_eq!(run_dir(&dir, &strict, Some(&base), &fake_job).exit_code(false), 1);
+
+    // A scan gone from the folder is missing (exit 1 unless allowed); an unreadable one is exit 2.
+    fake_scan(&dir, "sub/b.x3p", r#"{"alpha": 0.12, "kl": 0.001}"#);
+    std::fs::remove_file(dir.join("d.sur")).unwrap();
+    let o = run_dir(&dir, &opts(&out1, 2), Some(&base), &fake_job);
+    assert_eq!(o.missing, ["d.sur"]);
+    assert_eq!((o.exit_code(false), o.exit_code(true)), (1, 0));
+    fake_scan(&dir, "d.sur", "garbage");
+    let o = run_dir(&dir, &opts(&out1, 2), Some(&base), &fake_job);
+    assert_eq!(o.exit_code(false), 2);
+    assert_eq!(entries(&out1)["d.sur"]["baseline"]["verdict"], "broken");
+}
+
+#[test]
+fn same_bins_score_decides_over_stored_quality() {
+    // The baseline model re-scored on this run's bins is what counts: here the stored baseline kl
+    // (0.001) would call the new fit (0.0012) a regression, but on the same bins the baseline model
+    // scores 0.0013, so the new fit is better.
+    let t = tempfile::tempdir().unwrap();
+    let (dir, out0, out1) = (t.path().join("in"), t.path().join("base"), t.path().join("run"));
+    fake_scan(&dir, "a.x3p", r#"{"alpha": 0.2, "kl": 0.001}"#);
+    run_dir(&dir, &opts(&out0, 1), None, &fake_job);
+    let base = Baseline::read(&out0.join("summary.json")).unwrap();
+    fake_scan(&dir, "a.x3p", r#"{"alpha": 0.2, "kl": 0.0012, "kl_baseline_model": 0.0013}"#);
+    let o = run_dir(&dir, &opts(&out1, 1), Some(&base), &fake_job);
+    let e = entries(&out1);
+    assert_eq!(e["a.x3p"]["baseline"]["basis"], "same_bins");
+    assert_eq!(e["a.x3p"]["baseline"]["verdict"], "improved");
+    assert_eq!(o.exit_code(false), 0);
+}
+
+#[test]
+fn manifest_keys_and_options_reach_the_job() {
+    let t = tempfile::tempdir().unwrap();
+    let dir = t.path().join("in");
+    fake_scan(&dir, "raw/a.txt", r#"{"alpha": 0.2}"#);
+    fake_scan(&dir, "list.csv", "path,id,dx,model\nraw/a.txt,first,1e-6,beckmann\nraw/a.txt,second,2e-6,\n");
+    let specs = batch::manifest::read_manifest(&dir.join("list.csv")).unwrap();
+    let seen = std::sync::Mutex::new(Vec::new());
+    let job = |s: &ScanSpec, c: &JobContext<'_>| {
+        seen.lock().unwrap().push((s.key.clone(), s.options.clone()));
+        fake_job(s, c)
+    };
+    let out = t.path().join("out");
+    let o = batch::run(&specs, None, &job, &opts(&out, 2), &|_| {}).unwrap();
+    assert_eq!(o.briefs.iter().map(|b| b.entry.path.as_str()).collect::<Vec<_>>(), ["first", "second"]);
+    assert_eq!(o.briefs[0].model.as_deref(), Some("beckmann"));
+    assert_eq!(o.briefs[1].model.as_deref(), Some("ggx"));
+    let mut seen = seen.into_inner().unwrap();
+    seen.sort();
+    assert_eq!(seen[0].1, ["--dx", "1e-6"]);
+    assert_eq!(seen[1].1, ["--dx", "2e-6"]);
+    assert!(out.join("scans/first.json").is_file() && out.join("fits/second.fit.json").is_file());
+}
+
+#[allow(dead_code)]
+fn _unused(_: PathBuf) {}
