@@ -91,10 +91,10 @@ fn numbers(v: Option<&Value>) -> BTreeMap<String, f64> {
         .unwrap_or_default()
 }
 
-/// The standard errors a fit JSON reports, by parameter name. The fit writer's key is `stderr` (an
-/// object by name); a few other spellings are accepted so older baselines still compare.
+/// The standard errors a fit JSON reports, by parameter name: `std_errors` of `ndfit.fit/1` (an object
+/// by name; `null` for an undetermined parameter, which is then left out), or `stderr`.
 pub fn stderr_of(fit: &Value) -> BTreeMap<String, f64> {
-    for path in [&["stderr"][..], &["std_errors"], &["standard_errors"], &["uncertainty", "stderr"], &["uncertainty", "std_errors"]] {
+    for path in [&["std_errors"][..], &["stderr"]] {
         let mut v = Some(fit);
         for k in path {
             v = v.and_then(|x| x.get(*k));

@@ -404,10 +404,10 @@ pub fn brief_of(mut entry: Entry, reused: bool) -> Brief {
             v
         })
     };
-    let termination = find(&["termination", "solver.termination", "fit.termination"])
+    let termination = find(&["solver.termination", "termination"])
         .map(|v| v.as_str().map(str::to_string).unwrap_or_else(|| v.to_string()));
-    let evaluations = find(&["evaluations", "n_evaluations", "solver.evaluations", "fit.evaluations"]).and_then(Value::as_u64);
-    let reduced_chi2 = find(&["reduced_chi2", "goodness.reduced_chi2", "fit.reduced_chi2"]).and_then(Value::as_f64);
+    let evaluations = find(&["solver.evaluations", "evaluations"]).and_then(Value::as_u64);
+    let reduced_chi2 = find(&["quality.reduced_chi2", "reduced_chi2"]).and_then(Value::as_f64);
     Brief { entry, model, params, stderr, termination, evaluations, reduced_chi2, reused }
 }
 

@@ -85,6 +85,10 @@ pub struct Args {
     /// Testing aid: sleep this many milliseconds in each scan's job (to interrupt a batch midway).
     #[arg(long, hide = true, default_value_t = 0)]
     pub debug_delay_ms: u64,
+    /// Testing aid: abort the process inside the job of the scan with this key (shows what
+    /// --isolate process survives).
+    #[arg(long, hide = true)]
+    pub debug_abort: Option<String>,
 }
 
 /// Run `ndfit batch`.
@@ -126,6 +130,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         scan_options: args.scan_options.clone(),
         write_ndf: args.write_ndf,
         debug_delay_ms: args.debug_delay_ms,
+        debug_abort: args.debug_abort.clone(),
     };
     // Every per-scan option is checked before anything runs, so a typo fails the run at once.
     for s in &specs {

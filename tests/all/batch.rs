@@ -299,5 +299,75 @@ fn manifest_keys_and_options_reach_the_job() {
     assert!(out.join("scans/first.json").is_file() && out.join("fits/second.fit.json").is_file());
 }
 
+// ---- ndfit batch (the CLI) ----
+
+use crate::common::ndfit_bin;
+use std::process::{Command, Output};
+
+fn ndfit(args: &[&str]) -> Output {
+    Command::new(ndfit_bin()).args(args).output().expect("run ndfit")
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().expect("utf-8 temp path")
+}
+
+#[test]
+fn cli_process_isolation_survives_an_abort_and_reports_every_bad_scan() {
+    let t = tempfile::tempdir().unwrap();
+    let (dir, out) = (t.path().join("in"), t.path().join("out"));
+    fake_scan(&dir, "a.x3p", "not a zip");
+    fake_scan(&dir, "b/empty.x3p", "");
+    fake_scan(&dir, "c.x3p", "PK\u{3}\u{4}");
+    let o = ndfit(&["batch", p(&dir), "-o", p(&out), "--isolate", "process", "--debug-abort", "c.x3p", "--jobs", "2"]);
+    assert_eq!(o.status.code(), Some(2), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let e = entries(&out);
+    assert_eq!(e.len(), 3);
+    assert!(e.values().all(|x| x["status"] == "error"));
+    assert_eq!(e["c.x3p"]["error_kind"], "crash");
+    assert!(e["c.x3p"]["error"].as_str().unwrap().contains("SIGABRT"), "{}", e["c.x3p"]);
+    // The others fail in the reader, each naming its file.
+    assert!(e["a.x3p"]["error"].as_str().unwrap().contains("a.x3p"));
+    assert!(e["b/empty.x3p"]["error"].as_str().unwrap().contains("empty.x3p"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.lines().filter(|l| l.starts_with("ndfit: ")).count(), 3, "{err}");
+    assert_outputs_complete(&out);
+}
+
+#[test]
+fn cli_rejects_bad_invocations_with_one_line() {
+    let t = tempfile::tempdir().unwrap();
+    let (dir, out) = (t.path().join("in"), t.path().join("out"));
+    std::fs::create_dir_all(&dir).unwrap();
+    // An empty folder, a missing folder, a bad model, a bad per-scan option, a bad baseline.
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (vec![p(&dir).into()], "no scans"),
+        (vec![p(&t.path().join("nope")).into()], "nope"),
+        (vec![p(&dir).into(), "--model".into(), "phong".into()], "phong"),
+    ];
+    for (extra, needle) in cases {
+        let mut args: Vec<String> = vec!["batch".into()];
+        args.extend(extra);
+        args.extend(["-o".into(), p(&out).into()]);
+        let o = Command::new(ndfit_bin()).args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+    fake_scan(&dir, "a.x3p", "x");
+    let o = ndfit(&["batch", p(&dir), "-o", p(&out), "--", "--dx", "minus-one"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!((o.status.code(), err.lines().count()), (Some(2), 1), "{err}");
+    assert!(err.contains("a.x3p") && err.contains("--dx"), "{err}");
+    let bad = t.path().join("base.json");
+    std::fs::write(&bad, "{\"entries\": 3}").unwrap();
+    let o = ndfit(&["batch", p(&dir), "-o", p(&out), "--baseline", p(&bad)]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!((o.status.code(), err.lines().count()), (Some(2), 1), "{err}");
+    assert!(err.contains("base.json"), "{err}");
+    assert!(!out.join("summary.json").exists(), "no summary for a run that did not start");
+}
+
 #[allow(dead_code)]
 fn _unused(_: PathBuf) {}

@@ -20,10 +20,12 @@ pub struct JobConfig {
     pub write_ndf: bool,
     /// Testing aid: sleep in each job (milliseconds).
     pub debug_delay_ms: u64,
+    /// Testing aid: abort the process in the job of the scan with this key.
+    pub debug_abort: Option<String>,
 }
 
 impl JobConfig {
-    /// The settings that change results (for the resume key): everything but the test delay.
+    /// The settings that change results (for the resume key): everything but the testing aids.
     pub fn settings(&self) -> Value {
         serde_json::json!({"model": self.model, "scan_options": self.scan_options, "write_ndf": self.write_ndf})
     }
@@ -53,6 +55,9 @@ pub fn parse_scan_options(cfg: &JobConfig, spec: &ScanSpec) -> Result<PerScan, J
 pub fn fit_scan(cfg: &JobConfig, spec: &ScanSpec, ctx: &JobContext<'_>) -> Result<JobOutput, JobFailure> {
     if cfg.debug_delay_ms > 0 {
         std::thread::sleep(std::time::Duration::from_millis(cfg.debug_delay_ms));
+    }
+    if cfg.debug_abort.as_deref() == Some(spec.key.as_str()) {
+        std::process::abort();
     }
     let per = parse_scan_options(cfg, spec)?;
     let model = spec.model.clone().unwrap_or_else(|| cfg.model.clone());
