@@ -11,6 +11,7 @@ pub mod discover;
 pub mod entry;
 pub mod job;
 pub mod manifest;
+pub mod pipeline;
 pub mod quality;
 pub mod runner;
 pub mod spec;

@@ -369,5 +369,62 @@ fn cli_rejects_bad_invocations_with_one_line() {
     assert!(!out.join("summary.json").exists(), "no summary for a run that did not start");
 }
 
+/// Kill a running batch with SIGKILL midway, then `--resume`: the summary equals an uninterrupted run's.
+#[test]
+fn cli_killed_batch_resumes_to_the_same_summary() {
+    let t = tempfile::tempdir().unwrap();
+    let (dir, out_full, out_kill) = (t.path().join("in"), t.path().join("full"), t.path().join("killed"));
+    let n = make_scan_set(&dir);
+    let full = ndfit(&["batch", p(&dir), "-o", p(&out_full), "--jobs", "2"]);
+    let code = full.status.code();
+
+    // 150 ms per scan with one job: the kill lands while scans are still to do.
+    let mut child = Command::new(ndfit_bin())
+        .args(["batch", p(&dir), "-o", p(&out_kill), "--jobs", "1", "--debug-delay-ms", "150"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let records = |d: &Path| count_files(&d.join("scans"), ".json");
+    let t0 = std::time::Instant::now();
+    while records(&out_kill) < 2 && t0.elapsed().as_secs() < 60 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    child.kill().unwrap(); // SIGKILL on Unix
+    let st = child.wait().unwrap();
+    assert!(!st.success());
+    let done = records(&out_kill);
+    assert!(done >= 2 && done < n, "kill landed midway: {done} of {n} finished");
+    assert!(!out_kill.join("summary.json").exists());
+    assert_outputs_complete(&out_kill);
+
+    let resumed = ndfit(&["batch", p(&dir), "-o", p(&out_kill), "--jobs", "2", "--resume"]);
+    assert_eq!(resumed.status.code(), code);
+    assert_eq!(stable_summary(&out_kill), stable_summary(&out_full));
+    assert_outputs_complete(&out_kill);
+}
+
+fn count_files(dir: &Path, suffix: &str) -> usize {
+    let Ok(rd) = std::fs::read_dir(dir) else { return 0 };
+    rd.flatten()
+        .map(|e| {
+            let p = e.path();
+            if p.is_dir() {
+                count_files(&p, suffix)
+            } else {
+                usize::from(e.file_name().to_string_lossy().ends_with(suffix) && !e.file_name().to_string_lossy().starts_with('.'))
+            }
+        })
+        .sum()
+}
+
+/// A small set of scans for the CLI tests; returns how many.
+fn make_scan_set(dir: &Path) -> usize {
+    for i in 0..8 {
+        fake_scan(dir, &format!("s{i}.x3p"), &format!("junk {i}"));
+    }
+    8
+}
+
 #[allow(dead_code)]
 fn _unused(_: PathBuf) {}

@@ -4,7 +4,8 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use ndfit::batch::{model_of_fit, quality, JobContext, JobFailure, JobOutput, ScanSpec};
+use ndfit::batch::pipeline::{self, PipelineOptions};
+use ndfit::batch::{JobContext, JobFailure, JobOutput, ScanSpec};
 use serde_json::Value;
 
 use crate::ndfit_cli::scan_args::ScanArgs;
@@ -60,25 +61,16 @@ pub fn fit_scan(cfg: &JobConfig, spec: &ScanSpec, ctx: &JobContext<'_>) -> Resul
         std::process::abort();
     }
     let per = parse_scan_options(cfg, spec)?;
-    let model = spec.model.clone().unwrap_or_else(|| cfg.model.clone());
     let path: PathBuf = per.scan.scan.clone();
-    let hf = ndfit::io::read_scan(&path, &per.scan.read_options())?;
-    let hf = ndfit::preprocess::apply(hf, &ndfit::preprocess::Preprocess::default()).map_err(|e| e.with_path(&path))?;
-    let ndf = ndfit::ndf::empirical_ndf(&hf, &ndfit::ndf::NdfOptions::default()).map_err(|e| e.with_path(&path))?;
-    let fit = fit_json(&hf, &ndf, &model).map_err(|e| e.with_path(&path))?;
-    let fitted = model_of_fit(&fit).map_err(|e| e.with_path(&path))?;
-    let q = quality(&ndf, &fitted).map_err(|e| e.with_path(&path))?;
-    let same_bins = ctx
-        .baseline
-        .and_then(|b| b.fit_json())
-        .and_then(|f| model_of_fit(&f).ok())
-        .and_then(|m| quality(&ndf, &m).ok());
-    let _ = ctx.extra_path("ndf", ".ndf.csv");
-    Ok(JobOutput { fit, quality: Some(q), baseline_on_same_bins: same_bins })
-}
-
-/// The fit JSON (`ndfit.fit/1`) of `model` on `ndf`.
-fn fit_json(hf: &ndfit::Heightfield, ndf: &ndfit::ndf::EmpiricalNdf, model: &str) -> ndfit::Result<Value> {
-    let _ = (hf, ndf, model);
-    Err(ndfit::Error::new(ndfit::ErrorKind::Unsupported, "fitting is not available yet"))
+    let opts = PipelineOptions {
+        read: per.scan.read_options(),
+        preprocess: Default::default(),
+        ndf: Default::default(),
+        model: spec.model.clone().unwrap_or_else(|| cfg.model.clone()),
+    };
+    let r = pipeline::fit_scan(&path, &opts, ctx.baseline)?;
+    if cfg.write_ndf {
+        let _ = ctx.extra_path("ndf", ".ndf.csv");
+    }
+    Ok(r.output)
 }
