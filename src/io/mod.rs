@@ -5,9 +5,16 @@
 //! the bytes actually present before allocating. Layouts, units and invalid markers of each format are
 //! described in `data_formats/formats.md`.
 
+pub mod al3d;
 pub mod atomic;
 pub mod bytes;
 pub mod md5;
+pub mod metropro;
+pub mod opd;
+pub mod plu;
+pub mod sur;
+pub mod tmd;
+pub mod units;
 pub mod x3p;
 pub mod x3p_write;
 pub mod xml;
@@ -38,16 +45,35 @@ pub struct ReadOptions {
 pub enum Format {
     /// ISO 25178-72 X3P.
     X3p,
+    /// Digital Surf SUR (classic and compressed).
+    Sur,
+    /// Zygo MetroPro DAT.
+    MetroPro,
+    /// Alicona AL3D.
+    Al3d,
+    /// GelSight/TrueMap TMD.
+    Tmd,
+    /// Veeco/Wyko OPD.
+    Opd,
+    /// Sensofar PLU (no magic: found by extension).
+    Plu,
 }
 
 impl Format {
     /// Every format, in detection order.
-    pub const ALL: &'static [Format] = &[Format::X3p];
+    pub const ALL: &'static [Format] =
+        &[Format::X3p, Format::Sur, Format::MetroPro, Format::Al3d, Format::Tmd, Format::Opd, Format::Plu];
 
     /// The format id.
     pub fn id(self) -> &'static str {
         match self {
             Format::X3p => "x3p",
+            Format::Sur => "sur",
+            Format::MetroPro => "metropro",
+            Format::Al3d => "al3d",
+            Format::Tmd => "tmd",
+            Format::Opd => "opd",
+            Format::Plu => "plu",
         }
     }
 
@@ -61,6 +87,12 @@ impl Format {
     fn extensions(self) -> &'static [&'static str] {
         match self {
             Format::X3p => &["x3p"],
+            Format::Sur => &["sur"],
+            Format::MetroPro => &["dat"],
+            Format::Al3d => &["al3d"],
+            Format::Tmd => &["tmd"],
+            Format::Opd => &["opd"],
+            Format::Plu => &["plu", "apx"],
         }
     }
 
@@ -68,6 +100,15 @@ impl Format {
     fn magic(self, head: &[u8]) -> bool {
         match self {
             Format::X3p => head.starts_with(b"PK\x03\x04"),
+            Format::Sur => head.starts_with(b"DIGITAL SURF") || head.starts_with(b"DSCOMPRESSED"),
+            Format::MetroPro => {
+                head.len() >= 4 && head[..3] == [0x88, 0x1B, 0x03] && (0x6F..=0x71).contains(&head[3])
+            }
+            Format::Al3d => head.starts_with(al3d::AL3D_MAGIC),
+            Format::Tmd => head.starts_with(tmd::TMD_MAGIC),
+            // Two bytes, then the directory entry named "Directory".
+            Format::Opd => head.len() >= 11 && &head[2..11] == b"Directory",
+            Format::Plu => false,
         }
     }
 }
@@ -116,6 +157,12 @@ pub fn read_bytes(format: Format, bytes: &[u8], opts: &ReadOptions) -> Result<He
     let _ = opts;
     match format {
         Format::X3p => x3p::read_x3p(bytes),
+        Format::Sur => sur::read_sur(bytes),
+        Format::MetroPro => metropro::read_metropro(bytes),
+        Format::Al3d => al3d::read_al3d(bytes),
+        Format::Tmd => tmd::read_tmd(bytes),
+        Format::Opd => opd::read_opd(bytes),
+        Format::Plu => plu::read_plu(bytes),
     }
 }
 
