@@ -125,6 +125,21 @@ impl Ellipsoid {
     /// (Heitz eq. 43). Exact Smith `Lambda` of GGX when `theta_x = theta_y = 0`. Saturates at `f64::MAX`
     /// on the horizon, where it is `+inf`.
     pub fn lambda(&self, u: Vector3<f64>) -> f64 {
+        if u.z > 0.0 {
+            // 1/g - 1 cancels near the normal. With c = An/|An|, beta = Au.c, tau^2 = |Au - beta c|^2 and the
+            // skew term p = A(ux, uy, 0).c, the same quantity is (tau^2/(|Au| + beta) + 2p) / (2 |An| uz):
+            // no cancellation when p = 0 (theta_x = theta_y = 0, where it is exactly Tokuyoshi eq. 16).
+            let au = self.a * u;
+            let c = self.an / self.an_norm;
+            let beta = au.dot(&c);
+            let tau2 = (au - c * beta).norm_squared();
+            let nu = au.norm();
+            let first = if beta > 0.0 { tau2 / (nu + beta) } else { nu - beta };
+            let p = (self.a * Vector3::new(u.x, u.y, 0.0)).dot(&c);
+            let l = (first + 2.0 * p) / (2.0 * self.an_norm * u.z);
+            // Overflow for uz ~ 1e-308: the horizon limit.
+            return if l.is_finite() { l.max(0.0) } else { f64::MAX };
+        }
         let g = self.visible_ratio(u);
         let l = 1.0 / g - 1.0;
         // g = 0 on the horizon: Lambda = +inf, saturated; NaN only for a zero u.
