@@ -45,13 +45,12 @@ pub struct Header {
 /// Write `out_dir/summary.json`: the header, then `entries` from the per-scan records, ordered by key.
 pub fn write_summary_json(out_dir: &Path, header: &Header, outcome: &RunOutcome) -> Result<()> {
     let path = out_dir.join("summary.json");
-    let head = serde_json::to_value(header).map_err(|e| Error::io(e.into()))?;
-    let obj = head.as_object().ok_or_else(|| Error::new(ErrorKind::Numerical, "summary header is not an object"))?;
+    // The header in its declared order (schema first), pretty; then the entries, one per line.
+    let head = serde_json::to_string_pretty(header).map_err(|e| Error::io(e.into()))?;
+    let head = head.trim_end().strip_suffix('}').unwrap_or(&head).trim_end().to_string();
     write_atomic(&path, |w| {
-        w.write_all(b"{\n").map_err(Error::io)?;
-        for (k, v) in obj {
-            writeln!(w, "  {}: {},", json(k)?, json(v)?).map_err(Error::io)?;
-        }
+        w.write_all(head.as_bytes()).map_err(Error::io)?;
+        w.write_all(b",\n").map_err(Error::io)?;
         w.write_all(b"  \"entries\": [").map_err(Error::io)?;
         for (i, b) in outcome.briefs.iter().enumerate() {
             let rec = out_dir.join(super::runner::RECORDS_DIR).join(key_to_rel(&b.entry.path));

@@ -155,7 +155,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let progress = |p: batch::runner::Progress<'_>| {
         let e = &p.brief.entry;
         let what = match (&e.error, p.brief.reused) {
-            (Some(err), _) => format!("error {err}"),
+            (Some(_), _) => format!("error {}", e.path),
             (None, true) => format!("ok (resumed) {}", e.path),
             (None, false) => format!("ok {} ({:.2} s)", e.path, e.time_s),
         };
@@ -218,10 +218,21 @@ fn collect_specs(input: &Path, out: &Path) -> anyhow::Result<Vec<ScanSpec>> {
     Ok(batch::discover::walk(input, &[out.to_path_buf()], &detect_by_content)?)
 }
 
-/// Whether a file without a scan extension is a scan by its content (the readers' detection).
+/// Whether a file without a scan extension is a scan by its content: the readers' magic-byte detection
+/// on its first 512 bytes (the extension is deliberately not passed, so only content counts). Files whose
+/// extension says they are something else (documents, archives, our own outputs) are never scans.
 fn detect_by_content(path: &Path) -> bool {
-    let _ = path;
-    false
+    const NOT_SCANS: &[&str] = &["json", "md", "txt", "csv", "zip", "pdf", "html", "png", "log", "toml", "yaml", "yml", "py", "rs", "sh"];
+    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if NOT_SCANS.contains(&ext.as_str()) {
+        return false;
+    }
+    let mut head = [0u8; 512];
+    let n = match std::fs::File::open(path).and_then(|mut f| std::io::Read::read(&mut f, &mut head)) {
+        Ok(n) => n,
+        Err(_) => return false,
+    };
+    ndfit::io::detect(Path::new(""), &head[..n]).is_some()
 }
 
 fn check_model(m: &str) -> anyhow::Result<()> {

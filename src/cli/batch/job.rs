@@ -64,7 +64,7 @@ pub fn fit_scan(cfg: &JobConfig, spec: &ScanSpec, ctx: &JobContext<'_>) -> Resul
     let path: PathBuf = per.scan.scan.clone();
     let opts = PipelineOptions {
         read: per.scan.read_options(),
-        preprocess: Default::default(),
+        preprocess: per.scan.preprocess(),
         ndf: Default::default(),
         model: spec.model.clone().unwrap_or_else(|| cfg.model.clone()),
     };
