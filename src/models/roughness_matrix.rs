@@ -83,7 +83,9 @@ pub(crate) fn sym2_eigen(a: &Matrix2<f64>) -> (f64, f64, Vector2<f64>) {
     let mean = 0.5 * (p + r);
     let half_diff = 0.5 * (p - r);
     let rad = half_diff.hypot(q);
-    let (l1, l2) = (mean + rad, mean - rad);
+    let l1 = mean + rad;
+    // mean - rad cancels when the eigenvalues differ by orders of magnitude; det / l1 does not.
+    let l2 = if l1 > 0.0 { (p * r - q * q) / l1 } else { mean - rad };
     // Eigenvector of l1: angle phi with tan(2 phi) = 2q / (p - r); atan2 keeps it stable when q ~ 0.
     let phi = 0.5 * q.atan2(half_diff);
     (l1, l2, Vector2::new(phi.cos(), phi.sin()))
