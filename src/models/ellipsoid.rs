@@ -220,6 +220,17 @@ impl Ndf for Ellipsoid {
     }
 }
 
+impl super::Masking for Ellipsoid {
+    /// [`Ellipsoid::lambda`].
+    fn lambda(&self, u: Vector3<f64>) -> f64 {
+        Ellipsoid::lambda(self, u)
+    }
+    /// [`Ellipsoid::g1`] (Walter et al. eq. 6).
+    fn g1(&self, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
+        Ellipsoid::g1(self, u, m)
+    }
+}
+
 /// `R = Rx(theta_x) Ry(theta_y) Rz(theta_z)` (Walter et al. eq. 3).
 pub fn rotation_xyz(theta_x: f64, theta_y: f64, theta_z: f64) -> Matrix3<f64> {
     let (sx, cx) = theta_x.sin_cos();

@@ -123,3 +123,17 @@ impl Masking for GgxMatrix {
         smith_g1(self.lambda(o), o, h)
     }
 }
+
+/// The Jacobian of the map from the projected unit disk `(hx, hy)` to slope space
+/// `(-hx/hz, -hy/hz)` (Tokuyoshi eq. 24-25): `-1/hz^3 [[1 - hy^2, hx hy], [hx hy, 1 - hx^2]]`, with
+/// `hz = sqrt(1 - hx^2 - hy^2)`. Its determinant is `1/hz^4`; with the disk's `d(disk) = hz d(omega)`
+/// (Tokuyoshi eq. 9) this is Heitz eq. 64, `P22 = D cos^4`. `None` on or outside the rim (`hz = 0`).
+pub fn disk_to_slope_jacobian(hx: f64, hy: f64) -> Option<Matrix2<f64>> {
+    let hz2 = 1.0 - hx * hx - hy * hy;
+    // On the rim the slope is infinite; outside it there is no hemisphere point.
+    if !(hz2 > 0.0) {
+        return None;
+    }
+    let hz = hz2.sqrt();
+    Some(Matrix2::new(1.0 - hy * hy, hx * hy, hx * hy, 1.0 - hx * hx) * (-1.0 / (hz2 * hz)))
+}

@@ -6,7 +6,7 @@ use std::f64::consts::PI;
 
 use nalgebra::{Complex, Matrix2, Matrix3, Rotation3, Unit, Vector3};
 use ndfit::models::{
-    fresnel::checked_eta, fresnel_conductor, Ggx, GgxMatrix, MaskingShadowing, MicrofacetBrdf, Model, ModelId, Ndf,
+    disk_to_slope_jacobian, fresnel::checked_eta, fresnel_conductor, Ggx, GgxMatrix, MaskingShadowing, MicrofacetBrdf, Model, ModelId, Ndf,
     SquaredEllipsoidalLobe,
 };
 
@@ -74,6 +74,31 @@ fn brdf_closed_form_reciprocity_and_height_correlation() {
         // Below the horizon: no reflection.
         assert_eq!(sep.eval(Vector3::new(0.0, 0.6, -0.8), n), 0.0);
     }
+}
+
+#[test]
+fn disk_to_slope_jacobian_matches_central_differences() {
+    // The hand-written Jacobian of Tokuyoshi eq. 25 against central differences of (-hx/hz, -hy/hz);
+    // h = 1e-6: truncation ~h^2 times the third derivative and rounding ~1e-16/h stay below 1e-6 relative
+    // for hz >= 0.3 (r <= 0.95).
+    let slope = |x: f64, y: f64| {
+        let z = (1.0 - x * x - y * y).sqrt();
+        nalgebra::Vector2::new(-x / z, -y / z)
+    };
+    let mut rng = Rng(44);
+    let h = 1e-6;
+    for _ in 0..2000 {
+        let (r, p) = (0.95 * rng.uniform().sqrt(), 2.0 * PI * rng.uniform());
+        let (x, y) = (r * p.cos(), r * p.sin());
+        let j = disk_to_slope_jacobian(x, y).unwrap();
+        let cx = (slope(x + h, y) - slope(x - h, y)) / (2.0 * h);
+        let cy = (slope(x, y + h) - slope(x, y - h)) / (2.0 * h);
+        let fd = Matrix2::from_columns(&[cx, cy]);
+        assert!((j - fd).abs().max() < 1e-6 * j.abs().max(), "at ({x}, {y}): {j} vs {fd}");
+        let hz = (1.0 - x * x - y * y).sqrt();
+        assert!((j.determinant() - hz.powi(-4)).abs() < 1e-9 * hz.powi(-4));
+    }
+    assert!(disk_to_slope_jacobian(1.0, 0.0).is_none() && disk_to_slope_jacobian(0.8, 0.8).is_none());
 }
 
 #[test]
