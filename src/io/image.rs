@@ -29,14 +29,19 @@ pub fn read_exr(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
     }
     let (dx, dy) = spacing(opts, "OpenEXR")?;
     let zs = z_scale(opts, "OpenEXR")?;
-    let img = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_buffered(std::io::Cursor::new(bytes))
-        .map_err(|e| Error::corrupt(format!("OpenEXR decode failed ({e})")))?;
+    // A third-party decoder must not take the process down on hostile bytes: a panic inside it is
+    // reported as a corrupt file.
+    let img = std::panic::catch_unwind(|| {
+        read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .from_buffered(std::io::Cursor::new(bytes))
+    })
+    .map_err(|_| Error::corrupt("OpenEXR decoder failed on this file"))?
+    .map_err(|e| Error::corrupt(format!("OpenEXR decode failed ({e})")))?;
     let layer = img.layer_data;
     let (nx, ny) = (layer.size.0, layer.size.1);
     let list = &layer.channel_data.list;
@@ -72,7 +77,10 @@ pub fn read_image16(bytes: &[u8], opts: &ReadOptions, format: image::ImageFormat
     reader.limits(limits);
     let (dx, dy) = spacing(opts, id)?;
     let zs = z_scale(opts, id)?;
-    let img = reader.decode().map_err(|e| Error::corrupt(format!("{id} decode failed ({e})")))?;
+    // See read_exr: a panic inside the decoder becomes a corrupt-file error.
+    let img = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| reader.decode()))
+        .map_err(|_| Error::corrupt(format!("{id} decoder failed on this file")))?
+        .map_err(|e| Error::corrupt(format!("{id} decode failed ({e})")))?;
     let (nx, ny) = (img.width() as usize, img.height() as usize);
     let z: Vec<f64> = match img {
         image::DynamicImage::ImageLuma16(b) => b.into_raw().into_iter().map(|v| v as f64 * zs).collect(),

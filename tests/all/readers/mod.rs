@@ -1,6 +1,8 @@
 //! Integration tests: readers, writers, preprocessing and surface statistics.
 
+mod cli_info;
 mod formats;
 pub mod gen;
 mod peers;
+mod robust;
 mod x3p;
