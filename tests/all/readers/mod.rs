@@ -4,5 +4,6 @@ mod cli_info;
 mod formats;
 pub mod gen;
 mod peers;
+mod preprocess;
 mod robust;
 mod x3p;
