@@ -104,7 +104,7 @@ mod tests {
         let g = Ggx::new(1.0, 1.0, 0.0).unwrap();
         // N = 15; E = (8, 2, 5) from W = E pi / N; c = (10, 0, 5); plus a bin with W = 0 (ignored).
         let w = |e: f64| e * PI / 15.0;
-        let ndf = EmpiricalNdf { bins: vec![bin(10, w(8.0)), bin(0, w(2.0)), bin(5, w(5.0)), bin(0, 0.0)], n_samples: 15 };
+        let ndf = EmpiricalNdf::from_bins(vec![bin(10, w(8.0)), bin(0, w(2.0)), bin(5, w(5.0)), bin(0, 0.0)], 15);
         let q = quality(&ndf, &g).unwrap();
         // Hand: F = 2[(8 - 10 + 10 ln(10/8)) + 2 + 0] = 2[0.23143551314209755 + 2].
         let f = 2.0 * ((8.0 - 10.0 + 10.0 * (1.25f64).ln()) + 2.0);
@@ -123,15 +123,15 @@ mod tests {
     fn perfect_model_scores_zero_and_zero_mass_stays_finite() {
         let g = Ggx::new(1.0, 1.0, 0.0).unwrap();
         let w = |e: f64| e * PI / 30.0;
-        let ndf = EmpiricalNdf { bins: vec![bin(10, w(10.0)), bin(20, w(20.0))], n_samples: 30 };
+        let ndf = EmpiricalNdf::from_bins(vec![bin(10, w(10.0)), bin(20, w(20.0))], 30);
         let q = quality(&ndf, &g).unwrap();
         assert!(q.deviance < 1e-12 && q.ndf_delta < 1e-12, "{q:?}");
         // A model with (numerically) no mass at the data: large, finite, not NaN.
         let tilted = Ggx::new(1e-4, 1e-4, 0.0).unwrap();
         let far = NdfBin { m: Vector3::new(0.8, 0.0, 0.6), ..bin(30, 0.1) };
-        let q = quality(&EmpiricalNdf { bins: vec![far], n_samples: 30 }, &tilted).unwrap();
+        let q = quality(&EmpiricalNdf::from_bins(vec![far], 30), &tilted).unwrap();
         assert!(q.deviance.is_finite() && q.deviance > 1e3, "{q:?}");
-        assert!(quality(&EmpiricalNdf { bins: vec![bin(0, 1.0)], n_samples: 0 }, &g).is_err());
+        assert!(quality(&EmpiricalNdf::from_bins(vec![bin(0, 1.0)], 0), &g).is_err());
     }
 
     #[test]
