@@ -31,9 +31,14 @@ fn assert_canonical_rules(p: &[f64]) {
 #[test]
 fn canonical_ellipsoid_keeps_d_follows_the_rules_and_is_idempotent() {
     let mut rng = Rng(12);
+    // A relabeling with a canonical alpha below ALPHA_MIN must still keep D (no floor in the canonical form).
+    let e = Ellipsoid::from_params(1e-4, 10.0, 1.2, 0.0, 0.3).unwrap();
+    assert_same_d(&e, &e.canonical(), "(1e-4, 10) tilted by 1.2");
+    assert!(e.canonical().params()[1] < 1e-4, "{:?}", e.canonical().params());
     for _ in 0..300 {
-        let ax = 10f64.powf(-3.0 + 4.0 * rng.uniform());
-        let ay = 10f64.powf(-3.0 + 4.0 * rng.uniform());
+        // alpha in [1e-4, 10] (the range the issue names), tilts up to +-1.5.
+        let ax = 10f64.powf(-4.0 + 5.0 * rng.uniform());
+        let ay = 10f64.powf(-4.0 + 5.0 * rng.uniform());
         let (tx, ty, tz) = (3.0 * rng.uniform() - 1.5, 3.0 * rng.uniform() - 1.5, 12.0 * rng.uniform() - 6.0);
         let e = Ellipsoid::from_params(ax, ay, tx, ty, tz).unwrap();
         let c = e.canonical();
