@@ -21,6 +21,8 @@
 pub mod frame;
 pub mod grid;
 pub mod normals;
+pub mod output;
+pub mod plot;
 
 use nalgebra::Vector3;
 use rayon::prelude::*;
