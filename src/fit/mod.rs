@@ -6,14 +6,13 @@
 //!   log D);
 //! - [`problem`], [`solve`]: the LM problem and the solvers (LM, argmin's Nelder-Mead and L-BFGS);
 //! - [`start`]: closed-form starting points from the slope distribution;
-//! - [`canonical`]: one name per distribution;
+//! - canonical form: [`crate::models::Model::canonical`] (the models module's convention);
 //! - [`covariance`]: standard errors and correlations from `(J^T J)^+` scaled by the residual variance;
 //! - [`report`]: the `ndfit.fit/1` JSON; [`metric`]: the NDF difference metric;
 //! - [`synthetic`]: binned NDFs with known truth (test and benchmark fixtures); [`plot`]: data vs fit.
 //!
 //! Entry points: [`fit_model`] for one model, [`fit_auto`] for model selection.
 
-pub mod canonical;
 pub mod covariance;
 pub mod lnd;
 pub mod metric;
@@ -109,8 +108,9 @@ fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) ->
         warnings.push(format!("{id}: the {} solver stopped without converging ({})", opts.solver.as_str(), local.termination));
     }
     // Canonical form: the same distribution, so the objective must not change beyond rounding.
-    let pc = canonical::canonical_params(id, &params::to_public(id, &local.x));
-    let xc = params::to_internal(id, &pc);
+    let xc = Model::from_params(id, &params::to_public(id, &local.x))
+        .map(|m| params::to_internal(id, &m.canonical().params()))
+        .unwrap_or_else(|_| local.x.clone());
     let mut r = vec![0.0; s.data.bins.len()];
     let fc = problem::residuals_into(&s.data, id, &xc, &mut r);
     let (x, f) = if fc.is_finite() && (fc - local.f).abs() <= 1e-8 * local.f.abs().max(1.0) {
@@ -277,12 +277,31 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
     let t0 = Instant::now();
     let s = Session::new(ndf, opts.objective)?;
-    let ggx = fit_iso(&s, ModelId::Ggx, opts)?;
-    let ggx_a = fit_aniso(&s, ModelId::GgxAniso, Some(&ggx), opts)?;
-    let ell = fit_ellipsoid(&s, &ggx_a, opts)?;
-    let beck = fit_iso(&s, ModelId::Beckmann, opts)?;
-    let beck_a = fit_aniso(&s, ModelId::BeckmannAniso, Some(&beck), opts)?;
-    let fits = [ggx, beck, ggx_a, beck_a, ell];
+    // A candidate that cannot be fitted is left out (and said so); only when none is usable is it an error.
+    let mut warnings = Vec::new();
+    let mut keep = |r: Result<Fitted>| match r {
+        Ok(f) if Model::from_params(f.id, &public(&f)).is_ok() => Some(f),
+        Ok(f) => {
+            warnings.push(format!("{}: fitted parameters out of the model's domain; candidate dropped", f.id));
+            None
+        }
+        Err(e) => {
+            warnings.push(format!("candidate dropped: {e}"));
+            None
+        }
+    };
+    let ggx = keep(fit_iso(&s, ModelId::Ggx, opts));
+    let ggx_a = keep(fit_aniso(&s, ModelId::GgxAniso, ggx.as_ref(), opts));
+    let ell = match &ggx_a {
+        Some(a) => keep(fit_ellipsoid(&s, a, opts)),
+        None => None,
+    };
+    let beck = keep(fit_iso(&s, ModelId::Beckmann, opts));
+    let beck_a = keep(fit_aniso(&s, ModelId::BeckmannAniso, beck.as_ref(), opts));
+    let fits: Vec<Fitted> = [ggx, beck, ggx_a, beck_a, ell].into_iter().flatten().collect();
+    if fits.is_empty() {
+        return Err(Error::new(ErrorKind::Numerical, format!("no model could be fitted ({})", warnings.join("; "))));
+    }
     let k = s.data.k_nonzero as f64;
     let c = fits
         .iter()
@@ -332,9 +351,9 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
             }
         })
         .collect();
-    let [f0, f1, f2, f3, f4] = fits;
-    let best = [f0, f1, f2, f3, f4].into_iter().nth(chosen).expect("chosen indexes the five fits");
+    let best = fits.into_iter().nth(chosen).expect("chosen indexes the fits");
     let mut rep = build_report(ndf, &s, best, opts, 0.0)?;
+    rep.warnings.extend(warnings);
     rep.selection = Some(Selection { criterion: "qbic".into(), overdispersion: c, candidates });
     rep.timings.fit_ms = t0.elapsed().as_secs_f64() * 1e3;
     Ok(rep)

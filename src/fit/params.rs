@@ -6,7 +6,7 @@
 //!   responds to (D scales as `1/alpha^2` near the peak), so `u` is well conditioned from 1e-4 to 10
 //!   where a linear alpha would need steps spanning five decades;
 //! - the angles are free: D is periodic in them, so LM never meets an edge; the result is folded to the
-//!   canonical form afterwards (see [`super::canonical`]).
+//!   canonical form afterwards ([`crate::models::Model::canonical`]).
 //!
 //! Internal vectors `x` by model (Walter et al. eq. 2-3 for the angles):
 //! `ggx`, `beckmann`: `[u]`; `ggx-aniso`, `beckmann-aniso`: `[u_x, u_y, theta_z]`;

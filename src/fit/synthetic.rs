@@ -85,20 +85,44 @@ pub fn expected(model: &Model, grid: &Grid, n_samples: f64) -> (Vec<NdfBin>, Vec
     let mut e = Vec::with_capacity(grid.n * grid.n);
     for i in 0..grid.n {
         for j in 0..grid.n {
-            let (cx, cy) = (-std::f64::consts::SQRT_2 + (j as f64 + 0.5) * h, -std::f64::consts::SQRT_2 + (i as f64 + 0.5) * h);
-            let Some((mc, _)) = grid.at(cx, cy) else { continue };
+            let (x0, y0) = (-std::f64::consts::SQRT_2 + j as f64 * h, -std::f64::consts::SQRT_2 + i as f64 * h);
+            // Cells that cross the rim of the disk get a finer rule (16x16 sub-cells, each with the 4x4
+            // Gauss-Legendre rule), so their partial area is integrated to well below the counting noise.
+            let corners_in = [(0.0, 0.0), (h, 0.0), (0.0, h), (h, h)]
+                .iter()
+                .filter(|(a, b)| (x0 + a).powi(2) + (y0 + b).powi(2) < 2.0)
+                .count();
+            let sub = match corners_in {
+                0 if (x0 + 0.5 * h).hypot(y0 + 0.5 * h) > std::f64::consts::SQRT_2 + h => continue,
+                4 => 1,
+                _ => 16,
+            };
+            let hs = h / sub as f64;
             let (mut w, mut ek, mut sa) = (0.0, 0.0, 0.0);
-            for (u, wu) in GL4 {
-                for (v, wv) in GL4 {
-                    if let Some((m, f)) = grid.at(cx + 0.5 * h * u, cy + 0.5 * h * v) {
-                        let q = wu * wv * 0.25 * h * h;
-                        w += q * f;
-                        ek += q * f * model.d(m);
-                        sa += q * f / m.z;
+            let mut msum = Vector3::zeros();
+            for si in 0..sub {
+                for sj in 0..sub {
+                    let (cx, cy) = (x0 + (sj as f64 + 0.5) * hs, y0 + (si as f64 + 0.5) * hs);
+                    for (u, wu) in GL4 {
+                        for (v, wv) in GL4 {
+                            if let Some((m, f)) = grid.at(cx + 0.5 * hs * u, cy + 0.5 * hs * v) {
+                                let q = wu * wv * 0.25 * hs * hs;
+                                w += q * f;
+                                ek += q * f * model.d(m);
+                                sa += q * f / m.z;
+                                msum += m * (q * f);
+                            }
+                        }
                     }
                 }
             }
-            if w > 0.0 {
+            // The bin's direction: the cell centre's when it is on the disk, else the projected-area
+            // weighted mean direction of the part on the disk.
+            let mc = match grid.at(x0 + 0.5 * h, y0 + 0.5 * h) {
+                Some((m, _)) => m,
+                None => msum.normalize(),
+            };
+            if w > 0.0 && mc.iter().all(|v| v.is_finite()) {
                 bins.push(NdfBin { m: mc, d: 0.0, stderr: 0.0, count: 0, solid_angle: sa, proj_solid_angle: w });
                 e.push(n_samples * ek);
             }

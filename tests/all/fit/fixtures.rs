@@ -8,8 +8,11 @@ use ndfit::ndf::EmpiricalNdf;
 /// Samples of a 1024^2 scan.
 pub const N_1024: f64 = 1024.0 * 1024.0;
 
-/// Cells per side of the fixture grid.
-pub const GRID_N: usize = 96;
+/// Cells per side of the fixture grid. The equal-area map of the whitened normal squeezes the GGX slope
+/// tail (1% of the mass beyond 10 alpha) into a thin ring at the rim, where the midpoint rule of
+/// objective.md errs most: at 96 cells a narrow GGX lobe fitted to noise-free counts is 0.46% low in
+/// alpha, at 192 cells 0.11% (measured; the error falls as h^2).
+pub const GRID_N: usize = 192;
 
 /// A model from its id and contract parameters.
 pub fn model(id: ModelId, p: &[f64]) -> Model {
@@ -24,7 +27,7 @@ pub fn ndf_of(truth: &Model, n: f64, seed: u64) -> EmpiricalNdf {
 /// `delta(D_fit; D_true)` (objective.md) by quadrature on a grid finer than the fixture's and matched
 /// to the truth (so the nodes sample `D_true(m)(m.n)` densely where it has mass).
 pub fn delta_to_truth(fit: &Model, truth: &Model) -> f64 {
-    let (bins, _) = ndfit::fit::synthetic::expected(truth, &Grid::for_model(truth, 160), 1.0);
+    let (bins, _) = ndfit::fit::synthetic::expected(truth, &Grid::for_model(truth, 256), 1.0);
     delta(|m| fit.d(*m), |m| truth.d(*m), bins.iter().map(|b| (b.m, b.proj_solid_angle))).expect("truth has mass")
 }
 
