@@ -70,13 +70,18 @@ pub struct Args {
     /// Also write each scan's empirical NDF as OUT_DIR/ndf/<path>.ndf.csv.
     #[arg(long)]
     pub write_ndf: bool,
+    /// Also plot each scan's data against its fit as OUT_DIR/plots/<path>.png.
+    #[arg(long)]
+    pub plots: bool,
     /// Isolation of each scan's job.
     #[arg(long, value_enum, default_value = "thread")]
     pub isolate: Isolate,
     /// With --isolate process: give up on a scan after this many seconds (an `error` entry).
     #[arg(long)]
     pub timeout: Option<f64>,
-    /// Options applied to every scan, as for `ndfit fit` (e.g. `-- --dx 1e-6 --form poly2`).
+    /// Options applied to every scan: reading and preprocessing (--dx, --dy, --z-scale, --format, --form,
+    /// --crop, --subsample), the NDF (--normals, --ndf-cells, --target-count) and the fit (--objective,
+    /// --solver, --extra-starts), e.g. `-- --dx 1e-6 --form poly2`.
     #[arg(last = true)]
     pub scan_options: Vec<String>,
     /// Internal: run one scan's job from a request on standard input (used by --isolate process).
@@ -129,6 +134,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         model: model.clone(),
         scan_options: args.scan_options.clone(),
         write_ndf: args.write_ndf,
+        plots: args.plots,
         debug_delay_ms: args.debug_delay_ms,
         debug_abort: args.debug_abort.clone(),
     };

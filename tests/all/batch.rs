@@ -418,12 +418,120 @@ fn count_files(dir: &Path, suffix: &str) -> usize {
         .sum()
 }
 
-/// A small set of scans for the CLI tests; returns how many.
+/// A small set of real synthetic scans for the CLI tests (two sizes of the synthetic set); returns how many.
 fn make_scan_set(dir: &Path) -> usize {
-    for i in 0..8 {
-        fake_scan(dir, &format!("s{i}.x3p"), &format!("junk {i}"));
+    synth_set(&dir.join("a"), 96).len() + synth_set(&dir.join("b"), 112).len()
+}
+
+// ---- end to end on synthetic scans ----
+
+/// The synthetic regression set of the tests: visible upper halves of ellipsoids (their NDF is exactly
+/// the ellipsoid NDF, so `ggx` describes the isotropic, unskewed one as well as `ellipsoid` does and the
+/// others worse). Small grids keep the module fast. Returns the names, with `true` for the surfaces that
+/// an isotropic GGX cannot describe (anisotropic or skewed).
+fn synth_set(dir: &Path, n: usize) -> Vec<(&'static str, bool)> {
+    use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
+    std::fs::create_dir_all(dir.join("skewed")).unwrap();
+    let set: [(&str, [f64; 5], bool); 4] = [
+        ("iso.x3p", [0.3, 0.3, 0.0, 0.0, 0.0], false),
+        ("aniso.x3p", [0.4, 0.12, 0.0, 0.0, 0.5], true),
+        ("skewed/x.x3p", [0.25, 0.25, 0.45, 0.0, 0.0], true),
+        ("skewed/yz.x3p", [0.35, 0.2, 0.0, -0.35, 1.0], true),
+    ];
+    let s = SynthSettings { nx: n, ny: n, dx: 1e-6, dy: 1e-6, seed: 7, ..SynthSettings::default() };
+    for (name, p, _) in &set {
+        let e = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+        let (hf, _) = ellipsoid_surface(&s, &e).unwrap();
+        ndfit::io::write_x3p(&dir.join(name), &hf).unwrap();
     }
-    8
+    set.iter().map(|(n, _, hard)| (*n, *hard)).collect()
+}
+
+#[test]
+fn synthetic_set_corrupt_scan_own_baseline_and_ggx_regression() {
+    let t = tempfile::tempdir().unwrap();
+    let dir = t.path().join("set");
+    let set = synth_set(&dir, 160);
+    // A corrupt scan: a good X3P cut in half.
+    let good = std::fs::read(dir.join("iso.x3p")).unwrap();
+    std::fs::write(dir.join("broken.x3p"), &good[..good.len() / 2]).unwrap();
+
+    // 1. Exit 2; every good scan fitted; the corrupt one reported, by name, on stderr and in the summary.
+    let base = t.path().join("base");
+    let o = ndfit(&["batch", p(&dir), "-o", p(&base), "--model", "ellipsoid", "--jobs", "2"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let e = entries(&base);
+    assert_eq!(e.len(), set.len() + 1);
+    assert_eq!(e["broken.x3p"]["status"], "error");
+    assert!(e["broken.x3p"]["error"].as_str().unwrap().contains("broken.x3p"));
+    assert!(err.lines().any(|l| l.starts_with("ndfit: ") && l.contains("broken.x3p")), "{err}");
+    for (name, _) in &set {
+        assert_eq!(e[*name]["status"], "ok", "{name}: {}", e[*name]);
+        assert_eq!(e[*name]["fit"]["model"], "ellipsoid");
+        // The batch's own score is a second implementation of objective.md: it must equal the fitter's
+        // Poisson objective at the optimum (same bins, same formula) to rounding.
+        let mine = e[*name]["quality"]["deviance"].as_f64().unwrap();
+        let fitter = e[*name]["fit"]["quality"]["objective_value"].as_f64().unwrap();
+        assert!((mine - fitter).abs() <= 1e-9 * fitter.abs(), "{name}: {mine} vs {fitter}");
+    }
+    std::fs::remove_file(dir.join("broken.x3p")).unwrap();
+    let o = ndfit(&["batch", p(&dir), "-o", p(&base), "--model", "ellipsoid", "--jobs", "2", "--write-ndf", "--plots"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    // Optional per-scan outputs: the NDF CSV is normalized (sum d W = 1, Heitz eq. 9: an independent
+    // check that the file holds the whole NDF) and the plot is a PNG.
+    let csv = std::fs::read_to_string(base.join("ndf/skewed/x.x3p.ndf.csv")).unwrap();
+    let mut rows = csv.lines();
+    let head: Vec<&str> = rows.next().unwrap().split(',').collect();
+    let (id, iw) = (head.iter().position(|h| *h == "d").unwrap(), head.iter().position(|h| *h == "proj_solid_angle").unwrap());
+    let total: f64 = rows.map(|r| {
+        let c: Vec<f64> = r.split(',').map(|x| x.parse().unwrap()).collect();
+        c[id] * c[iw]
+    }).sum();
+    assert!((total - 1.0).abs() < 1e-9, "sum d W = {total}");
+    assert!(std::fs::read(base.join("plots/aniso.x3p.png")).unwrap().starts_with(b"\x89PNG"));
+    let baseline = base.join("summary.json");
+
+    // 2. The same folder against its own baseline: exit 0, every verdict "same" with delta_kl = 0.
+    let again = t.path().join("again");
+    let o = ndfit(&["batch", p(&dir), "-o", p(&again), "--model", "ellipsoid", "--jobs", "1", "--baseline", p(&baseline)]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stdout));
+    for (name, v) in entries(&again) {
+        assert_eq!(v["baseline"]["verdict"], "same", "{name}");
+        assert_eq!(v["baseline"]["delta_kl"], 0.0, "{name}");
+        assert_eq!(v["baseline"]["basis"], "same_bins", "{name}");
+    }
+
+    // 3. The same scans fitted with ggx against the ellipsoid baseline: exit 1, exactly the anisotropic
+    //    and skewed scans regressed, named in the table on stdout.
+    let ggx = t.path().join("ggx");
+    let o = ndfit(&["batch", p(&dir), "-o", p(&ggx), "--model", "ggx", "--jobs", "2", "--baseline", p(&baseline)]);
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{table}");
+    let e = entries(&ggx);
+    for (name, hard) in &set {
+        let c = &e[*name]["baseline"];
+        assert_eq!(c["regressed"], *hard, "{name}: {c}");
+        let row = table.lines().find(|l| l.split_whitespace().nth(1) == Some(*name));
+        assert_eq!(row.is_some_and(|r| r.starts_with("REGRESSED")), *hard, "{name}:\n{table}");
+    }
+    assert!(table.contains("ellipsoid -> ggx"), "{table}");
+}
+
+#[test]
+fn synthetic_results_are_bit_identical_for_1_and_2_jobs() {
+    let t = tempfile::tempdir().unwrap();
+    let dir = t.path().join("set");
+    synth_set(&dir, 128);
+    let mut sums = Vec::new();
+    for jobs in ["1", "2"] {
+        let out = t.path().join(format!("out{jobs}"));
+        let o = ndfit(&["batch", p(&dir), "-o", p(&out), "--model", "auto", "--jobs", jobs]);
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        sums.push(stable_summary(&out));
+    }
+    // serde_json compares f64 exactly: bit-identical parameters, errors, qualities.
+    assert_eq!(sums[0], sums[1]);
 }
 
 #[allow(dead_code)]

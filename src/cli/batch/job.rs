@@ -8,6 +8,9 @@ use ndfit::batch::pipeline::{self, PipelineOptions};
 use ndfit::batch::{JobContext, JobFailure, JobOutput, ScanSpec};
 use serde_json::Value;
 
+use ndfit::fit::{FitOptions, Objective, Solver};
+
+use crate::ndfit_cli::ndf::NdfArgs;
 use crate::ndfit_cli::scan_args::ScanArgs;
 
 /// The run-level settings every scan's job shares (serializable: the child worker gets them too).
@@ -19,6 +22,8 @@ pub struct JobConfig {
     pub scan_options: Vec<String>,
     /// Write each scan's empirical NDF CSV.
     pub write_ndf: bool,
+    /// Write each scan's plot of data against fit.
+    pub plots: bool,
     /// Testing aid: sleep in each job (milliseconds).
     pub debug_delay_ms: u64,
     /// Testing aid: abort the process in the job of the scan with this key.
@@ -28,16 +33,43 @@ pub struct JobConfig {
 impl JobConfig {
     /// The settings that change results (for the resume key): everything but the testing aids.
     pub fn settings(&self) -> Value {
-        serde_json::json!({"model": self.model, "scan_options": self.scan_options, "write_ndf": self.write_ndf})
+        serde_json::json!({"model": self.model, "scan_options": self.scan_options, "write_ndf": self.write_ndf, "plots": self.plots})
     }
 }
 
-/// The per-scan options, parsed exactly like `ndfit fit`'s scan options.
+/// The per-scan options: reading and preprocessing (`ScanArgs`), the NDF (`NdfArgs`) and the fit, with
+/// the flag names of `ndfit fit` / `ndfit ndf`.
 #[derive(Debug, Parser)]
 #[command(no_binary_name = true, disable_help_flag = true)]
 pub struct PerScan {
     #[command(flatten)]
     pub scan: ScanArgs,
+    #[command(flatten)]
+    pub ndf: NdfArgs,
+    /// Residuals: `poisson` or `logd` (data_formats/objective.md).
+    #[arg(long, default_value = "poisson")]
+    pub objective: String,
+    /// Local optimizer: `lm`, `nelder-mead` or `lbfgs`.
+    #[arg(long, default_value = "lm")]
+    pub solver: String,
+    /// Extra skew starts for the ellipsoid (0-4).
+    #[arg(long, default_value_t = 0)]
+    pub extra_starts: usize,
+}
+
+impl PerScan {
+    /// The pipeline options these flags ask for (`model` from the manifest or the run).
+    pub fn pipeline(&self, model: String) -> ndfit::Result<PipelineOptions> {
+        let bad = |flag: &str, e: ndfit::Error| ndfit::Error::invalid(format!("{flag}: {}", e.message()));
+        let ndf = self.ndf.options().map_err(|e| ndfit::Error::invalid(e.to_string()))?;
+        let fit = FitOptions {
+            objective: self.objective.parse::<Objective>().map_err(|e| bad("--objective", e))?,
+            solver: self.solver.parse::<Solver>().map_err(|e| bad("--solver", e))?,
+            extra_starts: self.extra_starts.min(4),
+            ..FitOptions::default()
+        };
+        Ok(PipelineOptions { read: self.scan.read_options(), preprocess: self.scan.preprocess(), ndf, model, fit })
+    }
 }
 
 /// Parse the run's and the scan's options for `spec`.
@@ -45,11 +77,14 @@ pub fn parse_scan_options(cfg: &JobConfig, spec: &ScanSpec) -> Result<PerScan, J
     let mut argv: Vec<String> = vec![spec.file.display().to_string()];
     argv.extend(cfg.scan_options.iter().cloned());
     argv.extend(spec.options.iter().cloned());
-    PerScan::try_parse_from(&argv).map_err(|e| {
+    let fail = |msg: &str| JobFailure::new("invalid_input", format!("{}: options {:?}: {msg}", spec.key, &argv[1..]));
+    let per = PerScan::try_parse_from(&argv).map_err(|e| {
         let text = e.to_string();
-        let first = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("bad options").trim().trim_start_matches("error: ");
-        JobFailure::new("invalid_input", format!("{}: options {:?}: {first}", spec.key, &argv[1..]))
-    })
+        fail(text.lines().find(|l| !l.trim().is_empty()).unwrap_or("bad options").trim().trim_start_matches("error: "))
+    })?;
+    // Values that parse but are out of range fail here too, before anything runs.
+    per.pipeline(String::new()).map_err(|e| fail(e.message()))?;
+    Ok(per)
 }
 
 /// Fit one scan. Failures name the file and the problem in one line.
@@ -62,15 +97,19 @@ pub fn fit_scan(cfg: &JobConfig, spec: &ScanSpec, ctx: &JobContext<'_>) -> Resul
     }
     let per = parse_scan_options(cfg, spec)?;
     let path: PathBuf = per.scan.scan.clone();
-    let opts = PipelineOptions {
-        read: per.scan.read_options(),
-        preprocess: per.scan.preprocess(),
-        ndf: Default::default(),
-        model: spec.model.clone().unwrap_or_else(|| cfg.model.clone()),
-    };
+    let opts = per.pipeline(spec.model.clone().unwrap_or_else(|| cfg.model.clone())).map_err(|e| e.with_path(&path))?;
     let r = pipeline::fit_scan(&path, &opts, ctx.baseline)?;
     if cfg.write_ndf {
-        let _ = ctx.extra_path("ndf", ".ndf.csv");
+        pipeline::write_ndf_csv(&ctx.extra_path("ndf", ".ndf.csv"), &r.ndf)?;
+    }
+    if cfg.plots {
+        let model = ndfit::batch::model_of_fit(&r.output.fit).map_err(|e| e.with_path(&path))?;
+        let png = ctx.extra_path("plots", ".png");
+        if let Some(dir) = png.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| ndfit::Error::io(e).with_path(dir))?;
+        }
+        let title = format!("{}: {} fit", spec.key, model.id());
+        ndfit::fit::plot::plot_fit(&png, &r.ndf, &model, &title).map_err(|e| e.with_path(&png))?;
     }
     Ok(r.output)
 }
