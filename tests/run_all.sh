@@ -7,6 +7,9 @@ cd "$(dirname "$0")/.."
 echo "== cargo test"
 cargo test --release --locked 2>&1
 
+echo "== batch regression against fits/baselines (synthetic set; real scans when ../shared is present)"
+NDFIT=target/release/ndfit bash fits/baselines/check.sh
+
 if [ -f fits/pyproject.toml ]; then
   echo "== python: venv and install"
   if [ ! -x fits/.venv/bin/python ]; then
