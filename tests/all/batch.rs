@@ -534,5 +534,27 @@ fn synthetic_results_are_bit_identical_for_1_and_2_jobs() {
     assert_eq!(sums[0], sums[1]);
 }
 
+/// A manifest over a real scan: per-scan columns reach the reader (`subsample` halves the grid) and the
+/// per-scan `model` overrides `--model`.
+#[test]
+fn manifest_options_reach_the_pipeline_on_a_real_scan() {
+    let Some(scans) = crate::common::shared_scans("batch::manifest_options_reach_the_pipeline_on_a_real_scan") else { return };
+    let scan = scans.join("hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p");
+    let t = tempfile::tempdir().unwrap();
+    let m = t.path().join("list.csv");
+    let f = p(&scan);
+    std::fs::write(&m, format!("# two readings of one scan\npath,id,subsample,model\n{f},full,,ggx\n{f},half,2,\n")).unwrap();
+    let out = t.path().join("out");
+    let o = ndfit(&["batch", p(&m), "-o", p(&out), "--model", "beckmann"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let e = entries(&out);
+    let (full, half) = (&e["full"]["fit"], &e["half"]["fit"]);
+    assert_eq!((full["model"].as_str(), half["model"].as_str()), (Some("ggx"), Some("beckmann")));
+    let nx = |v: &Value| v["input"]["nx"].as_u64().unwrap();
+    let ny = |v: &Value| v["input"]["ny"].as_u64().unwrap();
+    // Every 2nd point of n points is ceil(n / 2) points.
+    assert_eq!((nx(half), ny(half)), (nx(full).div_ceil(2), ny(full).div_ceil(2)));
+}
+
 #[allow(dead_code)]
 fn _unused(_: PathBuf) {}
