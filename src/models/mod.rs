@@ -11,6 +11,15 @@
 //!
 //! Every model is a small `Copy` value type whose methods read like the formulas. All directions are unit
 //! vectors in the scan frame of CONTRACT.md (macro normal `n = +z`).
+//!
+//! Files, one job each: [`ellipsoid`] (D, G1, projected areas, pdf), [`sampling`] (Walter sec. 4.1),
+//! [`canonical`] (one labeling per distribution), [`ggx`] and [`beckmann`] (Heitz's slope-space forms and
+//! Smith Lambda), [`roughness_matrix`] (Tokuyoshi's 2x2 form), [`fresnel`], [`brdf`] (Walter eq. 4 with
+//! separable or height-correlated G2), [`sel`] (Tokuyoshi-Harada lobe), [`spec`] (JSON <-> [`Model`]).
+//!
+//! Conventions shared by every model: `D = 0` below the horizon; `G1` in `[0, 1]`; `Lambda >= 0`, saturated at
+//! `f64::MAX` exactly on the horizon (its true value is `+inf`), so no public function returns NaN or an
+//! infinity for finite inputs; alphas in `[ALPHA_MIN, ALPHA_MAX]` (below raised, above refused).
 
 // The `!(x > 0.0)` guards are deliberate: they also catch NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
