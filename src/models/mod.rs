@@ -138,8 +138,9 @@ pub trait Ndf {
 /// Masking of the models with a Smith-type masking function (Heitz eq. 43): `G1 = X+(u.m) / (1 + Lambda(u))`.
 pub trait Masking {
     /// The Smith `Lambda(u)` (Heitz eq. 43, 69-86), `>= 0`, finite. Exactly on the horizon the true value is
-    /// `+inf`; it saturates at `f64::MAX` there so callers never see an infinity. Below the horizon it is
-    /// `Lambda` of the mirrored direction `(ux, uy, -uz)` (Tokuyoshi eq. 16 uses `|o_z|`).
+    /// `+inf`; it saturates at `f64::MAX` there so callers never see an infinity. Below the horizon GGX and
+    /// Beckmann give `Lambda` of the mirrored direction `(ux, uy, -uz)` (Tokuyoshi eq. 16 uses `|o_z|`); the
+    /// ellipsoid follows Walter et al. eq. 32 with `|u.n|` as printed.
     fn lambda(&self, u: Vector3<f64>) -> f64;
 
     /// The masking function `G1(u, m)` in `[0, 1]`.
