@@ -172,16 +172,32 @@ def _bounds(model: str, x0: np.ndarray):
     return lb, ub, x0
 
 
+def _scales(model: str, x0: np.ndarray) -> np.ndarray:
+    """Per-coordinate scale of one local run: 1 for ln(alpha) and theta_z; for the tilts the lobe's width
+    sqrt(alpha_x alpha_y) (a tilt moves the lobe's centre by about the tilt in slope units), so that every
+    coordinate moves D by a similar amount per unit step. Conditions L-BFGS and sizes BOBYQA's trust region."""
+    sc = np.ones(len(x0))
+    names = models.PARAM_NAMES[model]
+    if "theta_x" in names:
+        width = min(1.0, max(1e-6, math.exp(0.5 * (x0[0] + x0[1]))))
+        sc[names.index("theta_x")] = sc[names.index("theta_y")] = width
+    return sc
+
+
 def _local(model: str, bins: Bins, objective: str, x0: np.ndarray, method: str, stop: Stopping):
-    """One nlopt run from x0 (search coordinates); returns (best x, best f, evaluations, nlopt status name)."""
+    """One nlopt run from x0 (search coordinates); returns (best x, best f, evaluations, nlopt status name).
+
+    nlopt works on y = x / scale (_scales); xtol_abs applies to y, i.e. to the tilts relative to the lobe width.
+    """
     n = len(x0)
     lb, ub, x0 = _bounds(model, x0)
+    sc = _scales(model, x0)
     best = {"x": x0.copy(), "f": math.inf, "n": 0}
     lg = _is_log(model)
 
-    def f(x, grad):
+    def f(y, grad):
         try:
-            return _eval(x, grad)
+            return _eval(np.asarray(y) * sc, grad)
         except Exception as e:  # nlopt would turn it into its own error; keep it to re-raise
             best["error"] = e
             raise nlopt.ForcedStop() from e
@@ -191,7 +207,7 @@ def _local(model: str, bins: Bins, objective: str, x0: np.ndarray, method: str, 
         p = from_search(model, x)
         if grad.size > 0:
             val, g = obj.objective(objective, model, p, bins, want_grad=True)
-            g = np.where(lg, g * p, g)  # chain rule: d/d ln(alpha) = alpha d/d alpha
+            g = np.where(lg, g * p, g) * sc  # chain rule: d/d ln(alpha) = alpha d/d alpha; d/dy = scale d/dx
             # Guard: an overflowed gradient would derail L-BFGS; zero it and let the line search shrink the step.
             grad[:] = np.where(np.isfinite(g), g, 0.0)
         else:
@@ -203,18 +219,24 @@ def _local(model: str, bins: Bins, objective: str, x0: np.ndarray, method: str, 
         return float(val)
 
     opt = nlopt.opt(_ALGO[method], n)
-    opt.set_lower_bounds(lb.tolist())
-    opt.set_upper_bounds(ub.tolist())
+    opt.set_lower_bounds((lb / sc).tolist())
+    opt.set_upper_bounds((ub / sc).tolist())
     opt.set_min_objective(f)
     opt.set_xtol_abs(stop.xtol_abs)
     opt.set_ftol_rel(stop.ftol_rel)
     opt.set_maxeval(stop.maxeval)
     if method in ("bobyqa", "sbplx"):
-        step = np.where(lg, 0.3, 0.1)  # first trust radius: 35% in alpha, ~6 degrees in angles
+        # First trust radius: 35% in alpha, ~6 degrees in theta_z, a third of the lobe width in tilt (<= 0.1 rad).
+        step = np.where(lg, 0.3, 0.1)
+        names = models.PARAM_NAMES[model]
+        if "theta_x" in names:
+            for k in ("theta_x", "theta_y"):
+                i = names.index(k)
+                step[i] = min(0.3, 0.1 / sc[i])
         opt.set_initial_step(step.tolist())
     status = "ok"
     try:
-        opt.optimize(x0.tolist())
+        opt.optimize((x0 / sc).tolist())
         code = opt.last_optimize_result()
         status = {
             nlopt.SUCCESS: "success",
@@ -233,14 +255,32 @@ def _local(model: str, bins: Bins, objective: str, x0: np.ndarray, method: str, 
     return best["x"], best["f"], best["n"], status
 
 
+def _polish(model, bins, objective, x, fv, stop):
+    """L-BFGS from x, restarted (fresh Hessian model) while a restart still gains more than ftol_rel."""
+    n_total, statuses = 0, []
+    for _ in range(4):
+        x2, f2, n2, s2 = _local(model, bins, objective, x, "lbfgs", stop)
+        n_total += n2
+        statuses.append(s2)
+        gain = fv - f2
+        if f2 < fv:
+            x, fv = x2, f2
+        if not gain > stop.ftol_rel * abs(fv):
+            break
+    return x, fv, n_total, "+".join(statuses)
+
+
 def _run(model, bins, objective, x0_nat, method, stop):
     x0 = to_search(model, x0_nat)
     if method == "bobyqa+lbfgs":
-        x1, f1, n1, s1 = _local(model, bins, objective, x0, "bobyqa", stop)
-        x2, f2, n2, s2 = _local(model, bins, objective, x1, "lbfgs", stop)
-        if f2 <= f1:
-            return x2, f2, n1 + n2, f"bobyqa:{s1},lbfgs:{s2}"
-        return x1, f1, n1 + n2, f"bobyqa:{s1},lbfgs:{s2}(no gain)"
+        # BOBYQA only has to bring L-BFGS into the basin: looser tolerances there, the tight ones for L-BFGS.
+        rough = Stopping(xtol_abs=max(stop.xtol_abs, 1e-7), ftol_rel=max(stop.ftol_rel, 1e-10), maxeval=stop.maxeval)
+        x1, f1, n1, s1 = _local(model, bins, objective, x0, "bobyqa", rough)
+        x2, f2, n2, s2 = _polish(model, bins, objective, x1, f1, stop)
+        return x2, f2, n1 + n2, f"bobyqa:{s1},lbfgs:{s2}"
+    if method == "lbfgs":
+        x, fv, ne, st = _polish(model, bins, objective, x0, math.inf, stop)
+        return x, fv, ne, f"lbfgs:{st}"
     x, fv, ne, st = _local(model, bins, objective, x0, method, stop)
     return x, fv, ne, f"{method}:{st}"
 
