@@ -69,6 +69,10 @@ def fit_document(result: FitResult, bins: Bins, input_info: Optional[dict] = Non
     }
     if a is not None:
         doc["matrix_a"] = a.tolist()
+    rc = doc["objective"]["reduced_chi2"]
+    se = obj.standard_errors(result.model, result.params, bins, scale=max(rc or 1.0, 1.0))
+    if se is not None:
+        doc["stderr"] = {k: float(v) for k, v in zip(models.PARAM_NAMES[result.model], se)}
     return doc
 
 

@@ -124,3 +124,21 @@ def model_delta(model: str, params, model_ref: str, params_ref, bins: Bins) -> f
     """delta between two models on the bins (objective.md's metric with the bins as quadrature)."""
     b = _prep(bins)
     return delta(models.log_d(model, params, b.m), models.log_d(model_ref, params_ref, b.m), b.proj_solid_angle)
+
+
+def standard_errors(model: str, params, bins: Bins, scale: float = 1.0):
+    """Standard errors of the parameters: the inverse Fisher information of Poisson counts,
+    I = sum_k E_k g_k g_k^T with g_k = d ln E_k / d params, times ``scale`` (objective.md: scaled by
+    reduced_chi2, since neighbouring normals are correlated). None when I is singular (e.g. theta_z of an
+    isotropic lobe)."""
+    _, ln_e, g = log_expected(model, params, bins, want_grad=True)
+    e = np.exp(np.maximum(ln_e, _LN_E_FLOOR))
+    info = (g * e[:, None]).T @ g
+    try:
+        cov = np.linalg.inv(info) * max(scale, 0.0)
+    except np.linalg.LinAlgError:
+        return None
+    diag = np.diag(cov)
+    if not np.all(np.isfinite(diag)) or np.any(diag < 0):
+        return None
+    return np.sqrt(diag)

@@ -138,3 +138,19 @@ def test_command_line(tmp_path, bins):
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and str(bad) in r.stderr
     assert not (tmp_path / "o.json").exists()
+
+
+def test_standard_errors_match_the_spread_of_repeated_fits():
+    """The Fisher standard error of alpha against the empirical spread of 12 fits of independent samples
+    (relative standard error of a 12-sample standard deviation: 1/sqrt(22) ~ 21%, so within 50%)."""
+    alphas = []
+    se = None
+    for seed in range(12):
+        b = synthetic.sampled_bins("ggx", [0.2], 20_000, synthetic.grid_for(0.2, 32, 32), seed=100 + seed)
+        r = fit(b, "ggx", method="lbfgs")
+        alphas.append(r.params["alpha"])
+        if se is None:
+            from ndfitpy import objective as obj
+            se = obj.standard_errors("ggx", r.params, b)[0]
+    spread = float(np.std(alphas, ddof=1))
+    assert 0.5 * se < spread < 1.5 * se, (spread, se)
