@@ -19,10 +19,10 @@ if [ -f fits/pyproject.toml ]; then
   fits/.venv/bin/python -m pip install --quiet -e "fits[test,notebooks]"
   echo "== python tests"
   fits/.venv/bin/python -m pytest -q fits/tests
-  NDFIT_BIN="${NDFIT:-target/release/ndfit}"
-  if [ ! -x "$NDFIT_BIN" ]; then
-    cargo build --release --locked --bin ndfit 2>&1
+  if [ -z "${NDFIT:-}" ]; then
+    cargo build --release --locked --bin ndfit 2>&1  # a no-op after cargo test --release, unless stale
   fi
+  NDFIT_BIN="${NDFIT:-target/release/ndfit}"
   echo "== cross-check: Rust fits vs numpy + nlopt"
   fits/.venv/bin/python fits/crosscheck.py --ndfit "$NDFIT_BIN"
   echo "== notebooks"
