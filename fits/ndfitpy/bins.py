@@ -29,11 +29,12 @@ class Bins:
     solid_angle: Optional[np.ndarray] = None  #: (K,) solid angle (sr), when known
     path: str = "<memory>"
     extra: dict = field(default_factory=dict)
+    n_total: Optional[float] = None  #: N when some counted rows were dropped (used()); else the sum of counts
 
     @property
     def n_samples(self) -> float:
-        """N = sum of counts (every valid sample falls in exactly one bin)."""
-        return float(self.count.sum())
+        """N = sum of counts over every row of the file (every valid sample falls in exactly one bin)."""
+        return float(self.count.sum()) if self.n_total is None else float(self.n_total)
 
     def __len__(self) -> int:
         return int(self.m.shape[0])
@@ -48,6 +49,7 @@ class Bins:
             d=None if self.d is None else self.d[keep],
             solid_angle=None if self.solid_angle is None else self.solid_angle[keep],
             path=self.path,
+            n_total=self.n_samples,
         )
 
 
@@ -93,13 +95,20 @@ def read_ndf_csv(path: str) -> Bins:
     if not cols["mx"]:
         raise ValueError(f"{path}: no bins (only a header)")
     arr = {c: np.asarray(v, dtype=float) for c, v in cols.items()}
-    for c, v in arr.items():
-        bad = np.flatnonzero(~np.isfinite(v))
+    for c in ("count", "proj_solid_angle"):
+        bad = np.flatnonzero(~np.isfinite(arr[c]))
+        if bad.size:
+            raise ValueError(f"{path}: line {int(bad[0]) + 2}: column '{c}' is not finite")
+    # Rows with W = 0 take no part (objective.md), so only their count matters; the others must be complete.
+    live = arr["proj_solid_angle"] > 0
+    for c in ("mx", "my", "mz", "d"):
+        bad = np.flatnonzero(live & ~np.isfinite(arr[c]))
         if bad.size:
             raise ValueError(f"{path}: line {int(bad[0]) + 2}: column '{c}' is not finite")
     m = np.column_stack([arr["mx"], arr["my"], arr["mz"]])
+    m[~live] = np.where(np.isfinite(m[~live]), m[~live], 0.0)
     norms = np.linalg.norm(m, axis=1)
-    bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-6)
+    bad = np.flatnonzero(live & (np.abs(norms - 1.0) > 1e-6))
     if bad.size:
         raise ValueError(f"{path}: line {int(bad[0]) + 2}: (mx,my,mz) is not a unit vector (norm {norms[bad[0]]:.9g})")
     count = arr["count"]

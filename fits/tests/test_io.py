@@ -154,3 +154,12 @@ def test_standard_errors_match_the_spread_of_repeated_fits():
             se = obj.standard_errors("ggx", r.params, b)[0]
     spread = float(np.std(alphas, ddof=1))
     assert 0.5 * se < spread < 1.5 * se, (spread, se)
+
+
+def test_rows_without_projected_area_are_ignored_but_counted(tmp_path):
+    """A square grid over a disk has cells outside it (W = 0): their direction may be anything, even NaN;
+    they are left out of the objective but their count (if any) stays in N (ndf_csv.md: N = sum of count)."""
+    p = tmp_path / "ndf.csv"
+    p.write_text(HEADER + "0,0,1,1,7,1.0\nnan,nan,nan,nan,0,0\n0,0.6,0.8,0.5,3,2.0\n")
+    b = read_ndf_csv(p)
+    assert b.n_samples == 10 and len(b.used()) == 2 and b.used().n_samples == 10
