@@ -48,13 +48,17 @@ DELTA_TOL = 1e-3  # the issue's 0.1% on the NDF
 OBJ_TOL = 1e-6  # Rust's deviance may exceed nlopt's by this much, relative
 SCAN_EXTS = (".x3p", ".plu", ".sur", ".opd", ".al3d", ".tmd", ".dat", ".gsf", ".npy", ".exr", ".asc", ".xyz")
 
-# Synthetic scans: `ndfit synth` arguments per case (the size is appended by --size). Each case names the
-# model the surface was made from; every model is still fitted to it.
+# Synthetic scans: (name, `ndfit synth` arguments, NDF options). --nx/--ny come from --size. `--form none`:
+# ndfit's default form removal (a least-squares plane) would take the mean slope, i.e. the ellipsoid's tilt,
+# out of the NDF; without it the NDF is the one the truth describes. Every model is fitted to every scan.
 SYNTH_CASES = [
-    ("synth-ggx", ["--model", "ggx", "--alpha", "0.3"]),
-    ("synth-beckmann-aniso", ["--model", "beckmann-aniso", "--alpha-x", "0.15", "--alpha-y", "0.4", "--theta-z", "0.5"]),
-    ("synth-ellipsoid", ["--model", "ellipsoid", "--alpha-x", "0.2", "--alpha-y", "0.35", "--theta-x", "0.15",
-                         "--theta-y", "-0.1", "--theta-z", "0.6"]),
+    ("synth-ellipsoid", ["--surface", "ellipsoid", "--alpha-x", "0.2", "--alpha-y", "0.35", "--theta-x", "0.15",
+                         "--theta-y", "-0.1", "--theta-z", "0.6"], ["--form", "none"]),
+    ("synth-ggx", ["--surface", "ellipsoid", "--alpha-x", "0.3"], ["--form", "none"]),
+    ("synth-mirror", ["--surface", "ellipsoid", "--alpha-x", "0.03", "--alpha-y", "0.05", "--theta-z", "-0.4"],
+     ["--form", "none"]),
+    ("synth-gaussian", ["--surface", "gaussian", "--sigma-x", "0.15", "--sigma-y", "0.3", "--theta-z", "0.5"],
+     ["--form", "none"]),
 ]
 
 
@@ -244,14 +248,14 @@ def main(argv=None) -> int:
     try:
         scans = []
         if not args.no_synth:
-            for name, synth_args in SYNTH_CASES:
+            for name, synth_args, case_ndf_args in SYNTH_CASES:
                 if only and not any(s in name for s in only):
                     continue
                 path = os.path.join(work, f"{name}.x3p")
                 size = str(args.size)
-                ok, _, msg = run([ndfit, "synth", *synth_args, "--nx", size, "--ny", size, "-o", path], args.timeout)
+                ok, _, msg = run([ndfit, "synth", path, *synth_args, "--nx", size, "--ny", size], args.timeout)
                 if ok:
-                    scans.append((path, name))
+                    scans.append((path, name, case_ndf_args))
                 else:
                     rows += [Row(scan=name, model=m, notes=[f"ndfit synth failed: {msg}"]) for m in model_list]
         if not args.no_real:
@@ -260,13 +264,13 @@ def main(argv=None) -> int:
                     name = os.path.basename(p)
                     if only and not any(s in name for s in only):
                         continue
-                    scans.append((p, name))
+                    scans.append((p, name, []))
             else:
                 print(f"SKIP real scans: {os.path.normpath(args.scans)} is absent")
                 skipped.append("real scans")
-        for path, name in scans:
+        for path, name, case_ndf_args in scans:
             print(f"-- {name}", file=sys.stderr, flush=True)
-            rows += check_scan(ndfit, path, name, model_list, work, ndf_args, args.timeout)
+            rows += check_scan(ndfit, path, name, model_list, work, case_ndf_args + ndf_args, args.timeout)
     finally:
         if not args.work:
             shutil.rmtree(work, ignore_errors=True)

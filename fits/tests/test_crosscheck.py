@@ -36,11 +36,11 @@ FAKE = textwrap.dedent(
 
     cmd = sys.argv[1]
     if cmd == "synth":
-        model = opt("--model")
-        names = {{"alpha": "--alpha", "alpha_x": "--alpha-x", "alpha_y": "--alpha-y", "theta_x": "--theta-x",
-                 "theta_y": "--theta-y", "theta_z": "--theta-z"}}
-        p = [float(opt(names[k])) for k in models.PARAM_NAMES[model]]
-        json.dump({{"model": model, "params": p}}, open(opt("-o"), "w"))
+        if opt("--surface") != "ellipsoid":
+            print("ndfit: only ellipsoid surfaces here", file=sys.stderr); sys.exit(2)
+        ax = float(opt("--alpha-x", 0.3))
+        p = [ax, float(opt("--alpha-y", ax))] + [float(opt(k, 0)) for k in ("--theta-x", "--theta-y", "--theta-z")]
+        json.dump({{"model": "ellipsoid", "params": p}}, open(sys.argv[2], "w"))
     elif cmd == "ndf":
         write_ndf_csv(opt("-o"), bins_of(sys.argv[2]))
     elif cmd == "fit":
