@@ -15,9 +15,9 @@ from .bins import Bins
 
 OBJECTIVES = ("poisson", "logd")
 
-# Guard: ln E is clamped here so that a model with (numerically) no mass at an occupied bin gives a huge but
-# finite deviance (c * 1400 or so per such bin) instead of inf, which derivative-free optimizers cannot rank.
-_LN_E_FLOOR = -700.0
+# No floor on ln E: a lobe far too narrow for the data has ln E ~ -1e4 at occupied bins, and the deviance term
+# 2 c (E/c - 1 - ln(E/c)) ~ -2 c ln E is computed from ln E directly, so it stays finite and exact. A floor
+# (as an earlier version had) would cap that penalty and let absurdly narrow lobes look good.
 
 
 def _prep(bins: Bins) -> Bins:
@@ -39,33 +39,33 @@ def poisson_deviance(model: str, params, bins: Bins, want_grad: bool = False):
     z = ln E - ln c, which is accurate near the optimum where x ~ 1. dF/dp = sum_k 2 (E_k - c_k) d ln D_k / dp.
     """
     b, ln_e, g = log_expected(model, params, bins, want_grad)
-    clamped = ln_e < _LN_E_FLOOR
-    ln_e = np.maximum(ln_e, _LN_E_FLOOR)
-    e = np.exp(ln_e)
-    c = b.count
-    pos = c > 0
-    terms = 2.0 * e  # empty bins: 2 E
-    z = ln_e[pos] - np.log(c[pos])
-    terms[pos] = 2.0 * c[pos] * (np.expm1(z) - z)
+    e, terms = _deviance_terms(ln_e, b.count)
     f = float(terms.sum())
     if not want_grad:
         return f
-    g = np.where(clamped[:, None], 0.0, g)  # the clamped terms are constant in the parameters
-    grad = 2.0 * ((e - c) @ g)
+    grad = 2.0 * ((e - b.count) @ g)
     return f, grad
+
+
+def _deviance_terms(ln_e: np.ndarray, c: np.ndarray):
+    """E_k and the per-bin deviance 2 (E - c + c ln(c/E)); inf where the model has no mass (ln E = -inf) at an
+    occupied bin (the X+ factor: a bin below the horizon of the model)."""
+    with np.errstate(over="ignore"):
+        e = np.exp(ln_e)  # underflows to 0 harmlessly; the occupied bins use ln E below
+    pos = c > 0
+    terms = 2.0 * e  # empty bins: 2 E
+    z = ln_e[pos] - np.log(c[pos])
+    with np.errstate(over="ignore", invalid="ignore"):
+        t = 2.0 * c[pos] * (np.expm1(z) - z)
+    terms[pos] = np.where(np.isnan(t), np.inf, t)  # z = -inf gives inf - inf; the deviance is +inf there
+    return e, terms
 
 
 def poisson_residuals(model: str, params, bins: Bins) -> np.ndarray:
     """r_k = sign(c_k - E_k) sqrt(2 (E_k - c_k + c_k ln(c_k/E_k))) (objective.md), so F = sum r_k^2."""
     b, ln_e, _ = log_expected(model, params, bins)
-    ln_e = np.maximum(ln_e, _LN_E_FLOOR)
-    e = np.exp(ln_e)
-    c = b.count
-    pos = c > 0
-    t = 2.0 * e
-    z = ln_e[pos] - np.log(c[pos])
-    t[pos] = 2.0 * c[pos] * (np.expm1(z) - z)
-    return np.sign(c - e) * np.sqrt(np.maximum(t, 0.0))
+    e, t = _deviance_terms(ln_e, b.count)
+    return np.sign(b.count - e) * np.sqrt(np.maximum(t, 0.0))
 
 
 def logd_objective(model: str, params, bins: Bins, want_grad: bool = False, min_count: float = 10.0):
@@ -76,9 +76,6 @@ def logd_objective(model: str, params, bins: Bins, want_grad: bool = False, min_
         raise ValueError(f"{bins.path}: objective 'logd' needs bins with count >= {min_count:g}; there are none")
     m, c, w = b.m[sel], b.count[sel], b.proj_solid_angle[sel]
     logd, g = models.log_d_and_grad(model, params, m, want_grad)
-    if want_grad:
-        g = np.where((logd < _LN_E_FLOOR)[:, None], 0.0, g)  # the clamped terms are constant
-    logd = np.maximum(logd, _LN_E_FLOOR)  # same guard as the deviance: finite for the optimizer
     ln_data = np.log(c) - math.log(b.n_samples) - np.log(w)
     r = logd - ln_data
     f = float(np.sum(c * r * r))
@@ -132,7 +129,7 @@ def standard_errors(model: str, params, bins: Bins, scale: float = 1.0):
     reduced_chi2, since neighbouring normals are correlated). None when I is singular (e.g. theta_z of an
     isotropic lobe)."""
     _, ln_e, g = log_expected(model, params, bins, want_grad=True)
-    e = np.exp(np.maximum(ln_e, _LN_E_FLOOR))
+    e = np.exp(ln_e)
     info = (g * e[:, None]).T @ g
     try:
         cov = np.linalg.inv(info) * max(scale, 0.0)

@@ -85,13 +85,25 @@ def test_zero_weight_bins_are_left_out():
     assert math.isfinite(f)
 
 
-def test_deviance_stays_finite_when_the_model_has_no_mass():
-    """A lobe of alpha 1e-4 against data spread over the hemisphere: E underflows in most bins; the guard
-    keeps F finite (and huge) so derivative-free optimizers can still rank the point."""
+def test_deviance_of_a_far_too_narrow_lobe_is_exact():
+    """Beckmann lobes much narrower than the data: E underflows to 0 in most occupied bins, ln E reaches -1e5.
+    The deviance must still be the exact 2 sum (E - c + c (ln c - ln E)), computed here in the log domain term
+    by term, finite, and must keep ranking narrower lobes as worse (a floor on ln E would flatten that)."""
     b = _data(4)
-    f, g = obj.poisson_deviance("beckmann", [1e-4], b, want_grad=True)
-    assert math.isfinite(f) and f > 1e6
-    assert np.all(np.isfinite(g))
+    n = b.n_samples
+    values = []
+    for alpha in (1e-4, 1e-3, 1e-2):
+        f, g = obj.poisson_deviance("beckmann", [alpha], b, want_grad=True)
+        ld = models.log_d("beckmann", [alpha], b.m)
+        ref = 0.0
+        for c, l, w in zip(b.count, ld, b.proj_solid_angle):
+            ln_e = math.log(n) + l + math.log(w)
+            e = math.exp(ln_e) if ln_e > -745 else 0.0
+            ref += 2.0 * (e - c + (c * (math.log(c) - ln_e) if c > 0 else 0.0))
+        assert f == pytest.approx(ref, rel=1e-12)
+        assert math.isfinite(f) and np.all(np.isfinite(g))
+        values.append(f)
+    assert values[0] > values[1] > values[2]
 
 
 def test_delta_of_a_scaled_ndf_is_the_scale():
