@@ -66,12 +66,14 @@ def fake(tmp_path):
     return str(p)
 
 
-def _run(fake, tmp_path, env_extra=None, models="ggx,ellipsoid"):
+def _run(fake, tmp_path, env_extra=None, models="ggx,ellipsoid", known=None):
     env = dict(os.environ, **(env_extra or {}))
     out = tmp_path / "rows.json"
+    known_path = tmp_path / "known.json"
+    known_path.write_text(json.dumps(known or []))
     r = subprocess.run(
         [sys.executable, CROSSCHECK, "--ndfit", fake, "--models", models, "--scans", str(tmp_path / "absent"),
-         "--size", "64", "--only", "ggx", "--json", str(out)],
+         "--size", "64", "--only", "ggx", "--json", str(out), "--known", str(known_path)],
         capture_output=True, text=True, env=env, timeout=600,
     )
     rows = json.loads(out.read_text()) if out.exists() else None
@@ -93,6 +95,17 @@ def test_disagreement_fails(fake, tmp_path):
     assert r.returncode == 1
     assert r.stdout.strip().splitlines()[-1] == "crosscheck: 0 passed, 2 failed"
     assert "NDFs differ" in r.stdout and "rust objective worse" in r.stdout
+    assert "the Rust side is wrong" in r.stdout
+
+
+def test_known_findings_are_reported_and_skipped(fake, tmp_path):
+    known = [{"scan": "synth-ggx", "model": "ggx", "side": "rust", "reason": "test reason"}]
+    r, rows = _run(fake, tmp_path, {"FAKE_SCALE": "1.01"}, known=known)
+    assert r.returncode == 1  # the ellipsoid row is not known
+    assert r.stdout.strip().splitlines()[-1] == "crosscheck: 0 passed, 1 failed, 1 skipped"
+    assert "known finding (rust side): test reason" in r.stdout
+    r, rows = _run(fake, tmp_path, known=known)
+    assert r.returncode == 0 and "now pass" in r.stdout
 
 
 def test_failing_command_is_a_row_not_a_traceback(fake, tmp_path):
