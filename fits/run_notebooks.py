@@ -40,8 +40,8 @@ def strip(path: str) -> bool:
     return False
 
 
-def execute(path: str, timeout: int) -> str:
-    """Run one notebook; returns '' or a one-line error."""
+def execute(path: str, timeout: int, out_dir: str = "") -> str:
+    """Run one notebook; returns '' or a one-line error. With ``out_dir`` the executed copy is written there."""
     import nbformat
     from nbclient import NotebookClient
     from nbclient.exceptions import CellExecutionError, CellTimeoutError
@@ -57,6 +57,10 @@ def execute(path: str, timeout: int) -> str:
         return f"a cell ran longer than {timeout} s"
     except Exception as e:  # kernel died, bad JSON, ...
         return f"{type(e).__name__}: {e}".splitlines()[0]
+    finally:
+        if out_dir:
+            os.makedirs(out_dir, exist_ok=True)
+            nbformat.write(nb, os.path.join(out_dir, os.path.basename(path)))
     return ""
 
 
@@ -65,6 +69,7 @@ def main(argv=None) -> int:
     ap.add_argument("folder")
     ap.add_argument("--strip", action="store_true", help="strip outputs in place instead of executing")
     ap.add_argument("--timeout", type=int, default=900, help="seconds per cell")
+    ap.add_argument("--out", default="", help="write the executed notebooks (with outputs) into this folder")
     args = ap.parse_args(argv)
     paths = sorted(glob.glob(os.path.join(args.folder, "*.ipynb")))
     if not paths:
@@ -78,7 +83,7 @@ def main(argv=None) -> int:
     failed = 0
     for p in paths:
         t0 = time.perf_counter()
-        err = execute(p, args.timeout)
+        err = execute(p, args.timeout, args.out)
         dt = time.perf_counter() - t0
         if err:
             failed += 1

@@ -56,10 +56,13 @@ print("ndfit:", ndfit("--version").strip(), "| work folder:", WORK)
 SYNTH = r'''
 # A synthetic scan with known truth: the upper half of a tilted, anisotropic ellipsoid (its NDF is exactly
 # Walter et al.'s ellipsoid NDF, eq. 1), 384 x 384 pixels.
-SYNTH_ARGS = ["ellipsoid", "--alpha-x", "0.2", "--alpha-y", "0.35", "--theta-x", "0.15", "--theta-y", "-0.1",
-              "--theta-z", "0.6", "--nx", "384", "--ny", "384"]
+SYNTH_ARGS = ["--surface", "ellipsoid", "--alpha-x", "0.2", "--alpha-y", "0.35", "--theta-x", "0.15",
+              "--theta-y", "-0.1", "--theta-z", "0.6", "--nx", "384", "--ny", "384"]
 synth_scan = os.path.join(WORK, "synth.x3p")
-ndfit("synth", *SYNTH_ARGS, "-o", synth_scan)
+print(ndfit("synth", synth_scan, *SYNTH_ARGS))
+# ndfit removes a least-squares plane by default (right for real scans); here it would take the ellipsoid's
+# tilt out of the NDF, so the synthetic scan is read with --form none.
+SYNTH_OPTS = ["--form", "none"]
 truth_path = next((p for p in (synth_scan + ".truth.json", synth_scan[:-4] + ".truth.json") if os.path.exists(p)), None)
 truth = json.load(open(truth_path)) if truth_path else None
 print("truth:", truth and {"model": truth["model"], "params": truth["params"]})
@@ -88,9 +91,9 @@ def disk_plot(ax, bins, values, title, cmap="magma", vmin=None, vmax=None, label
     ax.set_aspect("equal"); ax.set_title(title, fontsize=9); ax.set_xlabel("mx"); ax.set_ylabel("my")
     plt.colorbar(sc, ax=ax, shrink=0.75, label=label)
 
-def empirical(scan, name):
+def empirical(scan, name, opts=()):
     csv = os.path.join(WORK, f"{name}.ndf.csv")
-    ndfit("ndf", scan, "-o", csv)
+    ndfit("ndf", scan, "-o", csv, *opts)
     b = read_ndf_csv(csv).used()
     occ = b.count > 0
     print(f"{len(b)} bins, {int(b.n_samples)} samples, {occ.sum()} occupied; sum d W = {np.sum(b.d * b.proj_solid_angle):.6f}")
@@ -100,11 +103,11 @@ def empirical(scan, name):
     plt.show()
     return csv, b
 
-def fit_all(scan, name, bins):
+def fit_all(scan, name, bins, opts=()):
     rows, fits = [], {}
     for m in models.MODELS:
         out = os.path.join(WORK, f"{name}.{m}.json")
-        t0 = time.perf_counter(); ndfit("fit", scan, "--model", m, "-o", out); t = time.perf_counter() - t0
+        t0 = time.perf_counter(); ndfit("fit", scan, "--model", m, "-o", out, *opts); t = time.perf_counter() - t0
         doc = fitjson.read_fit(out)
         fits[m] = doc
         f = obj.poisson_deviance(m, doc["params"], bins)
@@ -127,14 +130,17 @@ def residual_maps(bins, fits, name):
                   label="signed deviance residual")
     fig.tight_layout(); plt.show()
 
-def auto_choice(scan, name):
+def auto_choice(scan, name, opts=()):
     out = os.path.join(WORK, f"{name}.auto.json")
-    ndfit("fit", scan, "--model", "auto", "-o", out)
+    ndfit("fit", scan, "--model", "auto", "-o", out, *opts)
     doc = json.load(open(out))
     print(f"--model auto chose: {doc['model']}  params: {doc['params']}")
-    extra = {k: v for k, v in doc.items() if k in ("selection", "auto", "candidates", "model_selection")}
-    if extra:
-        print(json.dumps(extra, indent=1)[:3000])
+    sel = doc.get("selection")
+    if isinstance(sel, dict):
+        print(f"criterion: {sel.get('criterion')}")
+        for c in sel.get("candidates", []):
+            print(f"  {c.get('model', '?'):15s} criterion {c.get('criterion', float('nan')):14.2f}  "
+                  f"reduced chi2 {c.get('reduced_chi2', float('nan')):9.3f}  delta_data {c.get('delta_data', float('nan')):.3f}")
     return doc
 '''
 
@@ -158,13 +164,13 @@ def tour():
             "The empirical NDF: bins of the hemisphere seen from above, coloured by log D. Its normalization "
             "(Heitz eq. 9) makes `sum d W` one."
         ),
-        new_code_cell('csv, bins = empirical(synth_scan, "synth")'),
+        new_code_cell('csv, bins = empirical(synth_scan, "synth", SYNTH_OPTS)'),
         new_markdown_cell(
             "Every model fitted by `ndfit fit`, scored in numpy on the same bins. `F/(K-p)` is the reduced "
             "deviance; `delta(rust,nlopt)` the NDF difference between the Rust fit and an independent nlopt fit."
         ),
         new_code_cell(
-            'fits = fit_all(synth_scan, "synth", bins)\n'
+            'fits = fit_all(synth_scan, "synth", bins, SYNTH_OPTS)\n'
             "if truth:\n"
             '    d_truth = obj.model_delta("ellipsoid", fits["ellipsoid"]["params"], truth["model"], truth["params"], bins)\n'
             '    print(f"ellipsoid fit vs truth: delta = {d_truth:.2e}")\n'
@@ -175,7 +181,7 @@ def tour():
             "lobes) means the model misses a feature of the data; noise means it explains it."
         ),
         new_code_cell('residual_maps(bins, fits, "synth")'),
-        new_code_cell('auto = auto_choice(synth_scan, "synth")'),
+        new_code_cell('auto = auto_choice(synth_scan, "synth", SYNTH_OPTS)'),
         new_markdown_cell("## 2. A real scan"),
         new_code_cell(
             'real = os.path.join(SCANS, "hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p")\n'
@@ -201,16 +207,16 @@ def sweep_with_binary(sizes, models_=("ggx", "ellipsoid")):
     rows = []
     for n in sizes:
         scan = os.path.join(WORK, f"s{n}.x3p")
-        t0 = time.perf_counter(); ndfit("synth", *SYNTH_ARGS_BASE, "--nx", n, "--ny", n, "-o", scan)
+        t0 = time.perf_counter(); ndfit("synth", scan, *SYNTH_ARGS_BASE, "--nx", n, "--ny", n)
         t_synth = time.perf_counter() - t0
         truth_path = next(p for p in (scan + ".truth.json", scan[:-4] + ".truth.json") if os.path.exists(p))
         truth = json.load(open(truth_path))
         csv = os.path.join(WORK, f"s{n}.csv")
-        t0 = time.perf_counter(); ndfit("ndf", scan, "-o", csv); t_ndf = time.perf_counter() - t0
+        t0 = time.perf_counter(); ndfit("ndf", scan, "-o", csv, "--form", "none"); t_ndf = time.perf_counter() - t0
         bins = read_ndf_csv(csv).used()
         for m in models_:
             out = os.path.join(WORK, f"s{n}.{m}.json")
-            t0 = time.perf_counter(); ndfit("fit", scan, "--model", m, "-o", out); t_fit = time.perf_counter() - t0
+            t0 = time.perf_counter(); ndfit("fit", scan, "--model", m, "-o", out, "--form", "none"); t_fit = time.perf_counter() - t0
             doc = fitjson.read_fit(out)
             py = nlopt_fit(bins, m)
             rows.append(dict(n=n, pixels=n * n, model=m, t_ndf=t_ndf, t_fit=t_fit, t_nlopt=py.seconds,
@@ -231,7 +237,7 @@ def speed():
         ),
         new_code_cell(COMMON.strip()),
         new_code_cell(
-            'SYNTH_ARGS_BASE = ["ellipsoid", "--alpha-x", "0.2", "--alpha-y", "0.35", "--theta-x", "0.15",\n'
+            'SYNTH_ARGS_BASE = ["--surface", "ellipsoid", "--alpha-x", "0.2", "--alpha-y", "0.35", "--theta-x", "0.15",\n'
             '                   "--theta-y", "-0.1", "--theta-z", "0.6"]\n' + BENCH.strip()
         ),
         new_markdown_cell("## `ndfit bench --quick`"),

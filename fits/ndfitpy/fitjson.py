@@ -1,7 +1,8 @@
 """Read and write the ``ndfit.fit/1`` JSON of /work/shared/CONTRACT.md ("Fit result JSON").
 
 Required keys: schema, model, params, matrix_a (for ellipsoid-family models), input. This writer adds
-``objective`` ({name, value, ...}) and ``fitter`` (which program and method made the fit).
+``objective`` ({name, value, ...}), ``std_errors`` (Fisher, scaled by reduced_chi2 when above 1) and ``fitter``
+(which program and method made the fit).
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ def fit_document(result: FitResult, bins: Bins, input_info: Optional[dict] = Non
     rc = doc["objective"]["reduced_chi2"]
     se = obj.standard_errors(result.model, result.params, bins, scale=max(rc or 1.0, 1.0))
     if se is not None:
-        doc["stderr"] = {k: float(v) for k, v in zip(models.PARAM_NAMES[result.model], se)}
+        doc["std_errors"] = {k: float(v) for k, v in zip(models.PARAM_NAMES[result.model], se)}
     return doc
 
 
@@ -122,6 +123,9 @@ def objective_value(doc: dict) -> Optional[float]:
     o = doc.get("objective")
     if isinstance(o, dict):
         o = o.get("value")
+    q = doc.get("quality")
+    if o is None and isinstance(q, dict):  # the Rust fit's layout: quality.objective_value
+        o = q.get("objective_value")
     if isinstance(o, (int, float)) and math.isfinite(o):
         return float(o)
     return None
