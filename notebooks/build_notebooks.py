@@ -87,7 +87,7 @@ def show_heights(scan, title):
 
 def disk_plot(ax, bins, values, title, cmap="magma", vmin=None, vmax=None, label=""):
     """Bins drawn at (mx, my): the hemisphere seen from above (orthographic), n = +z at the centre."""
-    sc = ax.scatter(bins.m[:, 0], bins.m[:, 1], c=values, s=4, cmap=cmap, vmin=vmin, vmax=vmax, linewidths=0)
+    sc = ax.scatter(bins.m[:, 0], bins.m[:, 1], c=values, s=7, cmap=cmap, vmin=vmin, vmax=vmax, linewidths=0)
     ax.set_aspect("equal"); ax.set_title(title, fontsize=9); ax.set_xlabel("mx"); ax.set_ylabel("my")
     plt.colorbar(sc, ax=ax, shrink=0.75, label=label)
 
@@ -122,7 +122,11 @@ def fit_all(scan, name, bins, opts=()):
     return fits
 
 def residual_maps(bins, fits, name):
-    fig, axes = plt.subplots(1, len(fits), figsize=(4 * len(fits), 3.6))
+    nrow = math.ceil(len(fits) / 3)
+    fig, axes = plt.subplots(nrow, 3, figsize=(14, 4.3 * nrow))
+    axes = axes.ravel()
+    for ax in axes[len(fits):]:
+        ax.axis("off")
     for ax, (m, doc) in zip(axes, fits.items()):
         r = obj.poisson_residuals(m, doc["params"], bins)
         lim = max(3.0, np.percentile(np.abs(r), 99))
@@ -201,103 +205,145 @@ def tour():
     return cells
 
 
-BENCH = r'''
-def sweep_with_binary(sizes, models_=("ggx", "ellipsoid")):
-    """Time the stages with the binary and measure accuracy against the synthetic truth, per scan size."""
-    rows = []
-    for n in sizes:
-        scan = os.path.join(WORK, f"s{n}.x3p")
-        t0 = time.perf_counter(); ndfit("synth", scan, *SYNTH_ARGS_BASE, "--nx", n, "--ny", n)
-        t_synth = time.perf_counter() - t0
-        truth_path = next(p for p in (scan + ".truth.json", scan[:-4] + ".truth.json") if os.path.exists(p))
-        truth = json.load(open(truth_path))
-        csv = os.path.join(WORK, f"s{n}.csv")
-        t0 = time.perf_counter(); ndfit("ndf", scan, "-o", csv, "--form", "none"); t_ndf = time.perf_counter() - t0
-        bins = read_ndf_csv(csv).used()
-        for m in models_:
-            out = os.path.join(WORK, f"s{n}.{m}.json")
-            t0 = time.perf_counter(); ndfit("fit", scan, "--model", m, "-o", out, "--form", "none"); t_fit = time.perf_counter() - t0
-            doc = fitjson.read_fit(out)
-            py = nlopt_fit(bins, m)
-            rows.append(dict(n=n, pixels=n * n, model=m, t_ndf=t_ndf, t_fit=t_fit, t_nlopt=py.seconds,
-                             bins=len(bins), delta_truth=obj.model_delta(m, doc["params"], truth["model"], truth["params"], bins)))
-    return rows
-'''
+BENCH = r"""
+# Accuracy is measured on one fixed, fine set of directions for every point, so that points with different
+# NDF bins are comparable: delta(D_fit; D_truth) of objective.md with the quadrature of a 160 x 128 grid.
+from ndfitpy.synthetic import grid_for
+QUAD = grid_for(0.3, 160, 128).bins()
+
+def synth(n, extra=()):
+    scan = os.path.join(WORK, f"s{n}.x3p")
+    if not os.path.exists(scan):
+        ndfit("synth", scan, *SYNTH_ARGS_BASE, "--nx", n, "--ny", n, *extra)
+    truth = json.load(open(scan[:-4] + ".truth.json"))
+    return scan, truth
+
+def point(scan, truth, label, fit_opts=(), model="ellipsoid"):
+    out = os.path.join(WORK, "point.json")
+    t0 = time.perf_counter()
+    ndfit("fit", scan, "--model", model, "-o", out, "--form", "none", *fit_opts)
+    wall = time.perf_counter() - t0
+    doc = json.load(open(out))
+    tm = doc.get("timings", {})
+    d = obj.delta(models.log_d(doc["model"], doc["params"], QUAD.m),
+                  models.log_d(truth["model"], truth["params"], QUAD.m), QUAD.proj_solid_angle)
+    return dict(label=label, wall=wall, read_ms=tm.get("read_ms", float("nan")), ndf_ms=tm.get("ndf_ms", float("nan")),
+                fit_ms=tm.get("fit_ms", float("nan")), delta=d, bins=doc.get("quality", {}).get("n_bins"))
+"""
+
+SIZES = r"""
+sizes = [128, 256, 512, 1024]
+size_rows = []
+for n in sizes:
+    scan, truth = synth(n)
+    size_rows.append(dict(point(scan, truth, f"{n}^2"), n=n))
+for r in size_rows:
+    print(f"{r['label']:>7s}  bins {r['bins']!s:>6s}  read {r['read_ms']:7.1f} ms  ndf {r['ndf_ms']:7.1f} ms  "
+          f"fit {r['fit_ms']:7.1f} ms  (process {r['wall']:.2f} s)  delta vs truth {r['delta']:.2e}")
+"""
+
+SIZE_PLOT = r"""
+px = np.array([r["n"] ** 2 for r in size_rows], dtype=float)
+fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+for key, mk in (("read_ms", "v-"), ("ndf_ms", "o-"), ("fit_ms", "s-")):
+    y = np.array([r[key] for r in size_rows])
+    k = np.polyfit(np.log(px), np.log(y), 1)[0]
+    a1.loglog(px, y, mk, label=f"{key[:-3]} (log-log slope {k:.2f})")
+a1.set_xlabel("pixels"); a1.set_ylabel("ms"); a1.legend(); a1.set_title("stage times (fit JSON timings)")
+a2.loglog(px, [r["delta"] for r in size_rows], "o-")
+a2.set_xlabel("pixels"); a2.set_ylabel("delta(fit; truth)"); a2.set_title("accuracy against truth")
+fig.tight_layout(); plt.show()
+"""
+
+KNOBS = r"""
+scan, truth = synth(512)
+knob_rows = [point(scan, truth, "defaults")]
+for cells in (15, 31, 63, 127):
+    knob_rows.append(point(scan, truth, f"--ndf-cells {cells}", ["--ndf-cells", cells]))
+for sub in (2, 4):
+    knob_rows.append(point(scan, truth, f"--subsample {sub}", ["--subsample", sub]))
+for label, opts in (("--ndf-scheme triangles", ["--ndf-scheme", "triangles"]),
+                    ("--solver nelder-mead", ["--solver", "nelder-mead"]), ("--solver lbfgs", ["--solver", "lbfgs"])):
+    try:
+        knob_rows.append(point(scan, truth, label, opts))
+    except RuntimeError as e:
+        print("skipped:", str(e).splitlines()[0])
+for r in knob_rows:
+    r["total_ms"] = r["read_ms"] + r["ndf_ms"] + r["fit_ms"]
+    print(f"{r['label']:24s} bins {r['bins']!s:>6s}  total {r['total_ms']:8.1f} ms  "
+          f"(ndf {r['ndf_ms']:6.1f}, fit {r['fit_ms']:6.1f})  delta {r['delta']:.2e}")
+"""
+
+KNOB_PLOT = r"""
+t = np.array([r["total_ms"] for r in knob_rows]); e = np.array([r["delta"] for r in knob_rows])
+order = np.argsort(t)
+front = np.minimum.accumulate(e[order])
+fig, ax = plt.subplots(figsize=(7, 4.5))
+ax.loglog(t, e, "o")
+for r in knob_rows:
+    ax.annotate(r["label"], (r["total_ms"], r["delta"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+ax.step(t[order], front, where="post", color="k", lw=0.8, label="Pareto front")
+ax.set_xlabel("read + NDF + fit (ms)"); ax.set_ylabel("delta(fit; truth)"); ax.legend()
+ax.set_title("knobs at 512^2: time against error"); plt.show()
+"""
+
+BENCH_RUN = r"""
+import csv as _csv
+bench_dir = os.path.join(WORK, "bench")
+help_text = subprocess.run([NDFIT, "bench", "--help"], capture_output=True, text=True).stdout
+bench_rows = []
+if "--quick" in help_text:
+    try:
+        ndfit("bench", "--quick", "-o", bench_dir)
+        bench_rows = list(_csv.DictReader(open(os.path.join(bench_dir, "bench.csv"))))
+    except (RuntimeError, OSError) as e:
+        print("ndfit bench failed:", str(e).splitlines()[0])
+else:
+    print("this ndfit has no `bench --quick` yet; the sweeps above are the measurement")
+print(f"{len(bench_rows)} rows", list(bench_rows[0]) if bench_rows else "")
+"""
+
+BENCH_SHOW = r"""
+png = os.path.join(bench_dir, "pareto.png")
+if os.path.exists(png):
+    fig, ax = plt.subplots(figsize=(9, 6)); ax.imshow(plt.imread(png)); ax.axis("off"); plt.show()
+if bench_rows:
+    cols = list(bench_rows[0])
+    show = [c for c in cols if any(k in c for k in ("knob", "label", "size", "total", "delta", "peak"))][:8]
+    print("  ".join(f"{c:>14s}" for c in show))
+    for r in bench_rows[:40]:
+        print("  ".join(f"{str(r[c])[:14]:>14s}" for c in show))
+"""
 
 
 def speed():
     cells = [
         new_markdown_cell(
             "# Speed and accuracy\n\n"
-            "What each knob costs and buys. If the binary has `ndfit bench`, its quick sweep is run and plotted "
-            "(time against error, the Pareto front). In any case the stages are timed with the binary itself on "
-            "synthetic scans of growing size, with accuracy measured against the known truth by the NDF "
-            "difference `delta` of `data_formats/objective.md` (computed in numpy). Timings on a shared 2-core "
-            "machine are noisy: read them as orders of magnitude."
+            "What each knob costs and buys, measured with the `ndfit` binary on synthetic ellipsoid scans with "
+            "known truth. Stage times come from the fit JSON's `timings` (read, NDF, fit, in ms); accuracy is the "
+            "NDF difference `delta(D_fit; D_truth)` of `data_formats/objective.md`, computed in numpy on one fixed "
+            "fine set of directions. If the binary has `ndfit bench --quick`, its sweep and Pareto plot are shown "
+            "too (the full sweep is in docs/PERFORMANCE.md once the bench engineer lands it). Timings on a shared "
+            "2-core machine are noisy: read them as orders of magnitude."
         ),
         new_code_cell(COMMON.strip()),
         new_code_cell(
             'SYNTH_ARGS_BASE = ["--surface", "ellipsoid", "--alpha-x", "0.2", "--alpha-y", "0.35", "--theta-x", "0.15",\n'
             '                   "--theta-y", "-0.1", "--theta-z", "0.6"]\n' + BENCH.strip()
         ),
-        new_markdown_cell("## `ndfit bench --quick`"),
-        new_code_cell(
-            "import csv as _csv\n"
-            "bench_rows = []\n"
-            'if has_command("bench"):\n'
-            '    out = os.path.join(WORK, "bench.csv")\n'
-            "    try:\n"
-            '        ndfit("bench", "--quick", "-o", out)\n'
-            "        bench_rows = list(_csv.DictReader(open(out)))\n"
-            "    except RuntimeError as e:\n"
-            '        print("ndfit bench failed:", e)\n'
-            'print(f"{len(bench_rows)} rows from ndfit bench", (list(bench_rows[0]) if bench_rows else ""))'
+        new_markdown_cell("## Scan size: how time grows, what accuracy it buys"),
+        new_code_cell(SIZES.strip()),
+        new_code_cell(SIZE_PLOT.strip()),
+        new_markdown_cell(
+            "## Knobs at 512^2: NDF bins, subsampling, normal scheme, solver\n\n"
+            "Each knob moved alone from the defaults; time is read + NDF + fit from the JSON."
         ),
-        new_code_cell(
-            "def num(v):\n"
-            "    try: return float(v)\n"
-            "    except (TypeError, ValueError): return float('nan')\n"
-            "if bench_rows:\n"
-            "    cols = list(bench_rows[0])\n"
-            '    tcol = next((c for c in cols if c.startswith("time") or c.startswith("t_")), None)\n'
-            '    ecol = next((c for c in cols if "delta" in c or "error" in c), None)\n'
-            "    if tcol and ecol:\n"
-            "        t = np.array([num(r[tcol]) for r in bench_rows]); e = np.array([num(r[ecol]) for r in bench_rows])\n"
-            "        ok = np.isfinite(t) & np.isfinite(e) & (t > 0) & (e > 0)\n"
-            "        order = np.argsort(t[ok]); tt, ee = t[ok][order], e[ok][order]\n"
-            "        front = np.minimum.accumulate(ee)\n"
-            "        fig, ax = plt.subplots(figsize=(6, 4))\n"
-            '        ax.loglog(tt, ee, "o", alpha=0.5, label="bench points")\n'
-            '        ax.step(tt, front, where="post", color="k", label="Pareto front")\n'
-            '        ax.set_xlabel(tcol); ax.set_ylabel(ecol); ax.legend(); ax.set_title("ndfit bench --quick")\n'
-            "        plt.show()\n"
-            "    else:\n"
-            '        print("bench CSV has no recognizable time/error columns:", cols)'
-        ),
-        new_markdown_cell("## Stages timed with the binary, accuracy against truth"),
-        new_code_cell(
-            "rows = sweep_with_binary([128, 256, 512])\n"
-            'print(f"{\'n\':>5s} {\'model\':10s} {\'bins\':>6s} {\'t_ndf\':>7s} {\'t_fit\':>7s} {\'t_nlopt\':>8s} {\'delta vs truth\':>15s}")\n'
-            "for r in rows:\n"
-            "    print(f\"{r['n']:5d} {r['model']:10s} {r['bins']:6d} {r['t_ndf']:7.3f} {r['t_fit']:7.3f} {r['t_nlopt']:8.3f} {r['delta_truth']:15.3e}\")"
-        ),
-        new_code_cell(
-            "fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))\n"
-            "for m in sorted({r['model'] for r in rows}):\n"
-            "    rr = [r for r in rows if r['model'] == m]\n"
-            "    px = np.array([r['pixels'] for r in rr])\n"
-            "    a1.loglog(px, [r['t_fit'] for r in rr], 'o-', label=f'ndfit fit --model {m} (whole process)')\n"
-            "    a1.loglog(px, [r['t_nlopt'] for r in rr], 's--', label=f'nlopt fit of the CSV ({m})')\n"
-            "    a2.loglog(px, [r['delta_truth'] for r in rr], 'o-', label=m)\n"
-            "rr = [r for r in rows if r['model'] == rows[0]['model']]\n"
-            "a1.loglog([r['pixels'] for r in rr], [r['t_ndf'] for r in rr], 'k^-', label='ndfit ndf (whole process)')\n"
-            "a1.set_xlabel('pixels'); a1.set_ylabel('seconds'); a1.legend(fontsize=7); a1.set_title('time')\n"
-            "a2.set_xlabel('pixels'); a2.set_ylabel('delta(fit; truth)'); a2.legend(); a2.set_title('accuracy against truth')\n"
-            "fig.tight_layout(); plt.show()\n"
-            "px = np.array([r['pixels'] for r in rr], dtype=float)\n"
-            "slope = np.polyfit(np.log(px), np.log([r['t_ndf'] for r in rr]), 1)[0]\n"
-            "print(f'ndfit ndf time grows as pixels^{slope:.2f} over this range (process start-up dominates small scans)')"
-        ),
+        new_code_cell(KNOBS.strip()),
+        new_code_cell(KNOB_PLOT.strip()),
+        new_markdown_cell("## `ndfit bench --quick` (when the binary has it)"),
+        new_code_cell(BENCH_RUN.strip()),
+        new_code_cell(BENCH_SHOW.strip()),
         new_code_cell("shutil.rmtree(WORK, ignore_errors=True)"),
     ]
     return cells
