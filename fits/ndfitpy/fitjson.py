@@ -1,7 +1,8 @@
 """Read and write the ``ndfit.fit/1`` JSON of /work/shared/CONTRACT.md ("Fit result JSON").
 
 Required keys: schema, model, params, matrix_a (for ellipsoid-family models), input. This writer adds
-``objective`` ({name, value, ...}), ``std_errors`` (Fisher, scaled by reduced_chi2 when above 1) and ``fitter``
+``param_order``, ``quality``, ``solver`` and ``timings`` in the layout the Rust fit uses, ``objective``
+({name, value, ...}), ``std_errors`` (Fisher, scaled by reduced_chi2 when above 1) and ``fitter``
 (which program and method made the fit).
 """
 
@@ -68,6 +69,19 @@ def fit_document(result: FitResult, bins: Bins, input_info: Optional[dict] = Non
             "seconds": result.seconds,
         },
     }
+    # The same layout as the Rust fit's JSON where the two overlap (ndfit fit writes these keys too).
+    doc["param_order"] = list(models.PARAM_NAMES[result.model])
+    doc["quality"] = {
+        "objective": result.objective,
+        "objective_value": result.value,
+        "dof": k,
+        "reduced_chi2": doc["objective"]["reduced_chi2"],
+        "n_bins": doc["objective"]["n_bins"],
+        "n_bins_nonzero": int(np.count_nonzero((bins.proj_solid_angle > 0) & (bins.count > 0))),
+        "n_samples": bins.n_samples,
+    }
+    doc["solver"] = {"name": result.method, "termination": result.status, "evaluations": result.evaluations}
+    doc["timings"] = {"fit_ms": 1e3 * result.seconds}
     if a is not None:
         doc["matrix_a"] = a.tolist()
     rc = doc["objective"]["reduced_chi2"]

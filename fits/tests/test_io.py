@@ -81,7 +81,7 @@ def test_fit_json_has_the_contract_keys(tmp_path, bins):
     out = tmp_path / "fit.json"
     fitjson.write_fit(out, res, bins, {"nx": 10})
     doc = fitjson.read_fit(out)
-    for key in ("schema", "model", "params", "matrix_a", "input", "objective"):
+    for key in ("schema", "model", "params", "matrix_a", "input", "objective", "quality", "std_errors"):
         assert key in doc
     assert doc["schema"] == "ndfit.fit/1" and doc["input"]["nx"] == 10
     assert set(doc["params"]) == {"alpha_x", "alpha_y", "theta_z"}
