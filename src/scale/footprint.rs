@@ -164,9 +164,25 @@ pub fn mean_cov(pts: &[usize], v: impl Fn(usize) -> Vector2<f64>) -> (Vector2<f6
     (mean, cov.fold(Matrix2::zeros(), |a, b| a + b) / n)
 }
 
-/// Summarize a footprint field (with the unfiltered slopes `sx, sy` for the law-of-total-covariance check).
+/// Summarize a footprint field over all its valid points (with the unfiltered slopes `sx, sy` for the
+/// law-of-total-covariance check).
 pub fn footprint_stats(ff: &FootprintField, sx: &[f64], sy: &[f64], footprint: f64) -> Result<FootprintStats> {
-    let pts = ff.valid_points();
+    footprint_stats_over(ff, sx, sy, footprint, &ff.valid_points())
+}
+
+/// [`footprint_stats`] over the given points only (those of them where every statistic is defined).
+pub fn footprint_stats_over(
+    ff: &FootprintField,
+    sx: &[f64],
+    sy: &[f64],
+    footprint: f64,
+    points: &[usize],
+) -> Result<FootprintStats> {
+    let pts: Vec<usize> = points
+        .iter()
+        .copied()
+        .filter(|&p| p < ff.sfx.len() && ff.sfx[p].is_finite() && ff.wxx[p].is_finite() && sx[p].is_finite())
+        .collect();
     if pts.len() < 16 {
         return Err(Error::new(
             ErrorKind::BadData,

@@ -11,7 +11,9 @@
 //!   slope form through `A^T A`;
 //! - [`scene`]: the footprints a scene implies.
 
+pub mod fields;
 pub mod filter;
+pub mod ndf_at;
 pub mod footprint;
 pub mod roughness;
 pub mod scene;

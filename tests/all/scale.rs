@@ -1,0 +1,156 @@
+//! Integration tests: the NDF at a renderer's footprint (src/scale, data_formats/scale.md).
+
+use nalgebra::{Matrix2, Vector3};
+use ndfit::scale::fields::{BumpField, FourierSurface};
+use ndfit::scale::filter::{filter_field, gaussian_taps};
+use ndfit::scale::footprint::{footprint_field, footprint_stats, footprint_stats_over, kernel_sigma, slope_field};
+use ndfit::scale::ndf_at::{bin_slopes, sample_slopes, slope_moments};
+
+const DX: f64 = 1e-6;
+
+/// An isotropic Gaussian-spectrum surface: 128 x 128 samples per period, correlation length 6 samples,
+/// 400 modes, RMS slope 0.2.
+fn gaussian_surface() -> FourierSurface {
+    FourierSurface::gaussian_spectrum(128, DX, 400, (6.0 * DX, 6.0 * DX), 0.0, 0.2, 7).unwrap()
+}
+
+fn rel(a: &Matrix2<f64>, b: &Matrix2<f64>) -> f64 {
+    (a - b).norm() / b.norm()
+}
+
+#[test]
+fn footprint_covariances_match_closed_form() {
+    // A periodic surface padded by its own continuation makes the normalized filter a periodic one over
+    // the central period; there the slope covariances are exact sums over modes (fields.rs), and the
+    // law of total covariance Cov(s) = Cov(s_F) + Sigma_F (scale.md S3) holds exactly. Only rounding
+    // separates code and closed form: 1e-9 relative.
+    let fs = FourierSurface::gaussian_spectrum(96, DX, 300, (5.0 * DX, 9.0 * DX), 0.5, 0.3, 3).unwrap();
+    for footprint in [2.0 * DX, 6.0 * DX, 20.0 * DX] {
+        let sig = kernel_sigma(footprint) / DX;
+        let taps = gaussian_taps(sig).unwrap();
+        let pad = taps.len() / 2 + 2;
+        let hf = fs.heightfield(pad).unwrap();
+        let (sx, sy) = slope_field(&hf);
+        let ff = footprint_field(hf.nx, hf.ny, DX, DX, &sx, &sy, kernel_sigma(footprint)).unwrap();
+        let st = footprint_stats_over(&ff, &sx, &sy, footprint, &fs.central_points(pad)).unwrap();
+        assert_eq!(st.n_points, 96 * 96);
+        let cov_s = fs.slope_cov(&[1.0], &[1.0]);
+        let cov_f = fs.slope_cov(&taps, &taps);
+        assert!(rel(&st.cov_slopes, &cov_s) < 1e-9, "Cov(s) {} vs {}", st.cov_slopes, cov_s);
+        assert!(rel(&st.cov_resolved, &cov_f) < 1e-9, "Cov(s_F) {} vs {}", st.cov_resolved, cov_f);
+        let sigma_f = cov_s - cov_f;
+        assert!((st.sigma_f - sigma_f).norm() < 1e-9 * cov_s.norm(), "Sigma_F {} vs {}", st.sigma_f, sigma_f);
+        // The filter removes slope variance: Sigma_F grows with the footprint and stays below Cov(s).
+        assert!(sigma_f.trace() > 0.0 && sigma_f.trace() < cov_s.trace());
+    }
+}
+
+#[test]
+fn resolved_slopes_are_the_gradient_of_the_filtered_surface() {
+    // scale.md sec. 3: s_F = K*s equals grad(K*h). On a periodic grid both the central difference and the
+    // filter are shift-invariant linear operators, so they commute exactly: 1e-12 of the RMS slope.
+    let fs = gaussian_surface();
+    let footprint = 8.0 * DX;
+    let sig = kernel_sigma(footprint) / DX;
+    let pad = gaussian_taps(sig).unwrap().len() / 2 + 3;
+    let hf = fs.heightfield(pad).unwrap();
+    let (sx, sy) = slope_field(&hf);
+    let ff = footprint_field(hf.nx, hf.ny, DX, DX, &sx, &sy, kernel_sigma(footprint)).unwrap();
+    let hf_f = filter_field(hf.nx, hf.ny, &hf.z, sig, sig).unwrap();
+    let m = hf.nx;
+    let mut worst: f64 = 0.0;
+    for p in fs.central_points(pad) {
+        let gx = (hf_f[p + 1] - hf_f[p - 1]) / (2.0 * DX);
+        let gy = (hf_f[p + m] - hf_f[p - m]) / (2.0 * DX);
+        worst = worst.max((gx - ff.sfx[p]).abs()).max((gy - ff.sfy[p]).abs());
+    }
+    assert!(worst < 1e-12 * 0.2 / 1e-3, "max |grad h_F - s_F| = {worst}");
+}
+
+#[test]
+fn gaussian_surface_alpha_squared_grows_by_twice_the_kernel_variance() {
+    // scale.md sec. 5: for a Gaussian surface the NDF of h_F is Beckmann with alpha_F^2 = 2 var(s_F) per
+    // axis, and the NDF at F is Beckmann with alpha^2(F) = alpha_F^2 + 2 sigma_F^2 (Tokuyoshi eq. 3),
+    // sigma_F^2 the kernel's slope variance per axis. Closed forms from the spectrum (fields.rs); the
+    // empirical side is the sampled NDF at F (ndf_at.rs). The isotropic Beckmann maximum-likelihood
+    // estimate from slopes is alpha^2 = E|s|^2 (= 2 var per axis, = tr Cov for zero mean).
+    let fs = gaussian_surface();
+    let cov_s = fs.slope_cov(&[1.0], &[1.0]);
+    for footprint in [3.0 * DX, 10.0 * DX, 30.0 * DX] {
+        let sig = kernel_sigma(footprint) / DX;
+        let taps = gaussian_taps(sig).unwrap();
+        let pad = taps.len() / 2 + 2;
+        let hf = fs.heightfield(pad).unwrap();
+        let (sx, sy) = slope_field(&hf);
+        let ff = footprint_field(hf.nx, hf.ny, DX, DX, &sx, &sy, kernel_sigma(footprint)).unwrap();
+        // Keep only the central period: mask the padding.
+        let mut ffc = ff.clone();
+        let keep: std::collections::HashSet<usize> = fs.central_points(pad).into_iter().collect();
+        for p in 0..ffc.sfx.len() {
+            if !keep.contains(&p) {
+                ffc.sfx[p] = f64::NAN;
+            }
+        }
+        let cov_f = fs.slope_cov(&taps, &taps);
+        let alpha2_f = cov_f.trace(); // 2 * (per-axis variance), isotropic: tr = 2 var
+        let kernel_var = (cov_s - cov_f).trace() / 2.0; // per-axis slope variance of the kernel
+        let resolved = slope_moments(&sample_slopes(&ffc, 1, false, 1)).unwrap();
+        let at_f = sample_slopes(&ffc, 4, true, 11);
+        let m_at = slope_moments(&at_f).unwrap();
+        // alpha^2 estimates (Beckmann ML for zero-mean isotropic slopes: alpha^2 = E|s|^2).
+        let a2_f = resolved.cov.trace() + resolved.mean.norm_squared();
+        let a2_at = m_at.cov.trace() + m_at.mean.norm_squared();
+        assert!((a2_f / alpha2_f - 1.0).abs() < 1e-9, "alpha_F^2 {a2_f} vs {alpha2_f}");
+        // The blur's sampling error: z^T Sigma_w z has variance 2 tr(Sigma_w^2) per sample; 5 standard
+        // errors of the mean over n samples.
+        let n = at_f.len() as f64;
+        let tol = 5.0 * (2.0 * 2.0 * kernel_var * kernel_var / n).sqrt() + 1e-12;
+        let grown = a2_at - a2_f;
+        assert!((grown - 2.0 * kernel_var).abs() < tol, "F={footprint:e}: alpha^2 grew by {grown}, 2 sigma_F^2 = {}, tol {tol}", 2.0 * kernel_var);
+    }
+}
+
+#[test]
+fn bump_field_skew_fades_with_footprint() {
+    // Identical tilted caps (period 16 samples): the slope distribution is strongly skewed; once the
+    // footprint covers many bumps the resolved slopes vanish and the NDF at F is the Gaussian blur of
+    // (S1), whose skewness tends to 0. Thresholds: the skewness of n Gaussian samples has spread
+    // ~sqrt(12/n) (< 0.01 here); 0.05 leaves room for the edges, where one-sided windows keep some s_F.
+    let bumps = BumpField {
+        period: 16.0 * DX,
+        semi_axes: Vector3::new(6.0 * DX, 3.5 * DX, 4.0 * DX),
+        angles: Vector3::new(0.5, -0.4, 0.3),
+        depth: 1.0 * DX,
+    };
+    let hf = bumps.heightfield(192, DX).unwrap();
+    let (sx, sy) = slope_field(&hf);
+    let mut skews = Vec::new();
+    for footprint in [0.0, 1.0 * DX, 2.0 * DX, 4.0 * DX, 8.0 * DX, 16.0 * DX, 64.0 * DX] {
+        let ff = footprint_field(hf.nx, hf.ny, DX, DX, &sx, &sy, kernel_sigma(footprint)).unwrap();
+        let m = slope_moments(&sample_slopes(&ff, 2, true, 5)).unwrap();
+        skews.push(m.skewness);
+        // Second moments are preserved (S3) up to edge reweighting and sampling: 5 %.
+        let st = footprint_stats(&ff, &sx, &sy, footprint).unwrap();
+        assert!((m.cov.trace() / st.cov_slopes.trace() - 1.0).abs() < 0.05, "F={footprint:e}: {} vs {}", m.cov.trace(), st.cov_slopes.trace());
+    }
+    let raw = slope_moments(&sx.iter().zip(&sy).filter(|(a, _)| a.is_finite()).map(|(a, b)| nalgebra::Vector2::new(*a, *b)).collect::<Vec<_>>()).unwrap();
+    assert!((skews[0] - raw.skewness).abs() < 1e-9, "F=0 must be the raw NDF");
+    assert!(skews[0] > 0.5, "tilted caps must be skewed: {}", skews[0]);
+    eprintln!("skewness vs footprint: {skews:?}");
+    assert!(skews[6] < 0.05, "skew must fade: {skews:?}");
+    // Strictly falling until it reaches the noise floor (0.05).
+    assert!(skews.windows(2).all(|w| w[1] < w[0] || w[0] < 0.05), "skew must fall with footprint: {skews:?}");
+}
+
+#[test]
+fn binned_ndf_is_normalized() {
+    // Heitz eq. 9: sum d * proj_solid_angle = 1 when no sample is dropped (bin_slopes covers them all).
+    let fs = gaussian_surface();
+    let hf = fs.heightfield(0).unwrap();
+    let (sx, sy) = slope_field(&hf);
+    let ff = footprint_field(hf.nx, hf.ny, DX, DX, &sx, &sy, kernel_sigma(5.0 * DX)).unwrap();
+    let ndf = bin_slopes(&sample_slopes(&ff, 2, true, 3), 48).unwrap();
+    let total: f64 = ndf.bins.iter().map(|b| b.d * b.proj_solid_angle).sum();
+    assert!((total - 1.0).abs() < 1e-12, "{total}");
+    assert_eq!(ndf.bins.iter().map(|b| b.count).sum::<u64>(), ndf.n_samples);
+}
