@@ -11,9 +11,12 @@
 //!   slope form through `A^T A`;
 //! - [`scene`]: the footprints a scene implies.
 
+pub mod analyze;
 pub mod fields;
 pub mod filter;
 pub mod ndf_at;
 pub mod footprint;
+pub mod plot;
+pub mod report;
 pub mod roughness;
 pub mod scene;
