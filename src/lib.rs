@@ -26,6 +26,7 @@ pub mod ndf;
 pub mod plot;
 pub mod preprocess;
 pub mod scale;
+pub mod stats;
 pub mod synth;
 
 pub use error::{Error, ErrorKind, Result};

@@ -1,7 +1,12 @@
-//! Preprocessing of a heightfield before normals are taken: form removal, crop, subsampling.
-//! Holes are never filled; stencils that touch an invalid point are skipped downstream.
+//! Preprocessing of a heightfield before normals are taken: crop, subsampling, form removal.
+//!
+//! Each step is explicit and documented; the default removes the least-squares mean plane and nothing
+//! else. Holes are never filled: invalid points stay NaN through every step, and the NDF code skips
+//! every stencil that touches one.
 
-use crate::error::Result;
+pub mod form;
+
+use crate::error::{Error, Result};
 use crate::heightfield::Heightfield;
 
 /// Which preprocessing steps to apply, in the order crop, subsample, form removal.
@@ -9,6 +14,23 @@ use crate::heightfield::Heightfield;
 pub struct Preprocess {
     /// Least-squares form removal; the default removes the mean plane.
     pub form: FormRemoval,
+    /// Keep only this window of the grid (applied first).
+    pub crop: Option<Crop>,
+    /// Keep every `step`-th point along x and y (1 keeps all; applied after the crop).
+    pub subsample: usize,
+}
+
+/// A window of the grid in samples: columns `x..x+nx`, rows `y..y+ny`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Crop {
+    /// First column.
+    pub x: usize,
+    /// First row.
+    pub y: usize,
+    /// Number of columns.
+    pub nx: usize,
+    /// Number of rows.
+    pub ny: usize,
 }
 
 /// The form removed before normals are computed.
@@ -18,16 +40,75 @@ pub enum FormRemoval {
     None,
     /// Least-squares plane (default).
     Plane,
+    /// Least-squares polynomial of total degree 2 or 3 in x and y.
+    Polynomial(usize),
+    /// Least-squares cylinder with its axis in the xy plane (bullet lands, turned parts).
+    Cylinder,
 }
 
 impl Default for Preprocess {
     fn default() -> Self {
-        Preprocess { form: FormRemoval::Plane }
+        Preprocess { form: FormRemoval::Plane, crop: None, subsample: 1 }
     }
 }
 
-/// Apply `pre` to `hf`.
+/// Apply `pre` to `hf`: crop, subsample, then remove the form. Never fills an invalid point.
 pub fn apply(hf: Heightfield, pre: &Preprocess) -> Result<Heightfield> {
-    let _ = pre;
+    let mut hf = hf;
+    if let Some(c) = pre.crop {
+        hf = crop(&hf, c)?;
+    }
+    if pre.subsample != 1 {
+        hf = subsample(&hf, pre.subsample)?;
+    }
+    let z = match pre.form {
+        FormRemoval::None => return Ok(hf),
+        FormRemoval::Plane => form::remove_polynomial(&hf, 1)?,
+        FormRemoval::Polynomial(k) => form::remove_polynomial(&hf, k)?,
+        FormRemoval::Cylinder => form::remove_cylinder(&hf)?.residual,
+    };
+    hf.z = z;
     Ok(hf)
+}
+
+/// The window `c` of `hf` (origin moved so every kept point keeps its position).
+pub fn crop(hf: &Heightfield, c: Crop) -> Result<Heightfield> {
+    let fits = c.nx > 0
+        && c.ny > 0
+        && c.x.checked_add(c.nx).is_some_and(|e| e <= hf.nx)
+        && c.y.checked_add(c.ny).is_some_and(|e| e <= hf.ny);
+    if !fits {
+        return Err(Error::invalid(format!(
+            "crop {}x{}+{}+{} does not fit in the {} x {} grid",
+            c.nx, c.ny, c.x, c.y, hf.nx, hf.ny
+        )));
+    }
+    let mut z = Vec::with_capacity(c.nx * c.ny);
+    for i in c.y..c.y + c.ny {
+        z.extend_from_slice(&hf.row(i)[c.x..c.x + c.nx]);
+    }
+    let mut out = Heightfield::new(c.nx, c.ny, hf.dx, hf.dy, z)?;
+    out.x0 = hf.x0 + c.x as f64 * hf.dx;
+    out.y0 = hf.y0 + c.y as f64 * hf.dy;
+    out.meta = hf.meta.clone();
+    Ok(out)
+}
+
+/// Every `step`-th point along both axes (point picking, no averaging: averaging would mix invalid
+/// points into valid ones or invent values). Spacing grows by `step`.
+pub fn subsample(hf: &Heightfield, step: usize) -> Result<Heightfield> {
+    if step == 0 {
+        return Err(Error::invalid("subsampling step must be at least 1"));
+    }
+    let nx = hf.nx.div_ceil(step);
+    let ny = hf.ny.div_ceil(step);
+    let mut z = Vec::with_capacity(nx * ny);
+    for i in (0..hf.ny).step_by(step) {
+        z.extend(hf.row(i).iter().step_by(step).copied());
+    }
+    let mut out = Heightfield::new(nx, ny, hf.dx * step as f64, hf.dy * step as f64, z)?;
+    out.x0 = hf.x0;
+    out.y0 = hf.y0;
+    out.meta = hf.meta.clone();
+    Ok(out)
 }

@@ -1,13 +1,77 @@
-//! `ndfit info`.
+//! `ndfit info`: format, grid, spacing, units, instrument metadata, invalid count, height range, Sq, Sdq.
 
 use std::process::ExitCode;
 
+use ndfit::stats::surface_stats;
+
+use super::scan_args::ScanArgs;
+
 /// Arguments of `ndfit info`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    #[command(flatten)]
+    scan: ScanArgs,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
 
 /// Run `ndfit info`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let _ = args;
-    anyhow::bail!("'ndfit info' is not implemented yet")
+    let raw = args.scan.load_raw()?;
+    // Height range and counts describe the file as read (after any crop/subsample the user asked for);
+    // Sq and Sdq are taken after the requested form removal (the plane by default).
+    let pre = args.scan.preprocess();
+    let shaped = ndfit::preprocess::apply(raw.clone(), &ndfit::preprocess::Preprocess { form: ndfit::preprocess::FormRemoval::None, ..pre.clone() })
+        .map_err(|e| e.with_path(&args.scan.scan))?;
+    let leveled = ndfit::preprocess::apply(shaped.clone(), &ndfit::preprocess::Preprocess { crop: None, subsample: 1, ..pre })
+        .map_err(|e| e.with_path(&args.scan.scan))?;
+    let range = surface_stats(&shaped).map_err(|e| e.with_path(&args.scan.scan))?;
+    let st = surface_stats(&leveled).map_err(|e| e.with_path(&args.scan.scan))?;
+    let m = &shaped.meta;
+    if args.json {
+        let v = serde_json::json!({
+            "path": args.scan.scan.display().to_string(),
+            "format": m.format,
+            "nx": shaped.nx,
+            "ny": shaped.ny,
+            "dx": shaped.dx,
+            "dy": shaped.dy,
+            "x0": shaped.x0,
+            "y0": shaped.y0,
+            "units": "m",
+            "file_xy_unit": m.file_xy_unit,
+            "file_z_unit": m.file_z_unit,
+            "invalid": range.invalid,
+            "valid": range.valid,
+            "z_min": range.z_min,
+            "z_max": range.z_max,
+            "z_mean": range.z_mean,
+            "form": format!("{:?}", args.scan.form).to_lowercase(),
+            "sq": st.sq,
+            "sdq": if st.sdq.is_finite() { serde_json::json!(st.sdq) } else { serde_json::Value::Null },
+            "sdq_points": st.sdq_points,
+            "instrument": m.instrument,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!("file:       {}", args.scan.scan.display());
+        println!("format:     {}", m.format);
+        println!("grid:       {} x {} ({} points)", shaped.nx, shaped.ny, shaped.nx * shaped.ny);
+        println!("spacing:    dx = {:e} m, dy = {:e} m", shaped.dx, shaped.dy);
+        println!("origin:     x0 = {:e} m, y0 = {:e} m", shaped.x0, shaped.y0);
+        println!(
+            "file units: lateral {}, height {} (held in metres)",
+            m.file_xy_unit.as_deref().unwrap_or("none"),
+            m.file_z_unit.as_deref().unwrap_or("none")
+        );
+        println!("invalid:    {} of {}", range.invalid, range.invalid + range.valid);
+        println!("heights:    {:e} .. {:e} m (mean {:e} m)", range.z_min, range.z_max, range.z_mean);
+        println!("Sq:         {:e} m (after {:?} removal)", st.sq, args.scan.form);
+        println!("Sdq:        {} (central differences, {} points with 4 valid neighbours)", st.sdq, st.sdq_points);
+        for (k, v) in &m.instrument {
+            println!("meta:       {k} = {v}");
+        }
+    }
+    Ok(ExitCode::SUCCESS)
 }

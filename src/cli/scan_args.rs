@@ -3,8 +3,9 @@
 use std::path::PathBuf;
 
 use ndfit::io::ReadOptions;
+use ndfit::preprocess::{Crop, FormRemoval, Preprocess};
 
-/// The scan to read and how to read it.
+/// The scan to read and how to read and preprocess it.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ScanArgs {
     /// The scan file (format detected from content, then extension).
@@ -18,9 +19,20 @@ pub struct ScanArgs {
     /// Metres per stored height unit, for formats that carry no height unit.
     #[arg(long)]
     pub z_scale: Option<f64>,
-    /// Force the format instead of detecting it.
+    /// Force the format instead of detecting it (x3p, plu, sur, opd, metropro, al3d, tmd, ascii, xyz,
+    /// csv, gsf, npy, exr, png, tiff).
     #[arg(long)]
     pub format: Option<String>,
+    /// Form removed before anything else is computed: none, plane (least squares, the default),
+    /// poly2, poly3 (least-squares polynomials in x and y) or cylinder (axis in the xy plane).
+    #[arg(long, default_value = "plane", value_parser = parse_form)]
+    pub form: FormRemoval,
+    /// Keep only a window of the grid, in samples: NXxNY+X+Y (columns X..X+NX, rows Y..Y+NY).
+    #[arg(long, value_parser = parse_crop)]
+    pub crop: Option<Crop>,
+    /// Keep every N-th point along x and y (after the crop; no averaging).
+    #[arg(long, default_value_t = 1)]
+    pub subsample: usize,
 }
 
 impl ScanArgs {
@@ -28,4 +40,41 @@ impl ScanArgs {
     pub fn read_options(&self) -> ReadOptions {
         ReadOptions { dx: self.dx, dy: self.dy, z_scale: self.z_scale, format: self.format.clone() }
     }
+
+    /// The preprocessing these arguments ask for.
+    pub fn preprocess(&self) -> Preprocess {
+        Preprocess { form: self.form, crop: self.crop, subsample: self.subsample }
+    }
+
+    /// Read the scan as stored (no preprocessing).
+    pub fn load_raw(&self) -> anyhow::Result<ndfit::Heightfield> {
+        Ok(ndfit::io::read_scan(&self.scan, &self.read_options())?)
+    }
+
+    #[allow(dead_code)] // called by the scan-reading subcommands (fit, ndf, batch ...)
+    /// Read the scan AND preprocess it (crop, subsample, form removal), the way every command wants it.
+    pub fn load(&self) -> anyhow::Result<ndfit::Heightfield> {
+        let hf = self.load_raw()?;
+        Ok(ndfit::preprocess::apply(hf, &self.preprocess()).map_err(|e| e.with_path(&self.scan))?)
+    }
+}
+
+fn parse_form(s: &str) -> Result<FormRemoval, String> {
+    match s {
+        "none" => Ok(FormRemoval::None),
+        "plane" => Ok(FormRemoval::Plane),
+        "poly2" => Ok(FormRemoval::Polynomial(2)),
+        "poly3" => Ok(FormRemoval::Polynomial(3)),
+        "cylinder" => Ok(FormRemoval::Cylinder),
+        other => Err(format!("unknown form {other:?}: use none, plane, poly2, poly3 or cylinder")),
+    }
+}
+
+fn parse_crop(s: &str) -> Result<Crop, String> {
+    let bad = || format!("crop {s:?} is not NXxNY+X+Y (for example 512x512+0+0)");
+    let (size, rest) = s.split_once('+').ok_or_else(bad)?;
+    let (x, y) = rest.split_once('+').ok_or_else(bad)?;
+    let (nx, ny) = size.split_once('x').ok_or_else(bad)?;
+    let p = |t: &str| t.trim().parse::<usize>().map_err(|_| bad());
+    Ok(Crop { x: p(x)?, y: p(y)?, nx: p(nx)?, ny: p(ny)? })
 }

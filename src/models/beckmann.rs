@@ -1,8 +1,9 @@
-//! The Beckmann distribution, isotropic and anisotropic (Heitz eq. 68, 82).
+//! The Beckmann distribution, isotropic and anisotropic (Heitz eq. 67-69, 81-83).
 
-use nalgebra::Vector3;
+use nalgebra::{Vector2, Vector3};
 
-use super::{checked_alpha, rotate_z, Ndf};
+use super::ggx::{inv_a2, projected_roughness};
+use super::{checked_alpha, checked_angle, rotate_z, smith_g1, Masking, Ndf};
 use crate::error::Result;
 
 /// Anisotropic Beckmann rotated by `theta_z` (same convention as [`super::Ggx`]); isotropic when
@@ -18,14 +19,32 @@ pub struct Beckmann {
 }
 
 impl Beckmann {
-    /// A Beckmann distribution; alphas below [`super::ALPHA_MIN`] are raised to it.
+    /// A Beckmann distribution; alphas below [`super::ALPHA_MIN`] are raised to it, alphas above
+    /// [`super::ALPHA_MAX`] and non-finite values are refused.
     pub fn new(alpha_x: f64, alpha_y: f64, theta_z: f64) -> Result<Self> {
-        Ok(Beckmann { alpha_x: checked_alpha("alpha_x", alpha_x)?, alpha_y: checked_alpha("alpha_y", alpha_y)?, theta_z })
+        Ok(Beckmann {
+            alpha_x: checked_alpha("alpha_x", alpha_x)?,
+            alpha_y: checked_alpha("alpha_y", alpha_y)?,
+            theta_z: checked_angle("theta_z", theta_z)?,
+        })
+    }
+
+    /// The Gaussian distribution of slopes `P22` of Heitz eq. 81 (eq. 67 isotropic), slope in the scan frame.
+    pub fn p22(&self, slope: Vector2<f64>) -> f64 {
+        let l = rotate_z(self.theta_z, Vector3::new(slope.x, slope.y, 0.0));
+        let e = (l.x / self.alpha_x).powi(2) + (l.y / self.alpha_y).powi(2);
+        (-e).exp() / (std::f64::consts::PI * self.alpha_x * self.alpha_y)
+    }
+
+    /// The projected roughness `alpha_o` of Heitz eq. 80 in the azimuth of `u`.
+    pub fn alpha_o(&self, u: Vector3<f64>) -> f64 {
+        projected_roughness(self.alpha_x, self.alpha_y, self.theta_z, u)
     }
 }
 
 impl Ndf for Beckmann {
-    /// `D(m) = exp(-(x'^2/ax^2 + y'^2/ay^2) / z^2) / (pi ax ay z^4)` with `m' = Rz m` (Heitz eq. 82).
+    /// Heitz eq. 82 (eq. 68 isotropic): `D(m) = exp(-tan^2(theta) (cos^2 phi/ax^2 + sin^2 phi/ay^2)) /
+    /// (pi ax ay cos^4 theta)` with `m' = Rz m`, i.e. `P22(slope) / cos^4` (eq. 64).
     fn d(&self, m: Vector3<f64>) -> f64 {
         // At and below the horizon the slope is infinite and D is 0 (the exponential wins over 1/z^4).
         if m.z <= 0.0 {
@@ -34,6 +53,44 @@ impl Ndf for Beckmann {
         let l = rotate_z(self.theta_z, m);
         let z2 = l.z * l.z;
         let e = ((l.x / self.alpha_x).powi(2) + (l.y / self.alpha_y).powi(2)) / z2;
-        (-e).exp() / (std::f64::consts::PI * self.alpha_x * self.alpha_y * z2 * z2)
+        // exp(-e) / z^4 in the log domain: for m.z ~ 1e-100, z^4 underflows to 0 and exp(-e) to 0 (0/0);
+        // the exponent -e - 4 ln z is finite and correctly very negative.
+        let expo = -e - 4.0 * l.z.ln();
+        if expo.is_nan() {
+            return 0.0; // e = inf with ln z finite cannot give NaN; only a non-finite m gets here
+        }
+        expo.exp() / (std::f64::consts::PI * self.alpha_x * self.alpha_y)
+    }
+}
+
+impl Masking for Beckmann {
+    /// Heitz eq. 83 (eq. 69 isotropic) with the exact erf:
+    /// `Lambda = (erf(a) - 1)/2 + exp(-a^2)/(2 a sqrt(pi))`, `a = 1/(alpha_o tan theta_o)` (eq. 80),
+    /// evaluated as `(exp(-a^2)/(a sqrt(pi)) - erfc(a)) / 2` so that `erf(a) - 1` does not cancel.
+    fn lambda(&self, u: Vector3<f64>) -> f64 {
+        let w = inv_a2(self.alpha_x, self.alpha_y, self.theta_z, u);
+        // On the horizon a = 0 and Lambda = +inf: saturate (see Masking::lambda).
+        if !w.is_finite() || w == 0.0 && u.z == 0.0 {
+            return f64::MAX;
+        }
+        // Along the normal a = inf: nothing is masked.
+        if w == 0.0 {
+            return 0.0;
+        }
+        let a = 1.0 / w.sqrt();
+        // Past a = 26.6 both terms underflow; Lambda < 1e-300 there.
+        if a > 26.0 {
+            return 0.0;
+        }
+        let l = ((-a * a).exp() / (a * std::f64::consts::PI.sqrt()) - libm::erfc(a)) / 2.0;
+        if !l.is_finite() {
+            return f64::MAX; // a so small that 1/a overflowed: the grazing limit
+        }
+        l.max(0.0)
+    }
+
+    /// Heitz eq. 43: `X+(u.m) / (1 + Lambda(u))`.
+    fn g1(&self, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
+        smith_g1(self.lambda(u), u, m)
     }
 }

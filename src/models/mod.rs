@@ -13,12 +13,23 @@
 //! vectors in the scan frame of CONTRACT.md (macro normal `n = +z`).
 
 pub mod beckmann;
+pub mod brdf;
+pub mod canonical;
 pub mod ellipsoid;
+pub mod fresnel;
 pub mod ggx;
+pub mod roughness_matrix;
+pub mod sampling;
+pub mod sel;
+pub mod spec;
 
 pub use beckmann::Beckmann;
+pub use brdf::{MaskingShadowing, MicrofacetBrdf};
 pub use ellipsoid::Ellipsoid;
+pub use fresnel::fresnel_conductor;
 pub use ggx::Ggx;
+pub use roughness_matrix::GgxMatrix;
+pub use sel::SquaredEllipsoidalLobe;
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -28,6 +39,10 @@ use crate::error::{Error, Result};
 /// denominators `mz^2 + (slope/alpha)^2`, and a renderer cannot tell the lobe from a mirror anyway
 /// (pbrt-v4 uses the same floor for the same reason).
 pub const ALPHA_MIN: f64 = 1e-4;
+
+/// Largest roughness any model accepts. Above it the lobe is flat to better than 1e-12 over the
+/// hemisphere (nothing left to fit), and `alpha^4` still sits far inside the f64 range.
+pub const ALPHA_MAX: f64 = 1e6;
 
 /// The model ids of the contract.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
@@ -108,6 +123,17 @@ pub trait Ndf {
     fn d(&self, m: Vector3<f64>) -> f64;
 }
 
+/// Masking of the models with a Smith-type masking function (Heitz eq. 43): `G1 = X+(u.m) / (1 + Lambda(u))`.
+pub trait Masking {
+    /// The Smith `Lambda(u)` (Heitz eq. 43, 69-86), `>= 0`, finite. Exactly on the horizon the true value is
+    /// `+inf`; it saturates at `f64::MAX` there so callers never see an infinity. Below the horizon it is
+    /// `Lambda` of the mirrored direction `(ux, uy, -uz)` (Tokuyoshi eq. 16 uses `|o_z|`).
+    fn lambda(&self, u: Vector3<f64>) -> f64;
+
+    /// The masking function `G1(u, m)` in `[0, 1]`.
+    fn g1(&self, u: Vector3<f64>, m: Vector3<f64>) -> f64;
+}
+
 /// One fitted or hand-written model: the id and its parameters, as one value.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Model {
@@ -174,6 +200,58 @@ impl Model {
     }
 }
 
+impl Model {
+    /// `G1(u, m)`: Walter et al. eq. 6 for the ellipsoid, the Smith form `X+(u.m) / (1 + Lambda(u))` of
+    /// Heitz eq. 43 for GGX and Beckmann. Always in `[0, 1]`. For a `ggx`/`ggx-aniso` model both forms agree.
+    pub fn g1(&self, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
+        match self {
+            Model::Ggx(g) | Model::GgxAniso(g) => g.g1(u, m),
+            Model::Beckmann(b) | Model::BeckmannAniso(b) => b.g1(u, m),
+            Model::Ellipsoid(e) => e.g1(u, m),
+        }
+    }
+
+    /// The Smith `Lambda(u)` (Heitz eq. 72/86 for GGX, 69/83 for Beckmann). For the ellipsoid, whose masking
+    /// has no closed-form Smith integral, it is the `Lambda` implied by Walter et al. eq. 32,
+    /// `1/G1 - 1 = max(0, A_l(u,n) / (A_e(n) |u.n|) - 1)`, exact Smith when `theta_x = theta_y = 0`.
+    /// Saturates at `f64::MAX` on the horizon (see [`Masking::lambda`]).
+    pub fn lambda(&self, u: Vector3<f64>) -> f64 {
+        match self {
+            Model::Ggx(g) | Model::GgxAniso(g) => g.lambda(u),
+            Model::Beckmann(b) | Model::BeckmannAniso(b) => b.lambda(u),
+            Model::Ellipsoid(e) => e.lambda(u),
+        }
+    }
+
+    /// The same distribution in canonical parameters (see [`canonical`]): `ggx` unchanged; `ggx-aniso` and
+    /// `beckmann-aniso` with `alpha_x >= alpha_y` and `theta_z` in `(-pi/2, pi/2]` (`theta_z = 0` when the
+    /// alphas tie); the ellipsoid by [`Ellipsoid::canonical`]. The id is kept.
+    pub fn canonical(&self) -> Model {
+        match *self {
+            Model::Ggx(g) => Model::Ggx(g),
+            Model::GgxAniso(g) => {
+                let (ax, ay, tz) = canonical::canonical_aniso(g.alpha_x, g.alpha_y, g.theta_z);
+                Model::GgxAniso(Ggx { alpha_x: ax, alpha_y: ay, theta_z: tz })
+            }
+            Model::Beckmann(b) => Model::Beckmann(b),
+            Model::BeckmannAniso(b) => {
+                let (ax, ay, tz) = canonical::canonical_aniso(b.alpha_x, b.alpha_y, b.theta_z);
+                Model::BeckmannAniso(Beckmann { alpha_x: ax, alpha_y: ay, theta_z: tz })
+            }
+            Model::Ellipsoid(e) => Model::Ellipsoid(e.canonical()),
+        }
+    }
+
+    /// The ellipsoid form of the models that are ellipsoid special cases (`None` for Beckmann).
+    pub fn ellipsoid(&self) -> Option<Ellipsoid> {
+        match self {
+            Model::Ggx(g) | Model::GgxAniso(g) => Some(g.to_ellipsoid()),
+            Model::Ellipsoid(e) => Some(*e),
+            Model::Beckmann(_) | Model::BeckmannAniso(_) => None,
+        }
+    }
+}
+
 impl Ndf for Model {
     fn d(&self, m: Vector3<f64>) -> f64 {
         match self {
@@ -184,12 +262,34 @@ impl Ndf for Model {
     }
 }
 
-/// Check that an alpha is usable: finite and positive. Values below [`ALPHA_MIN`] are raised to it.
+/// Check that an alpha is usable: finite, positive and at most [`ALPHA_MAX`]. Values below [`ALPHA_MIN`]
+/// are raised to it.
 pub(crate) fn checked_alpha(name: &str, a: f64) -> Result<f64> {
     if !(a.is_finite() && a > 0.0) {
         return Err(Error::invalid(format!("{name} must be finite and positive, got {a}")));
     }
+    if a > ALPHA_MAX {
+        return Err(Error::invalid(format!("{name} = {a} exceeds the largest supported roughness {ALPHA_MAX}")));
+    }
     Ok(a.max(ALPHA_MIN))
+}
+
+/// Check that an angle parameter is finite.
+pub(crate) fn checked_angle(name: &str, t: f64) -> Result<f64> {
+    if !t.is_finite() {
+        return Err(Error::invalid(format!("{name} must be finite, got {t}")));
+    }
+    Ok(t)
+}
+
+/// `1 / (1 + Lambda)` with the horizon guard: exactly on the horizon `Lambda` is infinite and G1 is 0.
+#[inline]
+pub(crate) fn smith_g1(lambda: f64, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
+    // u on the horizon (or not finite): Lambda = +inf in exact arithmetic, so no facet is visible.
+    if u.z == 0.0 || !(u.dot(&m) > 0.0) {
+        return 0.0;
+    }
+    1.0 / (1.0 + lambda)
 }
 
 /// `Rz(theta) m`: the tangent-plane rotation of Walter et al. eq. 3, shared by the axis-aligned models

@@ -1,0 +1,123 @@
+//! Non-axis-aligned anisotropic GGX with Tokuyoshi's 2x2 roughness matrix (Tokuyoshi eq. 3, 17-18;
+//! Heitz eq. 88-93 with `Q^-1` the roughness matrix).
+
+use nalgebra::{Matrix2, Vector2, Vector3};
+
+use super::{canonical, smith_g1, Ggx, Masking, Ndf, ALPHA_MAX, ALPHA_MIN};
+use crate::error::{Error, Result};
+
+/// GGX written with a symmetric positive-definite 2x2 roughness matrix `A` (Tokuyoshi eq. 17):
+/// `D(h) = X+(h_z) / (pi sqrt(det A) ([hx, hy] A^-1 [hx, hy]^T + hz^2)^2)`.
+///
+/// For axis-aligned GGX `A = diag(alpha_x^2, alpha_y^2)`; a rotated one (our `theta_z`, local frame
+/// `m' = Rz(theta_z) m`) has `A = Rz^T diag(alpha_x^2, alpha_y^2) Rz`. Filtering the NDF by a Gaussian
+/// slope kernel of covariance `Sigma` adds `2 Sigma` (Tokuyoshi eq. 3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GgxMatrix {
+    a: Matrix2<f64>,
+    a_inv: Matrix2<f64>,
+    sqrt_det: f64,
+}
+
+impl GgxMatrix {
+    /// A roughness matrix; it must be finite, symmetric (to 1e-12 relative) and positive definite with
+    /// eigenvalues in `[ALPHA_MIN^2, ALPHA_MAX^2]` (the same alpha range as every model).
+    pub fn new(a: Matrix2<f64>) -> Result<Self> {
+        if a.iter().any(|v| !v.is_finite()) {
+            return Err(Error::invalid("roughness matrix has a non-finite entry"));
+        }
+        let scale = a.abs().max();
+        if (a[(0, 1)] - a[(1, 0)]).abs() > 1e-12 * scale {
+            return Err(Error::invalid("roughness matrix is not symmetric"));
+        }
+        let a = (a + a.transpose()) * 0.5;
+        let (l1, l2, _) = sym2_eigen(&a);
+        // Eigenvalues are alpha^2 along the principal axes; outside the alpha range the model is refused.
+        if !(l2 >= ALPHA_MIN * ALPHA_MIN * (1.0 - 1e-9) && l1 <= ALPHA_MAX * ALPHA_MAX) {
+            return Err(Error::invalid(format!(
+                "roughness matrix eigenvalues {l2:e}, {l1:e} are outside [{:e}, {:e}]",
+                ALPHA_MIN * ALPHA_MIN,
+                ALPHA_MAX * ALPHA_MAX
+            )));
+        }
+        let det = a[(0, 0)] * a[(1, 1)] - a[(0, 1)] * a[(1, 0)];
+        let a_inv = Matrix2::new(a[(1, 1)], -a[(0, 1)], -a[(1, 0)], a[(0, 0)]) / det;
+        Ok(GgxMatrix { a, a_inv, sqrt_det: det.sqrt() })
+    }
+
+    /// The roughness matrix of a (rotated) GGX: `Rz^T diag(ax^2, ay^2) Rz` (2x2 block of eq. 3's `Rz`).
+    pub fn from_ggx(g: &Ggx) -> Self {
+        let (s, c) = g.theta_z.sin_cos();
+        let rz = Matrix2::new(c, -s, s, c);
+        let a = rz.transpose() * Matrix2::from_diagonal(&Vector2::new(g.alpha_x.powi(2), g.alpha_y.powi(2))) * rz;
+        let a = (a + a.transpose()) * 0.5;
+        let det = g.alpha_x.powi(2) * g.alpha_y.powi(2);
+        let a_inv = Matrix2::new(a[(1, 1)], -a[(0, 1)], -a[(1, 0)], a[(0, 0)]) / det;
+        GgxMatrix { a, a_inv, sqrt_det: g.alpha_x * g.alpha_y }
+    }
+
+    /// The roughness matrix `A`.
+    pub fn matrix(&self) -> Matrix2<f64> {
+        self.a
+    }
+
+    /// The NDF filtered by a Gaussian slope kernel of covariance `sigma`: `A + 2 Sigma` (Tokuyoshi eq. 3).
+    pub fn with_kernel_covariance(&self, sigma: Matrix2<f64>) -> Result<Self> {
+        GgxMatrix::new(self.a + sigma * 2.0)
+    }
+
+    /// Back to `alpha_x >= alpha_y`, `theta_z` in `(-pi/2, pi/2]` (the canonical [`Ggx`]): the eigenvalues
+    /// of `A` are `alpha^2` and the eigenvector of the larger one is the local x axis.
+    pub fn to_ggx(&self) -> Ggx {
+        let (l1, l2, v1) = sym2_eigen(&self.a);
+        // Local x axis in the scan frame is (cos tz, -sin tz) (row 1 of Rz), so tz = atan2(-v1.y, v1.x).
+        let tz = (-v1.y).atan2(v1.x);
+        let (ax, ay, tz) = canonical::canonical_aniso(l1.sqrt(), l2.max(0.0).sqrt(), tz);
+        Ggx { alpha_x: ax.max(ALPHA_MIN), alpha_y: ay.max(ALPHA_MIN), theta_z: tz }
+    }
+}
+
+/// Eigenvalues `l1 >= l2` of a symmetric 2x2 matrix and the unit eigenvector of `l1` (closed form).
+pub(crate) fn sym2_eigen(a: &Matrix2<f64>) -> (f64, f64, Vector2<f64>) {
+    let (p, q, r) = (a[(0, 0)], a[(0, 1)], a[(1, 1)]);
+    let mean = 0.5 * (p + r);
+    let half_diff = 0.5 * (p - r);
+    let rad = half_diff.hypot(q);
+    let (l1, l2) = (mean + rad, mean - rad);
+    // Eigenvector of l1: angle phi with tan(2 phi) = 2q / (p - r); atan2 keeps it stable when q ~ 0.
+    let phi = 0.5 * q.atan2(half_diff);
+    (l1, l2, Vector2::new(phi.cos(), phi.sin()))
+}
+
+impl Ndf for GgxMatrix {
+    /// Tokuyoshi eq. 17.
+    fn d(&self, h: Vector3<f64>) -> f64 {
+        if h.z < 0.0 {
+            return 0.0;
+        }
+        let t = Vector2::new(h.x, h.y);
+        let q = (t.transpose() * self.a_inv * t)[(0, 0)] + h.z * h.z;
+        1.0 / (std::f64::consts::PI * self.sqrt_det * q * q)
+    }
+}
+
+impl Masking for GgxMatrix {
+    /// Tokuyoshi eq. 18: `Lambda = -1/2 + sqrt([ox, oy] A [ox, oy]^T + oz^2) / (2 |oz|)`, evaluated as
+    /// `s / (2 |oz| (sqrt(s + oz^2) + |oz|))` with `s = [ox, oy] A [ox, oy]^T` (no cancellation).
+    fn lambda(&self, o: Vector3<f64>) -> f64 {
+        let t = Vector2::new(o.x, o.y);
+        let s = (t.transpose() * self.a * t)[(0, 0)].max(0.0);
+        let z = o.z.abs();
+        let l = s / (2.0 * z * ((s + z * z).sqrt() + z));
+        // On the horizon (z = 0) Lambda = +inf (or 0/0 along no direction at all): saturate.
+        if !l.is_finite() {
+            return if s == 0.0 && z > 0.0 { 0.0 } else { f64::MAX };
+        }
+        l
+    }
+
+    /// Tokuyoshi appendix A: `G1 = X+(o.h) / (1 + Lambda(o))`.
+    fn g1(&self, o: Vector3<f64>, h: Vector3<f64>) -> f64 {
+        smith_g1(self.lambda(o), o, h)
+    }
+}

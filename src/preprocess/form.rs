@@ -1,0 +1,277 @@
+//! Least-squares form removal over the valid points: polynomials up to order 3 (order 1 is the mean
+//! plane) and cylinders (bullet lands, turned parts).
+//!
+//! Polynomials are fitted in a Legendre basis `P_p(u) P_q(v)`, `p + q <= order`, on coordinates
+//! scaled to `[-1, 1]` over the grid, with the mean height subtracted first: the normal equations stay
+//! well conditioned even for heights with a huge absolute offset (a 76 mm stage height under
+//! sub-micrometre roughness). NaN points take no part in the fit and stay NaN.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::error::{Error, ErrorKind, Result};
+use crate::heightfield::Heightfield;
+
+/// Legendre polynomials P_0..P_3 at `u`.
+#[inline]
+fn legendre(u: f64) -> [f64; 4] {
+    [1.0, u, 0.5 * (3.0 * u * u - 1.0), 0.5 * (5.0 * u * u * u - 3.0 * u)]
+}
+
+/// Exponent pairs (p, q) with p + q <= order.
+fn terms(order: usize) -> Vec<(usize, usize)> {
+    let mut t = Vec::new();
+    for s in 0..=order {
+        for p in (0..=s).rev() {
+            t.push((p, s - p));
+        }
+    }
+    t
+}
+
+/// Grid coordinate `k` of `n` mapped to [-1, 1] (0 when the axis has a single sample).
+#[inline]
+fn scaled(k: usize, n: usize) -> f64 {
+    if n > 1 {
+        2.0 * k as f64 / (n - 1) as f64 - 1.0
+    } else {
+        0.0
+    }
+}
+
+/// The least-squares polynomial of total degree `order` (0..=3) fitted to the valid heights, evaluated
+/// on the whole grid (NaN where the input is NaN). Returns the residual heights.
+pub fn remove_polynomial(hf: &Heightfield, order: usize) -> Result<Vec<f64>> {
+    if order > 3 {
+        return Err(Error::invalid(format!("polynomial form order {order} is above 3")));
+    }
+    // An axis with one sample cannot carry a slope along it; drop those terms rather than solve a
+    // singular system.
+    let all = terms(order);
+    let t: Vec<(usize, usize)> =
+        all.into_iter().filter(|&(p, q)| (p == 0 || hf.nx > 1) && (q == 0 || hf.ny > 1)).collect();
+    let m = t.len();
+    let valid = hf.valid_count();
+    if valid < m {
+        return Err(Error::new(
+            ErrorKind::BadData,
+            format!("{valid} valid points cannot determine a {m}-term form of order {order}"),
+        ));
+    }
+    let mean = hf.z.iter().filter(|h| !h.is_nan()).sum::<f64>() / valid as f64;
+    let lu: Vec<[f64; 4]> = (0..hf.nx).map(|j| legendre(scaled(j, hf.nx))).collect();
+    let lv: Vec<[f64; 4]> = (0..hf.ny).map(|i| legendre(scaled(i, hf.ny))).collect();
+    let mut ata = DMatrix::<f64>::zeros(m, m);
+    let mut atb = DVector::<f64>::zeros(m);
+    let mut row = vec![0.0; m];
+    for i in 0..hf.ny {
+        for j in 0..hf.nx {
+            let h = hf.z[i * hf.nx + j];
+            if h.is_nan() {
+                continue;
+            }
+            let r = h - mean;
+            for (k, &(p, q)) in t.iter().enumerate() {
+                row[k] = lu[j][p] * lv[i][q];
+            }
+            for a in 0..m {
+                atb[a] += row[a] * r;
+                for b in a..m {
+                    ata[(a, b)] += row[a] * row[b];
+                }
+            }
+        }
+    }
+    for a in 0..m {
+        for b in 0..a {
+            ata[(a, b)] = ata[(b, a)];
+        }
+    }
+    // SVD with a relative cut-off: the valid points may not span the basis (a mask that leaves one
+    // line of points); the minimum-norm solution is then still a least-squares fit.
+    let svd = ata.svd(true, true);
+    let smax = svd.singular_values.max();
+    let coef = svd
+        .solve(&atb, smax * 1e-12)
+        .map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
+    let mut out = Vec::with_capacity(hf.z.len());
+    for i in 0..hf.ny {
+        for j in 0..hf.nx {
+            let h = hf.z[i * hf.nx + j];
+            if h.is_nan() {
+                out.push(f64::NAN);
+                continue;
+            }
+            let mut f = 0.0;
+            for (k, &(p, q)) in t.iter().enumerate() {
+                f += coef[k] * lu[j][p] * lv[i][q];
+            }
+            out.push((h - mean) - f);
+        }
+    }
+    Ok(out)
+}
+
+/// Residuals after removing the least-squares plane (order 1).
+pub fn remove_plane(hf: &Heightfield) -> Result<Vec<f64>> {
+    remove_polynomial(hf, 1)
+}
+
+/// A fitted cylinder and the residual heights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CylinderFit {
+    /// Heights minus the fitted cylinder (NaN where the input is NaN).
+    pub residual: Vec<f64>,
+    /// Radius in metres.
+    pub radius: f64,
+    /// Direction of the cylinder axis in the xy plane, radians from +x.
+    pub axis_angle: f64,
+    /// +1 for a convex cylinder (a bullet land), -1 for a concave one (a bore).
+    pub convexity: f64,
+}
+
+/// Remove the least-squares cylinder whose axis lies parallel to the xy plane (at any azimuth, with
+/// a linear tilt along it): `z = c0 + g s + sigma sqrt(R^2 - (t - tc)^2)`, with `t` across and `s`
+/// along the axis. The azimuth and a starting radius come from the Hessian of a quadratic fit (the
+/// axis is the direction of least curvature); `c0, g, tc, R` are then refined by damped Gauss-Newton
+/// on the vertical residuals.
+pub fn remove_cylinder(hf: &Heightfield) -> Result<CylinderFit> {
+    let pts: Vec<(f64, f64, f64)> = (0..hf.ny)
+        .flat_map(|i| (0..hf.nx).map(move |j| (i, j)))
+        .filter_map(|(i, j)| {
+            let h = hf.z[i * hf.nx + j];
+            (!h.is_nan()).then_some((j as f64 * hf.dx, i as f64 * hf.dy, h))
+        })
+        .collect();
+    if pts.len() < 6 {
+        return Err(Error::new(ErrorKind::BadData, format!("{} valid points cannot determine a cylinder", pts.len())));
+    }
+    let n = pts.len() as f64;
+    let (xc, yc, zm) = pts.iter().fold((0.0, 0.0, 0.0), |a, p| (a.0 + p.0 / n, a.1 + p.1 / n, a.2 + p.2 / n));
+    // Quadratic fit z - zm = a + bx + cy + d x^2 + e xy + f y^2 in metric coordinates about the centroid,
+    // scaled by the half-extent for conditioning.
+    let sx = ((hf.nx.max(2) - 1) as f64 * hf.dx).max(hf.dx) / 2.0;
+    let sy = ((hf.ny.max(2) - 1) as f64 * hf.dy).max(hf.dy) / 2.0;
+    let mut ata = DMatrix::<f64>::zeros(6, 6);
+    let mut atb = DVector::<f64>::zeros(6);
+    for &(x, y, z) in &pts {
+        let (u, v) = ((x - xc) / sx, (y - yc) / sy);
+        let row = [1.0, u, v, u * u, u * v, v * v];
+        for a in 0..6 {
+            atb[a] += row[a] * (z - zm);
+            for b in 0..6 {
+                ata[(a, b)] += row[a] * row[b];
+            }
+        }
+    }
+    let svd = ata.svd(true, true);
+    let smax = svd.singular_values.max();
+    let q = svd.solve(&atb, smax * 1e-12).map_err(|e| Error::new(ErrorKind::Numerical, format!("cylinder start fit failed: {e}")))?;
+    let hxx = 2.0 * q[3] / (sx * sx);
+    let hxy = q[4] / (sx * sy);
+    let hyy = 2.0 * q[5] / (sy * sy);
+    // Eigen-decomposition of the 2x2 Hessian.
+    let tr = 0.5 * (hxx + hyy);
+    let disc = (0.25 * (hxx - hyy).powi(2) + hxy * hxy).sqrt();
+    let (l1, l2) = (tr + disc, tr - disc);
+    let kappa = if l1.abs() >= l2.abs() { l1 } else { l2 };
+    let width = (sx * sx + sy * sy).sqrt() * 2.0;
+    // A cylinder needs curvature: with a radius beyond 1e6 widths the fit is a plane in disguise.
+    if !(kappa.abs() * width * 1e6 > 1.0) {
+        return Err(Error::new(
+            ErrorKind::Numerical,
+            "cylinder removal: the surface shows no curvature to fit a cylinder to; use plane removal",
+        ));
+    }
+    // Across-axis direction: eigenvector of kappa.
+    let (ex, ey) = if hxy.abs() > 1e-300 {
+        let (a, b) = (kappa - hyy, hxy);
+        let norm = (a * a + b * b).sqrt();
+        (a / norm, b / norm)
+    } else if (kappa - hxx).abs() <= (kappa - hyy).abs() {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let sigma = if kappa < 0.0 { 1.0 } else { -1.0 };
+    let tsv: Vec<(f64, f64, f64)> =
+        pts.iter().map(|&(x, y, z)| ((x - xc) * ex + (y - yc) * ey, -(x - xc) * ey + (y - yc) * ex, z - zm)).collect();
+    let tmax = tsv.iter().fold(0.0f64, |m, p| m.max(p.0.abs()));
+    // Start: apex over the slope-zero point of the quadratic along t, radius 1/|kappa|.
+    let slope_t = (q[1] / sx) * ex + (q[2] / sy) * ey;
+    let mut r = (1.0 / kappa.abs()).max(1.01 * tmax);
+    let mut tc = -slope_t / kappa;
+    if !tc.is_finite() || tc.abs() > r {
+        tc = 0.0;
+    }
+    let mut p = [0.0, 0.0, tc, r]; // c0, g, tc, R
+    let cost = |p: &[f64; 4]| -> f64 {
+        let mut c = 0.0;
+        for &(t, s, z) in &tsv {
+            let w2 = p[3] * p[3] - (t - p[2]).powi(2);
+            if w2 <= 0.0 {
+                return f64::INFINITY;
+            }
+            let f = p[0] + p[1] * s + sigma * w2.sqrt();
+            c += (z - f).powi(2);
+        }
+        c
+    };
+    // c0 starts at the mean offset so the first cost is finite and sensible.
+    p[0] = tsv.iter().map(|&(t, _, z)| z - sigma * (r * r - (t - tc).powi(2)).max(0.0).sqrt()).sum::<f64>() / n;
+    let mut c_now = cost(&p);
+    let mut lambda = 1e-3;
+    for _ in 0..200 {
+        let mut jtj = nalgebra::Matrix4::<f64>::zeros();
+        let mut jtr = nalgebra::Vector4::<f64>::zeros();
+        for &(t, s, z) in &tsv {
+            let w = (p[3] * p[3] - (t - p[2]).powi(2)).sqrt();
+            let f = p[0] + p[1] * s + sigma * w;
+            let jrow = nalgebra::Vector4::new(1.0, s, sigma * (t - p[2]) / w, sigma * p[3] / w);
+            jtj += jrow * jrow.transpose();
+            jtr += jrow * (z - f);
+        }
+        let mut improved = false;
+        for _ in 0..30 {
+            let mut a = jtj;
+            for k in 0..4 {
+                a[(k, k)] *= 1.0 + lambda;
+            }
+            let Some(step) = a.lu().solve(&jtr) else { break };
+            let trial = [p[0] + step[0], p[1] + step[1], p[2] + step[2], p[3] + step[3]];
+            let c_trial = cost(&trial);
+            if c_trial < c_now {
+                let rel = (c_now - c_trial) / c_now.max(f64::MIN_POSITIVE);
+                p = trial;
+                c_now = c_trial;
+                lambda = (lambda * 0.3).max(1e-12);
+                improved = true;
+                if rel < 1e-13 {
+                    lambda = f64::NAN; // converged
+                }
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !improved || lambda.is_nan() {
+            break;
+        }
+    }
+    r = p[3];
+    let mut residual = Vec::with_capacity(hf.z.len());
+    for i in 0..hf.ny {
+        for j in 0..hf.nx {
+            let h = hf.z[i * hf.nx + j];
+            if h.is_nan() {
+                residual.push(f64::NAN);
+                continue;
+            }
+            let (x, y) = (j as f64 * hf.dx - xc, i as f64 * hf.dy - yc);
+            let (t, s) = (x * ex + y * ey, -x * ey + y * ex);
+            let w = (r * r - (t - p[2]).powi(2)).max(0.0).sqrt();
+            residual.push(h - zm - (p[0] + p[1] * s + sigma * w));
+        }
+    }
+    let axis_angle = (-ey).atan2(ex) + std::f64::consts::FRAC_PI_2;
+    let axis_angle = axis_angle.rem_euclid(std::f64::consts::PI);
+    Ok(CylinderFit { residual, radius: r, axis_angle, convexity: sigma })
+}
