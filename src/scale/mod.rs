@@ -20,3 +20,18 @@ pub mod plot;
 pub mod report;
 pub mod roughness;
 pub mod scene;
+
+/// The fitter of `src/fit/` behind [`analyze::Fitter`], or `None` while the crate has none.
+pub fn default_fitter() -> Option<impl analyze::Fitter> {
+    None::<NoFitter>
+}
+
+/// Placeholder type for [`default_fitter`] until `src/fit/` provides fits.
+#[derive(Debug, Clone, Copy)]
+pub struct NoFitter;
+
+impl analyze::Fitter for NoFitter {
+    fn fit(&self, _ndf: &crate::ndf::EmpiricalNdf, _id: crate::models::ModelId) -> crate::Result<analyze::Fitted> {
+        Err(crate::Error::new(crate::ErrorKind::Unsupported, "no fitter in this build"))
+    }
+}

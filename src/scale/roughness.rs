@@ -6,7 +6,7 @@ use nalgebra::{Matrix2, Matrix3, Vector2};
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::models::ellipsoid::rotation_xyz;
-use crate::models::{Beckmann, Ellipsoid, Ggx, Model, ModelId, ALPHA_MIN};
+use crate::models::{canonical, Beckmann, Ellipsoid, Ggx, Model, ModelId, ALPHA_MIN};
 
 /// A model in slope space: the roughness matrix `A2` (Tokuyoshi eq. 3, 17) and the centre `mu` of the
 /// lobe in slope space (zero except for a tilted ellipsoid, eq. S4).
@@ -70,47 +70,18 @@ pub fn ellipsoid_ata(f: &SlopeForm) -> Matrix3<f64> {
 }
 
 /// Canonical ellipsoid parameters `[alpha_x, alpha_y, theta_x, theta_y, theta_z]` (Walter et al. eq. 2-3,
-/// `A = S R`, `S = diag(alpha_x, alpha_y, 1)`, `R = Rx Ry Rz`) of a symmetric positive definite `A^T A`.
-///
-/// `A^T A = R^T S^2 R`: the rows of R are eigenvectors; the one closest to the macro normal is R's third
-/// row and its eigenvalue sets the scale. Of the equivalent choices, `alpha_x >= alpha_y` and
-/// `theta_z` in `(-pi/2, pi/2]`.
+/// `A = S R`) of a symmetric positive definite `A^T A`: any A with that Gram matrix gives the same NDF
+/// (Walter et al. sec. 1), so take `A = L^T` from the Cholesky factor `A^T A = L L^T` and hand it to the
+/// models' canonical form ([`crate::models::canonical::decompose`]).
 pub fn ellipsoid_params_from_ata(ata: &Matrix3<f64>) -> Result<[f64; 5]> {
     if ata.iter().any(|v| !v.is_finite()) {
         return Err(Error::new(ErrorKind::Numerical, "A^T A is not finite"));
     }
-    let e = (0.5 * (ata + ata.transpose())).symmetric_eigen();
-    let mut idx = [0usize, 1, 2];
-    // The z axis: the eigenvector with the largest |z| component.
-    idx.sort_by(|&a, &b| e.eigenvectors[(2, b)].abs().total_cmp(&e.eigenvectors[(2, a)].abs()));
-    let iz = idx[0];
-    let (mut i1, mut i2) = (idx[1], idx[2]);
-    if e.eigenvalues[i2] > e.eigenvalues[i1] {
-        std::mem::swap(&mut i1, &mut i2);
-    }
-    let lz = e.eigenvalues[iz];
-    if !(lz > 0.0 && e.eigenvalues[i1] > 0.0 && e.eigenvalues[i2] > 0.0) {
-        return Err(Error::new(ErrorKind::Numerical, "A^T A is not positive definite"));
-    }
-    let mut rz = e.eigenvectors.column(iz).into_owned();
-    if rz[2] < 0.0 {
-        rz = -rz;
-    }
-    let mut r1 = e.eigenvectors.column(i1).into_owned();
-    // Fold the free sign of the first row so theta_z lands in (-pi/2, pi/2] (R00 = cos ty cos tz >= 0).
-    if r1[0] < 0.0 {
-        r1 = -r1;
-    }
-    let r2 = rz.cross(&r1); // right-handed: row2 = row3 x row1
-    let r = Matrix3::from_rows(&[r1.transpose(), r2.transpose(), rz.transpose()]);
-    // R = Rx(tx) Ry(ty) Rz(tz): R02 = sin ty, R12 = -sin tx cos ty, R22 = cos tx cos ty,
-    // R01 = -cos ty sin tz, R00 = cos ty cos tz.
-    let ty = r[(0, 2)].clamp(-1.0, 1.0).asin();
-    let tx = (-r[(1, 2)]).atan2(r[(2, 2)]);
-    let tz = (-r[(0, 1)]).atan2(r[(0, 0)]);
-    let ax = (e.eigenvalues[i1] / lz).sqrt();
-    let ay = (e.eigenvalues[i2] / lz).sqrt();
-    Ok([ax, ay, tx, ty, tz])
+    let sym = 0.5 * (ata + ata.transpose());
+    let l = sym
+        .cholesky()
+        .ok_or_else(|| Error::new(ErrorKind::Numerical, "A^T A is not positive definite"))?;
+    canonical::decompose(&l.l().transpose())
 }
 
 /// The slope form of any model. Beckmann's roughness matrix is exactly twice its slope covariance
