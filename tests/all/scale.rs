@@ -154,3 +154,78 @@ fn binned_ndf_is_normalized() {
     assert!((total - 1.0).abs() < 1e-12, "{total}");
     assert_eq!(ndf.bins.iter().map(|b| b.count).sum::<u64>(), ndf.n_samples);
 }
+
+mod cli {
+    use std::process::Command;
+
+    use super::*;
+    use crate::common::ndfit_bin;
+
+    fn bump_scan(dir: &std::path::Path) -> std::path::PathBuf {
+        let bumps = BumpField {
+            period: 16.0 * DX,
+            semi_axes: Vector3::new(6.0 * DX, 3.5 * DX, 4.0 * DX),
+            angles: Vector3::new(0.5, -0.4, 0.3),
+            depth: 1.0 * DX,
+        };
+        let hf = bumps.heightfield(96, DX).unwrap();
+        let p = dir.join("bumps.x3p");
+        ndfit::io::x3p_write::write_x3p(&p, &hf).unwrap();
+        p
+    }
+
+    #[test]
+    fn writes_json_csv_png_and_is_reproducible() {
+        let dir = tempfile::tempdir().unwrap();
+        let scan = bump_scan(dir.path());
+        let run = |out: &str| {
+            let o = Command::new(ndfit_bin())
+                .arg("scale")
+                .arg(&scan)
+                .args(["--form", "none", "--footprint", "2e-6,3e-5", "--scene", "footprint=4e-6..4e-5", "--scene-steps", "3"])
+                .arg("-o")
+                .arg(dir.path().join(out))
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            std::fs::read_to_string(dir.path().join(out).join("scale.json")).unwrap()
+        };
+        let a = run("a");
+        let b = run("b");
+        // Same input, same seed: byte-identical report (the input path is the same file).
+        assert_eq!(a, b);
+        let j: serde_json::Value = serde_json::from_str(&a).unwrap();
+        assert_eq!(j["schema"], "ndfit.scale/1");
+        let fps = j["footprints"].as_array().unwrap();
+        assert_eq!(fps.len(), 5); // 2 given + 3 scene steps
+        assert!(j["recommendation"]["explanation"].as_str().unwrap().contains("simplest"));
+        let csv = std::fs::read_to_string(dir.path().join("a/scale.csv")).unwrap();
+        assert!(csv.starts_with(ndfit::scale::report::CSV_HEADER));
+        // 5 footprints x 5 models x 2 routes + header.
+        assert_eq!(csv.lines().count(), 1 + 5 * 5 * 2);
+        let png = std::fs::read(dir.path().join("a/scale.png")).unwrap();
+        assert_eq!(&png[1..4], b"PNG");
+    }
+
+    #[test]
+    fn bad_input_fails_with_one_line_and_no_output() {
+        let dir = tempfile::tempdir().unwrap();
+        let scan = bump_scan(dir.path());
+        let out = dir.path().join("out");
+        let cases: Vec<Vec<String>> = vec![
+            vec![scan.display().to_string(), "--footprint".into(), "-1".into()],
+            vec![scan.display().to_string()],
+            vec![scan.display().to_string(), "--scene".into(), "distance=1".into()],
+            vec![scan.display().to_string(), "--footprint".into(), "1".into()], // kernel far wider than the scan
+            vec![dir.path().join("missing.x3p").display().to_string(), "--footprint".into(), "1e-5".into()],
+            vec![scan.display().to_string(), "--footprint".into(), "1e-5".into(), "--models".into(), "phong".into()],
+        ];
+        for args in cases {
+            let o = Command::new(ndfit_bin()).arg("scale").args(&args).arg("-o").arg(&out).output().unwrap();
+            assert!(!o.status.success(), "{args:?} should fail");
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
+            assert!(!out.join("scale.json").exists(), "{args:?} left output");
+        }
+    }
+}
