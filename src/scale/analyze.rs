@@ -12,13 +12,25 @@ use crate::heightfield::Heightfield;
 use crate::models::{Model, ModelId, Ndf};
 use crate::ndf::EmpiricalNdf;
 
-/// A fitted model and its information criterion (lower is better), as the fitting code reports them.
+/// A fitted model and what the information criterion needs, as the fitting code reports them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Fitted {
     /// The fitted model.
     pub model: Model,
-    /// The information criterion of the fit, if the fitter computes one.
-    pub ic: Option<f64>,
+    /// The objective `F` at the optimum (Poisson deviance, objective.md), if known.
+    pub objective: Option<f64>,
+    /// `F / (K - p)`, if known.
+    pub reduced_chi2: Option<f64>,
+    /// Number of samples `N` binned.
+    pub n_samples: f64,
+}
+
+/// The information criterion of the fitting code (`src/fit`, `fit_auto`): the quasi-likelihood BIC
+/// `F / c + p ln N`, with the overdispersion `c = max(1, reduced chi-square of the richest model)`
+/// fitted at the same footprint (neighbouring slopes, and here the blur samples of one point, are
+/// correlated, so the deviance of even the right model exceeds its Poisson expectation by `c`).
+pub fn qbic(objective: f64, c: f64, n_params: usize, n_samples: f64) -> f64 {
+    objective / c.max(1.0) + n_params as f64 * n_samples.max(1.0).ln()
 }
 
 /// Fits a model of a given kind to an empirical NDF (the fitter of `src/fit/`, or a test double).
@@ -106,6 +118,9 @@ pub struct ModelAtFootprint {
     pub analytic: RouteResult,
     /// For isotropic models: the filtered alpha by Tokuyoshi eq. 10 and eq. 13 from the analytic base.
     pub tokuyoshi_iso: Option<(f64, f64)>,
+    /// `||A2_emp - A2_ana|| / ||A2_emp||` (Frobenius; `mu` included as `mu mu^T` for the ellipsoid):
+    /// how far the two routes' slope forms lie apart.
+    pub route_gap: Option<f64>,
 }
 
 /// Everything computed at one footprint.
@@ -123,6 +138,11 @@ pub struct FootprintResult {
     pub models: Vec<ModelAtFootprint>,
     /// The empirical NDF at F (kept for the recommendation and plots).
     pub ndf_at: EmpiricalNdf,
+    /// Coefficient of variation of `tr Sigma_w(x0)` over the points: large values make the mixture (S1)
+    /// heavier-tailed than one Gaussian of covariance `Sigma_F` (scale.md sec. 4b).
+    pub sigma_w_spread: f64,
+    /// Where the Tokuyoshi route is not expected to match, in words (scale.md sec. 4).
+    pub theory_notes: Vec<String>,
 }
 
 /// Run both routes at every footprint of `opts` on a heightfield.
@@ -152,12 +172,33 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
         let ndf_res = bin_slopes(&s_res, opts.bins)?;
         let ndf_at = bin_slopes(&s_at, opts.bins)?;
         let pixel_roughness = aniso_params(&(2.0 * stats.sigma_f)).ok();
-        let models = opts
+        let traces: Vec<f64> = ff.valid_points().iter().map(|&p| ff.wxx[p] + ff.wyy[p]).collect();
+        let tm = traces.iter().sum::<f64>() / traces.len().max(1) as f64;
+        let tv = traces.iter().map(|t| (t - tm).powi(2)).sum::<f64>() / traces.len().max(1) as f64;
+        // A footprint below the grid spacing has Sigma_w = 0 everywhere: no spread to speak of.
+        let sigma_w_spread = if tm > 0.0 { tv.sqrt() / tm } else { 0.0 };
+        let mut theory_notes = Vec::new();
+        // Thresholds are indicative, not tests: a Gaussian has skewness 0; a coefficient of variation of 1
+        // is that of an exponential spread of widths.
+        if resolved.skewness > 0.3 {
+            theory_notes.push(format!(
+                "the filtered surface's slopes are skewed (skewness {:.2}): not Gaussian, so only the ellipsoid can follow them and A + 2 Sigma is approximate",
+                resolved.skewness
+            ));
+        }
+        if sigma_w_spread > 1.0 {
+            theory_notes.push(format!(
+                "the within-footprint covariance varies strongly between footprints (coefficient of variation {sigma_w_spread:.2}): the NDF at F is a heavy-tailed mixture, one mean Sigma_F cannot reproduce it"
+            ));
+        }
+        let mut fitted: Vec<_> = opts
             .models
             .iter()
             .map(|&id| model_at_footprint(id, &stats, &resolved, &ndf_res, &ndf_at, fitter))
             .collect();
-        out.push(FootprintResult { stats, at_f, resolved, pixel_roughness, models, ndf_at });
+        fill_ic(&mut fitted);
+        let models = fitted.into_iter().map(|(m, _)| m).collect();
+        out.push(FootprintResult { stats, at_f, resolved, pixel_roughness, models, ndf_at, sigma_w_spread, theory_notes });
     }
     Ok(out)
 }
@@ -169,13 +210,18 @@ fn model_at_footprint(
     ndf_res: &EmpiricalNdf,
     ndf_at: &EmpiricalNdf,
     fitter: Option<&dyn Fitter>,
-) -> ModelAtFootprint {
+) -> (ModelAtFootprint, Option<Fitted>) {
     let failed = |source, e: String| RouteResult { model: None, ic: None, delta: None, source, error: Some(e) };
     let empirical = match fitter.map(|f| f.fit(ndf_at, id)) {
-        Some(Ok(f)) => RouteResult { model: Some(f.model), ic: f.ic, delta: Some(delta(&f.model, ndf_at)), source: "fit", error: None },
-        Some(Err(e)) => failed("fit", e.to_string()),
-        None => failed("fit", "no fitter available".into()),
+        Some(Ok(f)) => {
+            // The criterion needs the overdispersion of the richest model; `analyze` fills `ic` in.
+            let r = RouteResult { model: Some(f.model), ic: None, delta: Some(delta(&f.model, ndf_at)), source: "fit", error: None };
+            (r, Some(f))
+        }
+        Some(Err(e)) => (failed("fit", e.to_string()), None),
+        None => (failed("fit", "no fitter available".into()), None),
     };
+    let (empirical, fitted) = empirical;
     // Analytic route: base model of h_F, then + 2 Sigma_F (Tokuyoshi eq. 3).
     let base = match fitter.map(|f| f.fit(ndf_res, id)) {
         Some(Ok(f)) => Ok((f.model, "fit+kernel")),
@@ -198,7 +244,35 @@ fn model_at_footprint(
         }
         Err(e) => (failed("moments+kernel", e.to_string()), None),
     };
-    ModelAtFootprint { id, empirical, analytic, tokuyoshi_iso }
+    let route_gap = match (empirical.model, analytic.model) {
+        (Some(e), Some(a)) => match (slope_form(&e), slope_form(&a)) {
+            (Ok(fe), Ok(fa)) => {
+                let me = fe.a2 + fe.mu * fe.mu.transpose();
+                let ma = fa.a2 + fa.mu * fa.mu.transpose();
+                Some((me - ma).norm() / me.norm())
+            }
+            _ => None,
+        },
+        _ => None,
+    };
+    (ModelAtFootprint { id, empirical, analytic, tokuyoshi_iso, route_gap }, fitted)
+}
+
+/// Fill in the QBIC of every empirical fit at one footprint (see [`qbic`]).
+fn fill_ic(models: &mut [(ModelAtFootprint, Option<Fitted>)]) {
+    let c = models
+        .iter()
+        .filter_map(|(m, f)| f.and_then(|f| f.reduced_chi2).map(|r| (m.id.n_params(), r)))
+        .max_by_key(|(p, _)| *p)
+        .map(|(_, r)| r.max(1.0))
+        .unwrap_or(1.0);
+    for (m, f) in models.iter_mut() {
+        if let Some(f) = f {
+            if let Some(obj) = f.objective {
+                m.empirical.ic = Some(qbic(obj, c, m.id.n_params(), f.n_samples));
+            }
+        }
+    }
 }
 
 /// The scale-free skew (`sqrt(mu^T A2^-1 mu)`, roughness.rs) of a model.

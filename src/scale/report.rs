@@ -67,6 +67,9 @@ pub fn footprint_json(r: &FootprintResult) -> Value {
                 "empirical": route_json(&m.empirical),
                 "analytic": route_json(&m.analytic),
             });
+            if let Some(g) = m.route_gap {
+                o["route_gap"] = num(g);
+            }
             if let Some((e10, e13)) = m.tokuyoshi_iso {
                 o["tokuyoshi_eq10_alpha"] = num(e10);
                 o["tokuyoshi_eq13_alpha"] = num(e13);
@@ -87,6 +90,8 @@ pub fn footprint_json(r: &FootprintResult) -> Value {
         "pixel_roughness": r.pixel_roughness.map(|(ax, ay, tz)| json!({"matrix": mat2(&(2.0 * s.sigma_f)), "alpha_x": ax, "alpha_y": ay, "theta_z": tz})),
         "moments_at_footprint": mom(&r.at_f),
         "moments_resolved": mom(&r.resolved),
+        "sigma_w_spread": num(r.sigma_w_spread),
+        "theory_notes": r.theory_notes,
         "models": models,
     })
 }

@@ -349,4 +349,54 @@ mod tests {
         let lmax = s.symmetric_eigen().eigenvalues.max();
         assert!((e10 * e10 - 0.01 - 2.0 * lmax).abs() < 1e-15);
     }
+
+    /// delta (objective.md) of `approx` against the exact convolution `base (*) N(0, sigma^2 I)` in slope
+    /// space, on an n x n grid of half-width `w`: separable Gaussian convolution along x then y.
+    fn conv_delta(base: impl Fn(Vector2<f64>) -> f64, approx: impl Fn(Vector2<f64>) -> f64, sigma2: f64, w: f64, n: usize) -> f64 {
+        let h = 2.0 * w / n as f64;
+        let at = |i: usize| -w + (i as f64 + 0.5) * h;
+        let g: Vec<f64> = (0..2 * n).map(|k| {
+            let t = (k as f64 - n as f64) * h;
+            (-0.5 * t * t / sigma2).exp() / (2.0 * std::f64::consts::PI * sigma2).sqrt() * h
+        }).collect();
+        let f: Vec<f64> = (0..n * n).map(|p| base(Vector2::new(at(p % n), at(p / n)))).collect();
+        let mut t = vec![0.0; n * n];
+        for i in 0..n {
+            for j in 0..n {
+                t[i * n + j] = (0..n).map(|k| f[i * n + k] * g[j + n - k]).sum();
+            }
+        }
+        let mut c = vec![0.0; n * n];
+        for i in 0..n {
+            for j in 0..n {
+                c[i * n + j] = (0..n).map(|k| t[k * n + j] * g[i + n - k]).sum();
+            }
+        }
+        let (mut sw, mut s2) = (0.0, 0.0);
+        for p in 0..n * n {
+            let r = approx(Vector2::new(at(p % n), at(p / n))) / c[p] - 1.0;
+            sw += c[p];
+            s2 += c[p] * r * r;
+        }
+        (s2 / sw).sqrt()
+    }
+
+    #[test]
+    fn ggx_filtering_is_approximate_beckmann_exact() {
+        // Tokuyoshi sec. 2: A + 2 Sigma is exact for Beckmann and only approximate for GGX (a Student-t
+        // lobe convolved with a Gaussian is no Student-t). Measured here on a grid of half-width 8 alpha
+        // (GGX mass beyond it: 1/(1+64) = 1.5 %, the same for both sides of the ratio, so it does not
+        // bias delta much) for a kernel as wide as the lobe (2 sigma^2 = alpha^2). The Beckmann value is
+        // the quadrature error alone; the GGX value is the approximation's error (data_formats/scale.md
+        // sec. 4a quotes it).
+        let alpha: f64 = 0.2;
+        let s2 = alpha * alpha / 2.0;
+        let iso = |a2: f64| SlopeForm { a2: Matrix2::new(a2, 0.0, 0.0, a2), mu: Vector2::zeros() };
+        let (b0, b1) = (iso(alpha * alpha), iso(alpha * alpha + 2.0 * s2));
+        let db = conv_delta(|s| beckmann_p22(&b0, s), |s| beckmann_p22(&b1, s), s2, 8.0 * alpha, 240);
+        let dg = conv_delta(|s| ggx_p22(&b0, s), |s| ggx_p22(&b1, s), s2, 8.0 * alpha, 240);
+        eprintln!("delta of A + 2 Sigma vs exact convolution (2 sigma^2 = alpha^2): Beckmann {db:.2e}, GGX {dg:.3}");
+        assert!(db < 1e-6, "Beckmann must be exact: {db}");
+        assert!(dg > 0.05 && dg < 0.5, "GGX approximation error {dg}");
+    }
 }
