@@ -38,7 +38,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 fn eval_csv(model: &Model, input: &str) -> Result<String, String> {
     let mut lines = input.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
     let (_, header) = lines.next().ok_or("empty input: expected the header 'mx,my,mz' or 'mx,my,mz,ux,uy,uz'")?;
-    let cols: Vec<&str> = header.trim().trim_start_matches('\u{feff}').split(',').map(str::trim).collect();
+    let cols: Vec<&str> = header.trim().trim_start_matches('\u{feff}').split(',').map(|c| c.trim().trim_matches('"')).collect();
     let with_u = match cols.as_slice() {
         ["mx", "my", "mz"] => false,
         ["mx", "my", "mz", "ux", "uy", "uz"] => true,

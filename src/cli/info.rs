@@ -22,10 +22,15 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     // Height range and counts describe the file as read (after any crop/subsample the user asked for);
     // Sq and Sdq are taken after the requested form removal (the plane by default).
     let pre = args.scan.preprocess();
+    let pre_form = pre.form;
     let shaped = ndfit::preprocess::apply(raw.clone(), &ndfit::preprocess::Preprocess { form: ndfit::preprocess::FormRemoval::None, ..pre.clone() })
         .map_err(|e| e.with_path(&args.scan.scan))?;
-    let leveled = ndfit::preprocess::apply(shaped.clone(), &ndfit::preprocess::Preprocess { crop: None, subsample: 1, ..pre })
-        .map_err(|e| e.with_path(&args.scan.scan))?;
+    // Sq removes the least-squares plane itself; other forms are removed first.
+    let leveled = match pre_form {
+        ndfit::preprocess::FormRemoval::Plane | ndfit::preprocess::FormRemoval::None => shaped.clone(),
+        _ => ndfit::preprocess::apply(shaped.clone(), &ndfit::preprocess::Preprocess { crop: None, subsample: 1, ..pre })
+            .map_err(|e| e.with_path(&args.scan.scan))?,
+    };
     let range = surface_stats(&shaped).map_err(|e| e.with_path(&args.scan.scan))?;
     let st = surface_stats(&leveled).map_err(|e| e.with_path(&args.scan.scan))?;
     let m = &shaped.meta;
@@ -47,7 +52,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             "z_min": range.z_min,
             "z_max": range.z_max,
             "z_mean": range.z_mean,
-            "form": format!("{:?}", args.scan.form).to_lowercase(),
+            "form": format!("{:?}", pre_form).to_lowercase(),
             "sq": st.sq,
             "sdq": if st.sdq.is_finite() { serde_json::json!(st.sdq) } else { serde_json::Value::Null },
             "sdq_points": st.sdq_points,
@@ -67,7 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         );
         println!("invalid:    {} of {}", range.invalid, range.invalid + range.valid);
         println!("heights:    {:e} .. {:e} m (mean {:e} m)", range.z_min, range.z_max, range.z_mean);
-        println!("Sq:         {:e} m (after {:?} removal)", st.sq, args.scan.form);
+        println!("Sq:         {:e} m (after {:?} removal)", st.sq, pre_form);
         println!("Sdq:        {} (central differences, {} points with 4 valid neighbours)", st.sdq, st.sdq_points);
         for (k, v) in &m.instrument {
             println!("meta:       {k} = {v}");

@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 
 mod batch;
 mod bench;
+mod convert;
 mod demo;
 mod eval;
 mod fit;
@@ -33,6 +34,8 @@ enum Command {
     Demo(demo::Args),
     /// Describe a scan: format, grid, spacing, invalid points, height range, Sq and Sdq.
     Info(info::Args),
+    /// Convert any supported scan to X3P (heights kept as measured unless --form is given).
+    Convert(convert::Args),
     /// Compute the empirical NDF of a scan.
     Ndf(ndf::Args),
     /// Fit an analytic NDF to a scan.
@@ -55,6 +58,7 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Demo(a) => demo::run(a),
         Command::Info(a) => info::run(a),
+        Command::Convert(a) => convert::run(a),
         Command::Ndf(a) => ndf::run(a),
         Command::Fit(a) => fit::run(a),
         Command::Eval(a) => eval::run(a),

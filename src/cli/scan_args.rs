@@ -25,8 +25,8 @@ pub struct ScanArgs {
     pub format: Option<String>,
     /// Form removed before anything else is computed: none, plane (least squares, the default),
     /// poly2, poly3 (least-squares polynomials in x and y) or cylinder (axis in the xy plane).
-    #[arg(long, default_value = "plane", value_parser = parse_form)]
-    pub form: FormRemoval,
+    #[arg(long, value_parser = parse_form)]
+    pub form: Option<FormRemoval>,
     /// Keep only a window of the grid, in samples: NXxNY+X+Y (columns X..X+NX, rows Y..Y+NY).
     #[arg(long, value_parser = parse_crop)]
     pub crop: Option<Crop>,
@@ -43,7 +43,7 @@ impl ScanArgs {
 
     /// The preprocessing these arguments ask for.
     pub fn preprocess(&self) -> Preprocess {
-        Preprocess { form: self.form, crop: self.crop, subsample: self.subsample }
+        Preprocess { form: self.form.unwrap_or(FormRemoval::Plane), crop: self.crop, subsample: self.subsample }
     }
 
     /// Read the scan as stored (no preprocessing).

@@ -8,11 +8,16 @@
 pub mod al3d;
 pub mod atomic;
 pub mod bytes;
+pub mod gsf;
+pub mod image;
 pub mod md5;
 pub mod metropro;
+pub mod npy;
 pub mod opd;
 pub mod plu;
+pub mod raw_opts;
 pub mod sur;
+pub mod text;
 pub mod tmd;
 pub mod units;
 pub mod x3p;
@@ -57,12 +62,44 @@ pub enum Format {
     Opd,
     /// Sensofar PLU (no magic: found by extension).
     Plu,
+    /// Gwyddion Simple Field.
+    Gsf,
+    /// NumPy array.
+    Npy,
+    /// OpenEXR (a float channel).
+    Exr,
+    /// 16-bit grey PNG.
+    Png,
+    /// 16-bit grey TIFF.
+    Tiff,
+    /// Plain text matrix (optionally with an `AsciiMatrix` header).
+    Ascii,
+    /// Comma-separated matrix or x,y,z columns.
+    Csv,
+    /// x y z point list on a regular grid.
+    Xyz,
 }
 
 impl Format {
     /// Every format, in detection order.
     pub const ALL: &'static [Format] =
-        &[Format::X3p, Format::Sur, Format::MetroPro, Format::Al3d, Format::Tmd, Format::Opd, Format::Plu];
+        &[
+        Format::X3p,
+        Format::Sur,
+        Format::MetroPro,
+        Format::Al3d,
+        Format::Tmd,
+        Format::Opd,
+        Format::Gsf,
+        Format::Npy,
+        Format::Exr,
+        Format::Png,
+        Format::Tiff,
+        Format::Plu,
+        Format::Ascii,
+        Format::Csv,
+        Format::Xyz,
+    ];
 
     /// The format id.
     pub fn id(self) -> &'static str {
@@ -74,6 +111,14 @@ impl Format {
             Format::Tmd => "tmd",
             Format::Opd => "opd",
             Format::Plu => "plu",
+            Format::Gsf => "gsf",
+            Format::Npy => "npy",
+            Format::Exr => "exr",
+            Format::Png => "png",
+            Format::Tiff => "tiff",
+            Format::Ascii => "ascii",
+            Format::Csv => "csv",
+            Format::Xyz => "xyz",
         }
     }
 
@@ -93,6 +138,14 @@ impl Format {
             Format::Tmd => &["tmd"],
             Format::Opd => &["opd"],
             Format::Plu => &["plu", "apx"],
+            Format::Gsf => &["gsf"],
+            Format::Npy => &["npy"],
+            Format::Exr => &["exr"],
+            Format::Png => &["png"],
+            Format::Tiff => &["tif", "tiff"],
+            Format::Ascii => &["asc", "txt", "ascii"],
+            Format::Csv => &["csv"],
+            Format::Xyz => &["xyz"],
         }
     }
 
@@ -109,6 +162,13 @@ impl Format {
             // Two bytes, then the directory entry named "Directory".
             Format::Opd => head.len() >= 11 && &head[2..11] == b"Directory",
             Format::Plu => false,
+            Format::Gsf => head.starts_with(gsf::GSF_MAGIC),
+            Format::Npy => head.starts_with(npy::NPY_MAGIC),
+            Format::Exr => head.starts_with(&[0x76, 0x2f, 0x31, 0x01]),
+            Format::Png => head.starts_with(b"\x89PNG\r\n\x1a\n"),
+            Format::Tiff => head.starts_with(b"II*\0") || head.starts_with(b"MM\0*"),
+            Format::Ascii => head.starts_with(b"AsciiMatrix"),
+            Format::Csv | Format::Xyz => false,
         }
     }
 }
@@ -118,8 +178,22 @@ pub fn detect(path: &Path, head: &[u8]) -> Option<Format> {
     if let Some(f) = Format::ALL.iter().copied().find(|f| f.magic(head)) {
         return Some(f);
     }
-    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-    Format::ALL.iter().copied().find(|f| f.extensions().contains(&ext.as_str()))
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    if let Some(f) = Format::ALL.iter().copied().find(|f| f.extensions().contains(&ext.as_str())) {
+        // A `.dat` without MetroPro's magic is usually a text matrix.
+        if !(f == Format::MetroPro && looks_like_text(head)) {
+            return Some(f);
+        }
+    }
+    // Text of numbers under any other name: read it as a matrix.
+    looks_like_text(head).then_some(Format::Ascii)
+}
+
+/// Whether `head` is printable ASCII text that starts with something numeric or a comment.
+fn looks_like_text(head: &[u8]) -> bool {
+    !head.is_empty()
+        && head.iter().all(|&b| b == b'\n' || b == b'\r' || b == b'\t' || (0x20..0x7f).contains(&b))
+        && head.iter().find(|b| !b.is_ascii_whitespace()).is_some_and(|&b| b.is_ascii_digit() || b"+-.#%nN".contains(&b))
 }
 
 /// Read any supported scan file. Errors name `path` and the problem in one line.
@@ -154,7 +228,6 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
 
 /// Parse `bytes` as `format`.
 pub fn read_bytes(format: Format, bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
-    let _ = opts;
     match format {
         Format::X3p => x3p::read_x3p(bytes),
         Format::Sur => sur::read_sur(bytes),
@@ -163,6 +236,14 @@ pub fn read_bytes(format: Format, bytes: &[u8], opts: &ReadOptions) -> Result<He
         Format::Tmd => tmd::read_tmd(bytes),
         Format::Opd => opd::read_opd(bytes),
         Format::Plu => plu::read_plu(bytes),
+        Format::Gsf => gsf::read_gsf(bytes),
+        Format::Npy => npy::read_npy(bytes, opts),
+        Format::Exr => image::read_exr(bytes, opts),
+        Format::Png => image::read_image16(bytes, opts, ::image::ImageFormat::Png, "PNG"),
+        Format::Tiff => image::read_image16(bytes, opts, ::image::ImageFormat::Tiff, "TIFF"),
+        Format::Ascii => text::read_ascii_matrix(bytes, opts),
+        Format::Csv => text::read_csv(bytes, opts),
+        Format::Xyz => text::read_xyz(bytes, opts),
     }
 }
 

@@ -45,6 +45,9 @@ pub fn fold_half_turn(t: f64) -> f64 {
     }
 }
 
+/// A principal axis and its singular value.
+type AxisSv = (Vector3<f64>, f64);
+
 fn ties(a: f64, b: f64) -> bool {
     (a - b).abs() <= TIE * a.abs().max(b.abs())
 }
@@ -77,7 +80,7 @@ pub fn decompose(a: &Matrix3<f64>) -> Result<[f64; 5]> {
     let z = Vector3::z();
 
     // Pick r3 and the two remaining (axis, singular value) pairs.
-    let (r3, s3, rest): (Vector3<f64>, f64, Option<[(Vector3<f64>, f64); 2]>) =
+    let (r3, s3, rest): (Vector3<f64>, f64, Option<[AxisSv; 2]>) =
         if ties(s[0], s[1]) && ties(s[1], s[2]) {
             (z, s[0], None) // a sphere: every labeling is equivalent
         } else {

@@ -195,8 +195,10 @@ impl Ellipsoid {
     /// `G1(psi, m) G1(omega, m) F / |psi.n| * A_l(psi, n) / A_e(n)`, which is `<= G1(omega, m) F <= 1` (eq. 51-52).
     /// `fresnel` is `F(psi.m)` in `[0, 1]`. Written as `G1(omega, m) F min(1, 1/r) X+(psi.m)` with
     /// `r = A_e(n) |psi.n| / A_l(psi, n)`, the same value, finite on the horizon (its limit there).
+    /// 0 when `omega` is not above the horizon (the reflection BRDF is 0 there).
     pub fn sample_weight(&self, psi: Vector3<f64>, omega: Vector3<f64>, m: Vector3<f64>, fresnel: f64) -> f64 {
-        if !(psi.dot(&m) >= 0.0) {
+        // Back-facing m, or omega under the macrosurface (f_r of eq. 4 is 0 there, reflection only).
+        if !(psi.dot(&m) >= 0.0) || !(omega.z > 0.0) {
             return 0.0;
         }
         let r = self.visible_ratio(psi);
@@ -215,6 +217,17 @@ impl Ndf for Ellipsoid {
         }
         let q = (self.a_inv_t * m).norm_squared();
         1.0 / (std::f64::consts::PI * self.det_a * self.an_norm * q * q)
+    }
+}
+
+impl super::Masking for Ellipsoid {
+    /// [`Ellipsoid::lambda`].
+    fn lambda(&self, u: Vector3<f64>) -> f64 {
+        Ellipsoid::lambda(self, u)
+    }
+    /// [`Ellipsoid::g1`] (Walter et al. eq. 6).
+    fn g1(&self, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
+        Ellipsoid::g1(self, u, m)
     }
 }
 

@@ -12,6 +12,9 @@
 //! Every model is a small `Copy` value type whose methods read like the formulas. All directions are unit
 //! vectors in the scan frame of CONTRACT.md (macro normal `n = +z`).
 
+// The `!(x > 0.0)` guards are deliberate: they also catch NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod beckmann;
 pub mod brdf;
 pub mod canonical;
@@ -28,7 +31,7 @@ pub use brdf::{MaskingShadowing, MicrofacetBrdf};
 pub use ellipsoid::Ellipsoid;
 pub use fresnel::fresnel_conductor;
 pub use ggx::Ggx;
-pub use roughness_matrix::GgxMatrix;
+pub use roughness_matrix::{disk_to_slope_jacobian, GgxMatrix};
 pub use sel::SquaredEllipsoidalLobe;
 
 use nalgebra::{Matrix3, Vector3};
@@ -242,6 +245,18 @@ impl Model {
         }
     }
 
+    /// A visible normal for direction `u`, sampled exactly by Walter et al. sec. 4.1 (eq. 34-46) for the
+    /// ellipsoid special cases; `None` for Beckmann (no exact sampler here) and for an empty lune (`u = -n`).
+    /// With `u = n` the density is `D(m) (m.n)`.
+    pub fn sample_visible_normal(&self, u: Vector3<f64>, xi: [f64; 2]) -> Option<Vector3<f64>> {
+        self.ellipsoid()?.sample_visible_normal(u, xi)
+    }
+
+    /// The density of [`Model::sample_visible_normal`] (Walter et al. eq. 33); `None` for Beckmann.
+    pub fn pdf_visible_normal(&self, u: Vector3<f64>, m: Vector3<f64>) -> Option<f64> {
+        Some(self.ellipsoid()?.pdf_visible_normal(u, m))
+    }
+
     /// The ellipsoid form of the models that are ellipsoid special cases (`None` for Beckmann).
     pub fn ellipsoid(&self) -> Option<Ellipsoid> {
         match self {
@@ -249,6 +264,15 @@ impl Model {
             Model::Ellipsoid(e) => Some(*e),
             Model::Beckmann(_) | Model::BeckmannAniso(_) => None,
         }
+    }
+}
+
+impl Masking for Model {
+    fn lambda(&self, u: Vector3<f64>) -> f64 {
+        Model::lambda(self, u)
+    }
+    fn g1(&self, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
+        Model::g1(self, u, m)
     }
 }
 

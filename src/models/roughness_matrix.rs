@@ -83,7 +83,9 @@ pub(crate) fn sym2_eigen(a: &Matrix2<f64>) -> (f64, f64, Vector2<f64>) {
     let mean = 0.5 * (p + r);
     let half_diff = 0.5 * (p - r);
     let rad = half_diff.hypot(q);
-    let (l1, l2) = (mean + rad, mean - rad);
+    let l1 = mean + rad;
+    // mean - rad cancels when the eigenvalues differ by orders of magnitude; det / l1 does not.
+    let l2 = if l1 > 0.0 { (p * r - q * q) / l1 } else { mean - rad };
     // Eigenvector of l1: angle phi with tan(2 phi) = 2q / (p - r); atan2 keeps it stable when q ~ 0.
     let phi = 0.5 * q.atan2(half_diff);
     (l1, l2, Vector2::new(phi.cos(), phi.sin()))
@@ -120,4 +122,18 @@ impl Masking for GgxMatrix {
     fn g1(&self, o: Vector3<f64>, h: Vector3<f64>) -> f64 {
         smith_g1(self.lambda(o), o, h)
     }
+}
+
+/// The Jacobian of the map from the projected unit disk `(hx, hy)` to slope space
+/// `(-hx/hz, -hy/hz)` (Tokuyoshi eq. 24-25): `-1/hz^3 [[1 - hy^2, hx hy], [hx hy, 1 - hx^2]]`, with
+/// `hz = sqrt(1 - hx^2 - hy^2)`. Its determinant is `1/hz^4`; with the disk's `d(disk) = hz d(omega)`
+/// (Tokuyoshi eq. 9) this is Heitz eq. 64, `P22 = D cos^4`. `None` on or outside the rim (`hz = 0`).
+pub fn disk_to_slope_jacobian(hx: f64, hy: f64) -> Option<Matrix2<f64>> {
+    let hz2 = 1.0 - hx * hx - hy * hy;
+    // On the rim the slope is infinite; outside it there is no hemisphere point.
+    if !(hz2 > 0.0) {
+        return None;
+    }
+    let hz = hz2.sqrt();
+    Some(Matrix2::new(1.0 - hy * hy, hx * hy, hx * hy, 1.0 - hx * hx) * (-1.0 / (hz2 * hz)))
 }

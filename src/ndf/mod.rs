@@ -1,7 +1,33 @@
 //! The empirical NDF: the projected-area-weighted density of microfacet normals of a heightfield
-//! (Walter et al. sec. 2; Heitz sec. 2.2, eq. 9 and 64).
+//! (Walter et al. sec. 2 and eq. 9; Heitz sec. 2.2, eq. 9 and 64).
+//!
+//! Pipeline ([`empirical_ndf`]):
+//! 1. slopes `s = grad h` by central differences or the exact Gauss map of the triangulated surface
+//!    ([`NormalScheme`]); every sample has the same projected area on a regular grid;
+//! 2. a robust centre and covariance of the slopes from a subsample ([`SlopeFrame::robust`]);
+//! 3. each slope is whitened, turned into the stretched normal `m'` and mapped with the Lambert
+//!    azimuthal equal-area map onto the disk `|p| <= sqrt 2` ([`SlopeFrame::to_lambert`]), which covers
+//!    every slope up to infinity with no trigonometry per point; a square grid of odd size `n` over the
+//!    disk holds the counts ([`BinGrid`]), one histogram per rayon task, merged once;
+//! 4. per bin, the projected solid angle `W_k = integral of m.n dw` over the bin in the scan frame follows
+//!    from the closed-form Jacobian [`SlopeFrame::proj_density`] by Gauss-Legendre quadrature over the
+//!    cell (its exact part of the disk on the rim), and `D_k = count_k / (N W_k)`, so that
+//!    `sum_k D_k W_k = 1` (Heitz eq. 9).
+//!
+//! The bin's central direction `m_k` is the image of the `W`-weighted centroid of the cell, which makes
+//! the midpoint rule `E_k = N D(m_k) W_k` of `data_formats/objective.md` exact for any `D` that is linear
+//! over the cell in Lambert coordinates (second-order error).
+
+pub mod frame;
+pub mod grid;
+pub mod normals;
 
 use nalgebra::Vector3;
+use rayon::prelude::*;
+
+pub use frame::SlopeFrame;
+pub use grid::{BinGrid, QuadOrder};
+pub use normals::NormalScheme;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::heightfield::Heightfield;
@@ -30,14 +56,296 @@ pub struct EmpiricalNdf {
     pub bins: Vec<NdfBin>,
     /// Number of samples binned.
     pub n_samples: u64,
+    /// Number of stencils (or triangles) skipped because they touch an invalid point.
+    pub n_skipped: u64,
+    /// The normal scheme used.
+    pub scheme: NormalScheme,
+    /// The binning frame: robust slope centre and covariance, whitening (see [`SlopeFrame`]).
+    pub frame: SlopeFrame,
+    /// The grid over the Lambert disk (`n = 0` for an NDF assembled by [`EmpiricalNdf::from_bins`]).
+    pub grid: BinGrid,
+    /// The grid cell of each bin (ascending), for lookups.
+    pub bin_cells: Vec<u32>,
+    /// Mean slope `grad h` of all samples (projected-area weighted; Heitz eq. 61 convention, so the
+    /// mean normal tilt is `m ~ (-mean, 1)`).
+    pub slope_mean: [f64; 2],
+    /// Covariance of the slopes of all samples (projected-area weighted). Heavy-tailed NDFs (GGX) have
+    /// an infinite population covariance, so prefer [`SlopeFrame::cov`] (robust) for starting values.
+    pub slope_cov: [[f64; 2]; 2],
+    /// Projected area of one sample in m^2 (`dx dy`, or `dx dy / 2` for triangles).
+    pub sample_area: f64,
 }
 
 /// How the empirical NDF is computed.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct NdfOptions {}
+#[derive(Debug, Clone, PartialEq)]
+pub struct NdfOptions {
+    /// Normal scheme (default: central differences).
+    pub scheme: NormalScheme,
+    /// Cells across the Lambert disk (odd, 3 to [`grid::MAX_CELLS_ACROSS`]); `None` chooses from the
+    /// sample count so that the mean count per bin is about [`NdfOptions::target_count`].
+    pub cells_across: Option<usize>,
+    /// Mean samples per bin aimed at when `cells_across` is `None`.
+    pub target_count: f64,
+    /// Use this binning frame instead of estimating one (to put two NDFs on identical bins).
+    pub frame: Option<SlopeFrame>,
+}
 
-/// Compute the empirical NDF of `hf`.
+/// Default mean count per bin: see `data_formats/ndf_csv.md` ("resolution") for the measurement behind it.
+pub const DEFAULT_TARGET_COUNT: f64 = 64.0;
+/// Fewest cells across the disk when chosen from the data.
+pub const MIN_AUTO_CELLS: usize = 15;
+/// Most cells across the disk when chosen from the data.
+pub const MAX_AUTO_CELLS: usize = 255;
+/// Samples used for the robust frame (a strided subsample of the scan).
+const FRAME_SUBSAMPLE: usize = 1 << 17;
+
+impl Default for NdfOptions {
+    fn default() -> Self {
+        NdfOptions { scheme: NormalScheme::Central, cells_across: None, target_count: DEFAULT_TARGET_COUNT, frame: None }
+    }
+}
+
+impl NdfOptions {
+    /// The grid size used for `n` samples.
+    pub fn cells_for(&self, n: u64) -> usize {
+        match self.cells_across {
+            Some(c) => c,
+            None => {
+                let t = if self.target_count.is_finite() && self.target_count > 0.0 { self.target_count } else { DEFAULT_TARGET_COUNT };
+                // The disk holds about pi n^2 / 4 cells.
+                let c = (4.0 * n as f64 / (std::f64::consts::PI * t)).sqrt().round() as usize;
+                c.clamp(MIN_AUTO_CELLS, MAX_AUTO_CELLS)
+            }
+        }
+    }
+}
+
+/// Per-task accumulator: counts per cell and slope moments about the frame centre.
+struct Acc {
+    counts: Vec<u64>,
+    n: u64,
+    m1: [f64; 2],
+    m2: [f64; 3],
+}
+
+impl Acc {
+    fn new(cells: usize) -> Self {
+        Acc { counts: vec![0; cells], n: 0, m1: [0.0; 2], m2: [0.0; 3] }
+    }
+    fn merge(mut self, o: Acc) -> Acc {
+        for (a, b) in self.counts.iter_mut().zip(&o.counts) {
+            *a += b;
+        }
+        self.n += o.n;
+        for k in 0..2 {
+            self.m1[k] += o.m1[k];
+        }
+        for k in 0..3 {
+            self.m2[k] += o.m2[k];
+        }
+        self
+    }
+}
+
+/// Compute the empirical NDF of `hf` (see the module documentation for the method).
+///
+/// Errors: [`ErrorKind::BadData`] when no stencil is valid (all points masked, or the grid is smaller
+/// than one stencil).
 pub fn empirical_ndf(hf: &Heightfield, opts: &NdfOptions) -> Result<EmpiricalNdf> {
-    let _ = (hf, opts);
-    Err(Error::new(ErrorKind::Unsupported, "empirical NDF not implemented yet"))
+    let scheme = opts.scheme;
+    let rows = scheme.rows(hf);
+    let stencils = rows.len() as u64 * scheme.per_row(hf) as u64;
+    if stencils == 0 {
+        return Err(Error::new(ErrorKind::BadData, format!("grid {} x {} is too small for {} normals", hf.nx, hf.ny, scheme.as_str())));
+    }
+    let frame = match opts.frame {
+        Some(f) => f,
+        None => {
+            let mut sample = subsample(hf, scheme, FRAME_SUBSAMPLE);
+            if sample.is_empty() {
+                return Err(no_valid(hf));
+            }
+            SlopeFrame::robust(&mut sample)
+        }
+    };
+    // The grid size depends on the sample count, known only after the pass; estimate it from the
+    // valid fraction (exact when cells are given).
+    let n_est = estimate_valid(hf, scheme);
+    let grid = BinGrid::new(opts.cells_for(n_est));
+
+    let acc = histogram(hf, scheme, &frame, &grid, rows);
+    if acc.n == 0 {
+        return Err(no_valid(hf));
+    }
+    let n = acc.n as f64;
+    let mean = [acc.m1[0] / n, acc.m1[1] / n];
+    let cov = [
+        [acc.m2[0] / n - mean[0] * mean[0], acc.m2[1] / n - mean[0] * mean[1]],
+        [acc.m2[1] / n - mean[0] * mean[1], acc.m2[2] / n - mean[1] * mean[1]],
+    ];
+    let slope_mean = [frame.center[0] + mean[0], frame.center[1] + mean[1]];
+
+    let (bins, bin_cells) = build_bins(&frame, &grid, &acc.counts, acc.n);
+    Ok(EmpiricalNdf {
+        bins,
+        n_samples: acc.n,
+        n_skipped: stencils - acc.n,
+        scheme,
+        frame,
+        grid,
+        bin_cells,
+        slope_mean,
+        slope_cov: cov,
+        sample_area: scheme.sample_area(hf),
+    })
+}
+
+fn no_valid(hf: &Heightfield) -> Error {
+    Error::new(
+        ErrorKind::BadData,
+        format!("no valid normal stencil in the {} x {} grid ({} of {} points invalid)", hf.nx, hf.ny, hf.invalid_count(), hf.z.len()),
+    )
+}
+
+/// A strided subsample of about `target` valid slopes (all of them for small scans).
+fn subsample(hf: &Heightfield, scheme: NormalScheme, target: usize) -> Vec<[f64; 2]> {
+    let rows = scheme.rows(hf);
+    let total = rows.len() * scheme.per_row(hf);
+    let stride = ((total as f64 / target as f64).sqrt().floor() as usize).max(1);
+    let mut out = Vec::with_capacity(target.min(total) + 16);
+    for i in rows.step_by(stride) {
+        scheme.row_slopes(hf, i, stride, |sx, sy| out.push([sx, sy]));
+    }
+    out
+}
+
+/// Valid samples, estimated from the fraction of valid points (for the automatic grid size).
+fn estimate_valid(hf: &Heightfield, scheme: NormalScheme) -> u64 {
+    let total = scheme.rows(hf).len() as f64 * scheme.per_row(hf) as f64;
+    let frac = hf.valid_count() as f64 / hf.z.len() as f64;
+    (total * frac).round() as u64
+}
+
+/// The parallel pass: rows split into a few contiguous chunks per thread, one histogram per chunk.
+fn histogram(hf: &Heightfield, scheme: NormalScheme, frame: &SlopeFrame, grid: &BinGrid, rows: std::ops::Range<usize>) -> Acc {
+    let cells = grid.cells();
+    let chunks = (rayon::current_num_threads() * 2).max(1);
+    let len = rows.len().div_ceil(chunks).max(1);
+    let starts: Vec<usize> = rows.clone().step_by(len).collect();
+    let end = rows.end;
+    starts
+        .into_par_iter()
+        .map(|start| {
+            let mut acc = Acc::new(cells);
+            let (cx, cy) = (frame.center[0], frame.center[1]);
+            for i in start..(start + len).min(end) {
+                let Acc { counts, m1, m2, .. } = &mut acc;
+                let valid = scheme.row_slopes(hf, i, 1, |sx, sy| {
+                    let p = frame.to_lambert(sx, sy);
+                    counts[grid.cell_of(p)] += 1;
+                    let (dx, dy) = (sx - cx, sy - cy);
+                    m1[0] += dx;
+                    m1[1] += dy;
+                    m2[0] += dx * dx;
+                    m2[1] += dx * dy;
+                    m2[2] += dy * dy;
+                });
+                acc.n += valid;
+            }
+            acc
+        })
+        .reduce(|| Acc::new(cells), Acc::merge)
+}
+
+/// Integrals over one cell: projected solid angle, solid angle and the W-weighted centroid.
+fn cell_integrals(frame: &SlopeFrame, grid: &BinGrid, c: usize) -> (f64, f64, [f64; 2]) {
+    let (mut w, mut o, mut px, mut py) = (0.0, 0.0, 0.0, 0.0);
+    grid.quadrature(c, QuadOrder::Standard, |p, wt| {
+        let dw = frame.proj_density(p) * wt;
+        w += dw;
+        o += frame.solid_density(p) * wt;
+        px += p[0] * dw;
+        py += p[1] * dw;
+    });
+    let centroid = if w > 0.0 {
+        [px / w, py / w]
+    } else {
+        // Guard: a cell with no projected solid angle (a sliver on the rim) takes its geometric centre.
+        let [x0, x1, y0, y1] = grid.bounds(c);
+        [0.5 * (x0 + x1), 0.5 * (y0 + y1)]
+    };
+    (w, o, centroid)
+}
+
+fn build_bins(frame: &SlopeFrame, grid: &BinGrid, counts: &[u64], n: u64) -> (Vec<NdfBin>, Vec<u32>) {
+    let nf = n as f64;
+    let cells: Vec<usize> = (0..grid.cells()).filter(|&c| grid.meets_disk(c) || counts[c] > 0).collect();
+    let bins: Vec<NdfBin> = cells
+        .par_iter()
+        .map(|&c| {
+            let (w, o, centroid) = cell_integrals(frame, grid, c);
+            let count = counts[c];
+            // Guard: W = 0 only for a rim sliver of zero projected solid angle; D there is 0, not 0/0.
+            let (d, stderr) = if w > 0.0 {
+                (count as f64 / (nf * w), (count.max(1) as f64).sqrt() / (nf * w))
+            } else {
+                (0.0, 0.0)
+            };
+            NdfBin { m: frame.normal_at(centroid), d, stderr, count, solid_angle: o, proj_solid_angle: w }
+        })
+        .collect();
+    (bins, cells.into_iter().map(|c| c as u32).collect())
+}
+
+impl EmpiricalNdf {
+    /// An NDF from bins alone (no grid: lookups return `None`). For hand-made test data.
+    pub fn from_bins(bins: Vec<NdfBin>, n_samples: u64) -> Self {
+        EmpiricalNdf {
+            bins,
+            n_samples,
+            n_skipped: 0,
+            scheme: NormalScheme::Central,
+            frame: SlopeFrame::new([0.0, 0.0], [[1.0, 0.0], [0.0, 1.0]]),
+            grid: BinGrid::none(),
+            bin_cells: Vec::new(),
+            slope_mean: [0.0; 2],
+            slope_cov: [[0.0; 2]; 2],
+            sample_area: f64::NAN,
+        }
+    }
+
+    /// The index of the bin holding direction `m` (`m.z > 0`), if the NDF has a grid.
+    pub fn bin_of(&self, m: Vector3<f64>) -> Option<usize> {
+        if self.grid.n == 0 || !(m.z > 0.0) {
+            return None;
+        }
+        let s = SlopeFrame::slope_of(m);
+        let c = self.grid.cell_of(self.frame.to_lambert(s[0], s[1])) as u32;
+        self.bin_cells.binary_search(&c).ok()
+    }
+
+    /// Empirical D at direction `m` (0 outside the hemisphere or without a grid).
+    pub fn d_at(&self, m: Vector3<f64>) -> f64 {
+        self.bin_of(m).map_or(0.0, |k| self.bins[k].d)
+    }
+
+    /// `integral of f(m) (m.n) dw` over bin `k`, by quadrature in Lambert coordinates; `None` without a
+    /// grid. With `f = D_model` this is the bin-integrated model, the exact counterpart of the midpoint
+    /// value `D_model(m_k) W_k`.
+    pub fn bin_integral(&self, k: usize, order: QuadOrder, f: impl Fn(Vector3<f64>) -> f64) -> Option<f64> {
+        let c = *self.bin_cells.get(k)? as usize;
+        let mut sum = 0.0;
+        self.grid.quadrature(c, order, |p, wt| {
+            let dw = self.frame.proj_density(p) * wt;
+            if dw > 0.0 {
+                sum += f(self.frame.normal_at(p)) * dw;
+            }
+        });
+        Some(sum)
+    }
+
+    /// Sum of `d * proj_solid_angle` (1 up to rounding for a computed NDF).
+    pub fn total(&self) -> f64 {
+        self.bins.iter().map(|b| b.d * b.proj_solid_angle).sum()
+    }
 }

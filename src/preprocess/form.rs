@@ -193,70 +193,83 @@ pub fn remove_cylinder(hf: &Heightfield) -> Result<CylinderFit> {
         (0.0, 1.0)
     };
     let sigma = if kappa < 0.0 { 1.0 } else { -1.0 };
-    let tsv: Vec<(f64, f64, f64)> =
-        pts.iter().map(|&(x, y, z)| ((x - xc) * ex + (y - yc) * ey, -(x - xc) * ey + (y - yc) * ex, z - zm)).collect();
-    let tmax = tsv.iter().fold(0.0f64, |m, p| m.max(p.0.abs()));
+    // Axis azimuth phi: the axis runs along (cos phi, sin phi); e = (ex, ey) is across it, so
+    // e = (-sin phi, cos phi).
+    let phi0 = (-ex).atan2(ey);
+    let xyz: Vec<(f64, f64, f64)> = pts.iter().map(|&(x, y, z)| (x - xc, y - yc, z - zm)).collect();
+    let across = |phi: f64, x: f64, y: f64| (-x * phi.sin() + y * phi.cos(), x * phi.cos() + y * phi.sin());
+    let tmax = xyz.iter().fold(0.0f64, |m, p| m.max(across(phi0, p.0, p.1).0.abs()));
     // Start: apex over the slope-zero point of the quadratic along t, radius 1/|kappa|.
     let slope_t = (q[1] / sx) * ex + (q[2] / sy) * ey;
-    let mut r = (1.0 / kappa.abs()).max(1.01 * tmax);
-    let mut tc = -slope_t / kappa;
-    if !tc.is_finite() || tc.abs() > r {
-        tc = 0.0;
+    let r0 = (1.0 / kappa.abs()).max(1.01 * tmax);
+    let mut tc0 = -slope_t / kappa;
+    if !tc0.is_finite() || tc0.abs() > r0 {
+        tc0 = 0.0;
     }
-    let mut p = [0.0, 0.0, tc, r]; // c0, g, tc, R
-    let cost = |p: &[f64; 4]| -> f64 {
+    // Parameters: c0, g (tilt along the axis), tc, R, phi.
+    let model = |p: &[f64; 5], x: f64, y: f64| -> Option<(f64, f64, f64, f64)> {
+        let (t, s) = across(p[4], x, y);
+        let w2 = p[3] * p[3] - (t - p[2]).powi(2);
+        // Outside the cylinder's footprint the model is undefined; the step is rejected.
+        (w2 > 0.0).then(|| (p[0] + p[1] * s + sigma * w2.sqrt(), t, s, w2.sqrt()))
+    };
+    let cost = |p: &[f64; 5]| -> f64 {
         let mut c = 0.0;
-        for &(t, s, z) in &tsv {
-            let w2 = p[3] * p[3] - (t - p[2]).powi(2);
-            if w2 <= 0.0 {
-                return f64::INFINITY;
+        for &(x, y, z) in &xyz {
+            match model(p, x, y) {
+                Some((f, ..)) => c += (z - f).powi(2),
+                None => return f64::INFINITY,
             }
-            let f = p[0] + p[1] * s + sigma * w2.sqrt();
-            c += (z - f).powi(2);
         }
         c
     };
+    let mut p = [0.0, 0.0, tc0, r0, phi0];
     // c0 starts at the mean offset so the first cost is finite and sensible.
-    p[0] = tsv.iter().map(|&(t, _, z)| z - sigma * (r * r - (t - tc).powi(2)).max(0.0).sqrt()).sum::<f64>() / n;
+    p[0] = xyz
+        .iter()
+        .map(|&(x, y, z)| {
+            let t = across(phi0, x, y).0;
+            z - sigma * (r0 * r0 - (t - tc0).powi(2)).max(0.0).sqrt()
+        })
+        .sum::<f64>()
+        / n;
     let mut c_now = cost(&p);
     let mut lambda = 1e-3;
-    for _ in 0..200 {
-        let mut jtj = nalgebra::Matrix4::<f64>::zeros();
-        let mut jtr = nalgebra::Vector4::<f64>::zeros();
-        for &(t, s, z) in &tsv {
-            let w = (p[3] * p[3] - (t - p[2]).powi(2)).sqrt();
-            let f = p[0] + p[1] * s + sigma * w;
-            let jrow = nalgebra::Vector4::new(1.0, s, sigma * (t - p[2]) / w, sigma * p[3] / w);
+    for _ in 0..500 {
+        let mut jtj = nalgebra::Matrix5::<f64>::zeros();
+        let mut jtr = nalgebra::Vector5::<f64>::zeros();
+        for &(x, y, z) in &xyz {
+            let Some((f, t, s, w)) = model(&p, x, y) else { continue };
+            let dt = t - p[2];
+            let jrow = nalgebra::Vector5::new(1.0, s, sigma * dt / w, sigma * p[3] / w, p[1] * t + sigma * dt * s / w);
             jtj += jrow * jrow.transpose();
             jtr += jrow * (z - f);
         }
         let mut improved = false;
-        for _ in 0..30 {
+        for _ in 0..40 {
             let mut a = jtj;
-            for k in 0..4 {
-                a[(k, k)] *= 1.0 + lambda;
+            for k in 0..5 {
+                // Marquardt scaling; the floor keeps a zero diagonal (no tilt data) from freezing.
+                a[(k, k)] += lambda * jtj[(k, k)].max(1e-300);
             }
             let Some(step) = a.lu().solve(&jtr) else { break };
-            let trial = [p[0] + step[0], p[1] + step[1], p[2] + step[2], p[3] + step[3]];
+            let trial = [p[0] + step[0], p[1] + step[1], p[2] + step[2], p[3] + step[3], p[4] + step[4]];
             let c_trial = cost(&trial);
             if c_trial < c_now {
                 let rel = (c_now - c_trial) / c_now.max(f64::MIN_POSITIVE);
                 p = trial;
                 c_now = c_trial;
-                lambda = (lambda * 0.3).max(1e-12);
-                improved = true;
-                if rel < 1e-13 {
-                    lambda = f64::NAN; // converged
-                }
+                lambda = (lambda * 0.3).max(1e-15);
+                improved = rel > 1e-15;
                 break;
             }
             lambda *= 10.0;
         }
-        if !improved || lambda.is_nan() {
+        if !improved {
             break;
         }
     }
-    r = p[3];
+    let r = p[3];
     let mut residual = Vec::with_capacity(hf.z.len());
     for i in 0..hf.ny {
         for j in 0..hf.nx {
@@ -265,13 +278,11 @@ pub fn remove_cylinder(hf: &Heightfield) -> Result<CylinderFit> {
                 residual.push(f64::NAN);
                 continue;
             }
-            let (x, y) = (j as f64 * hf.dx - xc, i as f64 * hf.dy - yc);
-            let (t, s) = (x * ex + y * ey, -x * ey + y * ex);
+            let (t, s) = across(p[4], j as f64 * hf.dx - xc, i as f64 * hf.dy - yc);
             let w = (r * r - (t - p[2]).powi(2)).max(0.0).sqrt();
             residual.push(h - zm - (p[0] + p[1] * s + sigma * w));
         }
     }
-    let axis_angle = (-ey).atan2(ex) + std::f64::consts::FRAC_PI_2;
-    let axis_angle = axis_angle.rem_euclid(std::f64::consts::PI);
+    let axis_angle = p[4].rem_euclid(std::f64::consts::PI);
     Ok(CylinderFit { residual, radius: r, axis_angle, convexity: sigma })
 }

@@ -4,6 +4,9 @@
 //! Error estimate per cell: |K15 x K15 - G7 x G7|, pessimistic for smooth integrands (the real error of the
 //! 15-point rule is far smaller), so a tolerance met here is met by the value.
 
+// The QUADPACK constants are kept verbatim.
+#![allow(clippy::excessive_precision)]
+
 use std::collections::BinaryHeap;
 
 use nalgebra::{Matrix2, Matrix3, Rotation3, Vector2, Vector3};

@@ -1,4 +1,9 @@
 //! Integration tests: readers, writers, preprocessing and surface statistics.
 
+mod cli_info;
+mod formats;
+pub mod gen;
 mod peers;
+mod preprocess;
+mod robust;
 mod x3p;

@@ -1,0 +1,115 @@
+//! NumPy `.npy` (format versions 1-3): a 2-D array of heights, `shape = (rows, columns)`.
+//!
+//! `\x93NUMPY`, major and minor version, header length (u16 for v1, u32 for v2/v3), then a Python
+//! dict literal with `descr` (`<f8`, `<f4`, `>f8`, `>f4`, `<i2`, `<u2`, `<i4`, `<u4`, `|u1`, `|i1` ...),
+//! `fortran_order` and `shape`, then the raw array. No units: heights need `--z-scale` and spacing
+//! `--dx`/`--dy`. NaN points are invalid.
+
+use crate::error::{Error, ErrorKind, Result};
+use crate::heightfield::{Heightfield, ScanMeta};
+use crate::io::bytes::{check_grid, Cursor};
+use crate::io::raw_opts::{spacing, z_scale};
+use crate::io::ReadOptions;
+
+/// The NPY signature.
+pub const NPY_MAGIC: &[u8] = b"\x93NUMPY";
+
+/// Read an NPY file held in memory.
+pub fn read_npy(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
+    let mut c = Cursor::new(bytes);
+    if c.take(6, "NPY magic")? != NPY_MAGIC {
+        return Err(Error::corrupt("not an NPY file (bad magic)"));
+    }
+    let major = c.u8("NPY version")?;
+    let _minor = c.u8("NPY version")?;
+    let hlen = match major {
+        1 => c.u16_le("NPY header length")? as usize,
+        2 | 3 => c.u32_le("NPY header length")? as usize,
+        v => return Err(Error::new(ErrorKind::Unsupported, format!("NPY format version {v}"))),
+    };
+    let header = c.take(hlen, "NPY header")?;
+    let header = std::str::from_utf8(header).map_err(|_| Error::corrupt("NPY header is not text"))?;
+    let descr = dict_str(header, "descr").ok_or_else(|| Error::corrupt("NPY header has no descr"))?;
+    let fortran = header
+        .split("'fortran_order':")
+        .nth(1)
+        .map(|r| r.trim_start().starts_with("True"))
+        .ok_or_else(|| Error::corrupt("NPY header has no fortran_order"))?;
+    let shape = dict_shape(header).ok_or_else(|| Error::corrupt("NPY header has no readable shape"))?;
+    let (ny, nx) = match shape.as_slice() {
+        [ny, nx] => (*ny, *nx),
+        [ny, nx, 1] => (*ny, *nx),
+        s => return Err(Error::new(ErrorKind::Unsupported, format!("NPY array of shape {s:?}: a 2-D height array is needed"))),
+    };
+    let (endian, kind, size) = parse_descr(&descr)?;
+    let n = check_grid(nx, ny, size, c.remaining(), "NPY array")?;
+    let raw = c.take(n * size, "NPY data")?;
+    let zs = z_scale(opts, "NPY")?;
+    let (dx, dy) = spacing(opts, "NPY")?;
+    let value = |b: &[u8]| -> f64 {
+        let mut a = [0u8; 8];
+        a[..size].copy_from_slice(b);
+        if endian == '>' {
+            a[..size].reverse();
+        }
+        match (kind, size) {
+            ('f', 8) => f64::from_le_bytes(a),
+            ('f', 4) => f32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+            ('i', 1) => a[0] as i8 as f64,
+            ('u', 1) => a[0] as f64,
+            ('i', 2) => i16::from_le_bytes([a[0], a[1]]) as f64,
+            ('u', 2) => u16::from_le_bytes([a[0], a[1]]) as f64,
+            ('i', 4) => i32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+            ('u', 4) => u32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+            ('i', 8) => i64::from_le_bytes(a) as f64,
+            ('u', 8) => u64::from_le_bytes(a) as f64,
+            _ => f64::NAN,
+        }
+    };
+    let vals: Vec<f64> = raw.chunks_exact(size).map(|b| value(b) * zs).collect();
+    let z = if fortran {
+        // Column-major: element (i, j) is at j * ny + i.
+        let mut z = vec![0.0; n];
+        for i in 0..ny {
+            for j in 0..nx {
+                z[i * nx + j] = vals[j * ny + i];
+            }
+        }
+        z
+    } else {
+        vals
+    };
+    let mut hf = Heightfield::new(nx, ny, dx, dy, z)?;
+    hf.meta = ScanMeta { format: "npy".into(), ..Default::default() };
+    hf.meta.instrument.insert("npy.descr".into(), descr);
+    Ok(hf)
+}
+
+fn parse_descr(d: &str) -> Result<(char, char, usize)> {
+    let mut ch = d.chars();
+    let (e, k) = (ch.next().unwrap_or('?'), ch.next().unwrap_or('?'));
+    let size: usize = ch.as_str().parse().unwrap_or(0);
+    let ok = matches!(e, '<' | '>' | '|' | '=')
+        && matches!((k, size), ('f', 4) | ('f', 8) | ('i', 1 | 2 | 4 | 8) | ('u', 1 | 2 | 4 | 8));
+    if !ok {
+        return Err(Error::new(ErrorKind::Unsupported, format!("NPY dtype {d:?} (float and integer arrays are read)")));
+    }
+    // '=' is native order, little-endian on every machine ndfit builds for.
+    Ok((if e == '>' { '>' } else { '<' }, k, size))
+}
+
+fn dict_str(h: &str, key: &str) -> Option<String> {
+    let rest = h.split(&format!("'{key}':")).nth(1)?.trim_start();
+    let q = rest.chars().next()?;
+    if q != '\'' && q != '"' {
+        return None;
+    }
+    let body = &rest[1..];
+    Some(body[..body.find(q)?].to_string())
+}
+
+fn dict_shape(h: &str) -> Option<Vec<usize>> {
+    let rest = h.split("'shape':").nth(1)?.trim_start().strip_prefix('(')?;
+    let inner = &rest[..rest.find(')')?];
+    inner.split(',').map(str::trim).filter(|t| !t.is_empty()).map(|t| t.parse().ok()).collect()
+}

@@ -1,0 +1,35 @@
+//! The options raw formats need (CONTRACT.md: `--dx METRES`, `--dy` defaulting to `dx`,
+//! `--z-scale METRES_PER_UNIT`), with messages that say what is missing.
+
+use crate::error::{Error, ErrorKind, Result};
+use crate::io::ReadOptions;
+
+/// Spacing (dx, dy) in metres from the options, or an error naming the format and the flag.
+pub fn spacing(opts: &ReadOptions, format: &str) -> Result<(f64, f64)> {
+    let dx = opts.dx.ok_or_else(|| {
+        Error::new(ErrorKind::MissingOption, format!("{format} files carry no lateral spacing: give --dx METRES (and --dy if it differs)"))
+    })?;
+    let dy = opts.dy.unwrap_or(dx);
+    check_positive(dx, "--dx")?;
+    check_positive(dy, "--dy")?;
+    Ok((dx, dy))
+}
+
+/// Metres per stored height unit from the options, or an error naming the format and the flag.
+pub fn z_scale(opts: &ReadOptions, format: &str) -> Result<f64> {
+    let s = opts.z_scale.ok_or_else(|| {
+        Error::new(ErrorKind::MissingOption, format!("{format} files carry no height unit: give --z-scale METRES_PER_UNIT"))
+    })?;
+    if !(s.is_finite() && s != 0.0) {
+        return Err(Error::invalid(format!("--z-scale must be finite and non-zero, got {s}")));
+    }
+    Ok(s)
+}
+
+fn check_positive(v: f64, flag: &str) -> Result<()> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::invalid(format!("{flag} must be a finite positive length in metres, got {v}")))
+    }
+}

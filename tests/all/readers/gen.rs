@@ -1,0 +1,379 @@
+//! Writers of small valid files of every binary and plain format, built here from the published
+//! layouts (data_formats/formats.md), independently of the readers. They give the readers a known
+//! truth, seed the robustness checks, and (via `generate_seed_corpus`) the cargo-fuzz corpora.
+
+#![allow(dead_code)]
+
+use std::io::Write;
+
+/// Grid size of the generated files: small, non-square, odd.
+pub const NX: usize = 7;
+/// Rows.
+pub const NY: usize = 5;
+/// Points that are invalid in generated files (where the format can mark them).
+pub const HOLES: [usize; 2] = [3, 17];
+
+/// The stored value at (i, j): small integers so every format holds it exactly.
+pub fn stored(i: usize, j: usize) -> i32 {
+    (i as i32 * 37 - j as i32 * 11 + ((i * j) as i32 % 5) * 3) - 40
+}
+
+fn is_hole(k: usize) -> bool {
+    HOLES.contains(&k)
+}
+
+fn pad(s: &str, n: usize) -> Vec<u8> {
+    let mut v = s.as_bytes().to_vec();
+    v.resize(n, 0);
+    v
+}
+
+/// Sensofar PLU, µm per pixel 1.5 x 2.5, heights in µm = stored / 4.
+pub fn plu() -> Vec<u8> {
+    let mut b = pad("Fri Mar 10 16:35:59 2023", 128);
+    b.extend(1_678_462_559u32.to_le_bytes());
+    b.extend(pad("(None)", 256));
+    b.extend((NY as u32).to_le_bytes());
+    b.extend((NX as u32).to_le_bytes());
+    b.extend((NX as u32).to_le_bytes());
+    for f in [1.0f32, 1.5, 2.5, 0.0, 0.0, 1.5, 0.0] {
+        b.extend(f.to_le_bytes());
+    }
+    for u in [3u32, 1, 0, 14, 3] {
+        b.extend(u.to_le_bytes());
+    }
+    b.extend([0u8; 40]);
+    b.extend([0u8, 1, 251, 6, 1, 0, 0, 0]);
+    b.extend(1u32.to_le_bytes());
+    assert_eq!(b.len(), 500);
+    b.extend((NY as u32).to_le_bytes());
+    b.extend((NX as u32).to_le_bytes());
+    for k in 0..NX * NY {
+        let v = if is_hole(k) { 1_000_001.0f32 } else { stored(k / NX, k % NX) as f32 / 4.0 };
+        b.extend(v.to_le_bytes());
+    }
+    b.extend((-1.0f32).to_le_bytes());
+    b.extend(1.0f32.to_le_bytes());
+    b
+}
+
+/// Digital Surf SUR: 32-bit points, spacing 2 µm x 3 µm (unit µm), z spacing 0.5 nm (unit nm),
+/// z offset 10 nm, non-measured flag set with value min - 2 at the holes.
+pub fn sur(compressed: bool) -> Vec<u8> {
+    let mut h = vec![0u8; 512];
+    h[..12].copy_from_slice(if compressed { b"DSCOMPRESSED" } else { b"DIGITAL SURF" });
+    let put = |h: &mut Vec<u8>, off: usize, v: &[u8]| h[off..off + v.len()].copy_from_slice(v);
+    put(&mut h, 14, &1u16.to_le_bytes());
+    put(&mut h, 16, &1u16.to_le_bytes());
+    put(&mut h, 18, &2u16.to_le_bytes());
+    put(&mut h, 20, b"generated");
+    put(&mut h, 86, &1u16.to_le_bytes());
+    put(&mut h, 98, &32u16.to_le_bytes());
+    let zmin = -1000i32;
+    put(&mut h, 100, &zmin.to_le_bytes());
+    put(&mut h, 104, &1000i32.to_le_bytes());
+    put(&mut h, 108, &(NX as i32).to_le_bytes());
+    put(&mut h, 112, &(NY as i32).to_le_bytes());
+    put(&mut h, 116, &((NX * NY) as u32).to_le_bytes());
+    put(&mut h, 120, &2.0f32.to_le_bytes());
+    put(&mut h, 124, &3.0f32.to_le_bytes());
+    put(&mut h, 128, &0.5f32.to_le_bytes());
+    for (k, name) in ["X", "Y", "Z"].iter().enumerate() {
+        put(&mut h, 132 + 16 * k, name.as_bytes());
+    }
+    for (k, unit) in ["\u{b5}m", "\u{b5}m", "nm", "\u{b5}m", "\u{b5}m", "nm"].iter().enumerate() {
+        // Latin-1 micro sign, as Digital Surf writes it.
+        let bytes: Vec<u8> = unit.chars().map(|c| c as u32 as u8).collect();
+        put(&mut h, 180 + 16 * k, &bytes);
+    }
+    for k in 0..3 {
+        put(&mut h, 276 + 4 * k, &1.0f32.to_le_bytes());
+    }
+    put(&mut h, 316, &2024u16.to_le_bytes());
+    put(&mut h, 474, &10.0f32.to_le_bytes());
+    let mut data = Vec::new();
+    for k in 0..NX * NY {
+        let v = if is_hole(k) { zmin - 2 } else { stored(k / NX, k % NX) };
+        data.extend(v.to_le_bytes());
+    }
+    if compressed {
+        let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        enc.write_all(&data).expect("zlib");
+        let z = enc.finish().expect("zlib");
+        let mut block = 1u32.to_le_bytes().to_vec();
+        block.extend((data.len() as u32).to_le_bytes());
+        block.extend((z.len() as u32).to_le_bytes());
+        block.extend(&z);
+        h[324..328].copy_from_slice(&(block.len() as u32).to_le_bytes());
+        h.extend(block);
+    } else {
+        h.extend(data);
+    }
+    h
+}
+
+fn opd_entry(name: &str, t: i16, len: i32) -> Vec<u8> {
+    let mut e = pad(name, 16);
+    e.extend(t.to_le_bytes());
+    e.extend(len.to_le_bytes());
+    e.extend(0u16.to_le_bytes());
+    e
+}
+
+/// Wyko OPD with float32 values (wavelength 600 nm, mult 2, pixel 0.002 mm, aspect 1.5).
+/// Heights (m) = stored * 600e-9 / 2; values are stored column by column from the top row.
+pub fn opd(int16: bool) -> Vec<u8> {
+    let el = if int16 { 2 } else { 4 };
+    let raw_len = 6 + NX * NY * el;
+    let entries = [
+        ("Directory", 1i16, 24 * 6),
+        ("RAW_DATA", 3, raw_len as i32),
+        ("Wavelength", 7, 4),
+        ("Mult", 6, 2),
+        ("Pixel_size", 7, 4),
+        ("Aspect", 7, 4),
+    ];
+    let mut b = vec![1u8, 0];
+    for (n, t, l) in entries {
+        b.extend(opd_entry(n, t, l));
+    }
+    b.extend((NX as u16).to_le_bytes());
+    b.extend((NY as u16).to_le_bytes());
+    b.extend((el as u16).to_le_bytes());
+    for j in 0..NX {
+        for r in 0..NY {
+            let i = NY - 1 - r;
+            let k = i * NX + j;
+            if int16 {
+                let v = if is_hole(k) { i16::MAX } else { stored(i, j) as i16 };
+                b.extend(v.to_le_bytes());
+            } else {
+                let v = if is_hole(k) { 1.7014118e38f32 } else { stored(i, j) as f32 };
+                b.extend(v.to_le_bytes());
+            }
+        }
+    }
+    b.extend(600.0f32.to_le_bytes());
+    b.extend(2u16.to_le_bytes());
+    b.extend(0.002f32.to_le_bytes());
+    b.extend(1.5f32.to_le_bytes());
+    b
+}
+
+/// MetroPro DAT, header format 1: scale 0.5, wavelength 632.8 nm, obliquity 1, phase_res 1
+/// (R = 32768), lateral 1e-6 m; heights = stored * 0.5 * 632.8e-9 / 32768 (f32 constants).
+pub fn metropro() -> Vec<u8> {
+    let mut h = vec![0u8; 834];
+    let put = |h: &mut Vec<u8>, off: usize, v: &[u8]| h[off..off + v.len()].copy_from_slice(v);
+    put(&mut h, 0, &0x881B036Fu32.to_be_bytes());
+    put(&mut h, 4, &1u16.to_be_bytes());
+    put(&mut h, 6, &834u32.to_be_bytes());
+    put(&mut h, 68, &(NX as u16).to_be_bytes());
+    put(&mut h, 70, &(NY as u16).to_be_bytes());
+    put(&mut h, 72, &((NX * NY * 4) as u32).to_be_bytes());
+    put(&mut h, 164, &0.5f32.to_be_bytes());
+    put(&mut h, 168, &632.8e-9f32.to_be_bytes());
+    put(&mut h, 176, &1.0f32.to_be_bytes());
+    put(&mut h, 184, &1e-6f32.to_be_bytes());
+    put(&mut h, 218, &1i16.to_be_bytes());
+    put(&mut h, 246, b"20X Mirau");
+    for k in 0..NX * NY {
+        let v = if is_hole(k) { i32::MAX } else { stored(k / NX, k % NX) };
+        h.extend(v.to_be_bytes());
+    }
+    h
+}
+
+fn al3d_tag(k: &str, v: &str) -> Vec<u8> {
+    let mut t = pad(k, 20);
+    t.extend(pad(v, 30));
+    t.extend(b"\r\n");
+    t
+}
+
+/// Alicona AL3D: float32 metres = stored * 1e-6, pixel 0.5 µm x 0.75 µm, invalid 3e15.
+pub fn al3d() -> Vec<u8> {
+    let mut b = b"AliconaImaging\x00\r\n".to_vec();
+    b.extend(al3d_tag("Version", "1"));
+    b.extend(al3d_tag("TagCount", "6"));
+    let offset = 17 + 8 * 52;
+    for (k, v) in [
+        ("Cols", NX.to_string()),
+        ("Rows", NY.to_string()),
+        ("PixelSizeXMeter", "5e-07".to_string()),
+        ("PixelSizeYMeter", "7.5e-07".to_string()),
+        ("DepthImageOffset", offset.to_string()),
+        ("InvalidPixelValue", "3.000000028082e+15".to_string()),
+    ] {
+        b.extend(al3d_tag(k, &v));
+    }
+    assert_eq!(b.len(), offset);
+    for k in 0..NX * NY {
+        let v = if is_hole(k) { 3.000000028082e15f32 } else { stored(k / NX, k % NX) as f32 * 1e-6 };
+        b.extend(v.to_le_bytes());
+    }
+    b
+}
+
+/// TrueMap TMD: field 14 mm x 10 mm, heights in mm = stored / 1000 (f32).
+pub fn tmd() -> Vec<u8> {
+    let mut b = pad("Binary TrueMap Data File v2.0\r\n", 32);
+    b.extend(b"Created by TrueMap v6\r\n\0");
+    b.extend((NX as u32).to_le_bytes());
+    b.extend((NY as u32).to_le_bytes());
+    for f in [14.0f32, 10.0, 0.0, 0.0] {
+        b.extend(f.to_le_bytes());
+    }
+    for k in 0..NX * NY {
+        let v = if is_hole(k) { f32::NAN } else { stored(k / NX, k % NX) as f32 / 1000.0 };
+        b.extend(v.to_le_bytes());
+    }
+    b
+}
+
+/// Gwyddion Simple Field in µm laterally and nm vertically.
+pub fn gsf() -> Vec<u8> {
+    let mut b = format!(
+        "Gwyddion Simple Field 1.0\nXRes = {NX}\nYRes = {NY}\nXReal = 14\nYReal = 15\nXYUnits = um\nZUnits = nm\nTitle = generated\n"
+    )
+    .into_bytes();
+    let padn = 4 - b.len() % 4;
+    b.extend(std::iter::repeat_n(0u8, padn));
+    for k in 0..NX * NY {
+        let v = if is_hole(k) { f32::NAN } else { stored(k / NX, k % NX) as f32 };
+        b.extend(v.to_le_bytes());
+    }
+    b
+}
+
+/// NumPy v1 `<f8` array (rows, columns), C order.
+pub fn npy() -> Vec<u8> {
+    let dict = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({NY}, {NX}), }}");
+    let mut header = dict.into_bytes();
+    let total = 10 + header.len() + 1;
+    header.extend(std::iter::repeat_n(b' ', (64 - total % 64) % 64));
+    header.push(b'\n');
+    let mut b = b"\x93NUMPY\x01\x00".to_vec();
+    b.extend((header.len() as u16).to_le_bytes());
+    b.extend(header);
+    for k in 0..NX * NY {
+        let v = if is_hole(k) { f64::NAN } else { stored(k / NX, k % NX) as f64 };
+        b.extend(v.to_le_bytes());
+    }
+    b
+}
+
+/// 16-bit grey PNG of stored + 1000 (holes carry alpha 0).
+pub fn png16() -> Vec<u8> {
+    let mut px = Vec::new();
+    for k in 0..NX * NY {
+        px.push((stored(k / NX, k % NX) + 1000) as u16);
+        px.push(if is_hole(k) { 0 } else { u16::MAX });
+    }
+    let img = image::ImageBuffer::<image::LumaA<u16>, Vec<u16>>::from_raw(NX as u32, NY as u32, px).expect("buffer");
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png).expect("png");
+    out.into_inner()
+}
+
+/// 16-bit grey TIFF of stored + 1000 (no holes: TIFF grey has no alpha here).
+pub fn tiff16() -> Vec<u8> {
+    let px: Vec<u16> = (0..NX * NY).map(|k| (stored(k / NX, k % NX) + 1000) as u16).collect();
+    let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(NX as u32, NY as u32, px).expect("buffer");
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Tiff).expect("tiff");
+    out.into_inner()
+}
+
+/// OpenEXR with one float channel `Z` of stored values (holes NaN).
+pub fn exr() -> Vec<u8> {
+    use exr::prelude::*;
+    let vals: Vec<f32> = (0..NX * NY).map(|k| if is_hole(k) { f32::NAN } else { stored(k / NX, k % NX) as f32 }).collect();
+    let ch = AnyChannel::new("Z", FlatSamples::F32(vals));
+    let layer = Layer::new((NX, NY), LayerAttributes::named("height"), Encoding::FAST_LOSSLESS, AnyChannels::sort(vec![ch].into()));
+    let img = Image::from_layer(layer);
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write().to_buffered(&mut out).expect("exr");
+    out.into_inner()
+}
+
+/// Text matrix, optionally with the `AsciiMatrix cols rows du dv` header (du = 2, dv = 3).
+pub fn ascii(header: bool, sep: &str) -> Vec<u8> {
+    let mut s = String::new();
+    if header {
+        s.push_str(&format!("AsciiMatrix {NX} {NY} 2 3\n"));
+    }
+    for i in 0..NY {
+        let row: Vec<String> = (0..NX)
+            .map(|j| if is_hole(i * NX + j) { "nan".to_string() } else { stored(i, j).to_string() })
+            .collect();
+        s.push_str(&row.join(sep));
+        s.push('\n');
+    }
+    s.into_bytes()
+}
+
+/// XYZ list on a grid with step 0.5 x 0.25 (file units), origin (10, -2), one node left out.
+pub fn xyz(csv_header: bool) -> Vec<u8> {
+    let mut s = String::new();
+    if csv_header {
+        s.push_str("x,y,z\n");
+    }
+    let sep = if csv_header { "," } else { " " };
+    for i in 0..NY {
+        for j in 0..NX {
+            let k = i * NX + j;
+            if k == HOLES[0] {
+                continue; // a missing node
+            }
+            let z = if k == HOLES[1] { "NaN".to_string() } else { stored(i, j).to_string() };
+            s.push_str(&format!("{}{sep}{}{sep}{z}\n", 10.0 + 0.5 * j as f64, -2.0 + 0.25 * i as f64));
+        }
+    }
+    s.into_bytes()
+}
+
+/// X3P written by the library itself from a heightfield of the stored values.
+pub fn x3p() -> Vec<u8> {
+    let z: Vec<f64> = (0..NX * NY).map(|k| if is_hole(k) { f64::NAN } else { stored(k / NX, k % NX) as f64 * 1e-9 }).collect();
+    let hf = ndfit::Heightfield::new(NX, NY, 1e-6, 2e-6, z).expect("grid");
+    ndfit::io::x3p_write::x3p_bytes(&hf).expect("x3p")
+}
+
+/// Every generated binary file with its file name.
+pub fn binary_files() -> Vec<(&'static str, Vec<u8>)> {
+    vec![
+        ("gen.plu", plu()),
+        ("gen.sur", sur(false)),
+        ("gen_compressed.sur", sur(true)),
+        ("gen.opd", opd(false)),
+        ("gen_int16.opd", opd(true)),
+        ("gen.dat", metropro()),
+        ("gen.al3d", al3d()),
+        ("gen.tmd", tmd()),
+        ("gen.gsf", gsf()),
+        ("gen.npy", npy()),
+        ("gen.png", png16()),
+        ("gen.tif", tiff16()),
+        ("gen.exr", exr()),
+        ("gen.x3p", x3p()),
+    ]
+}
+
+/// Write the seed corpora of the cargo-fuzz targets (one directory per target) under `root`.
+pub fn write_seed_corpus(root: &std::path::Path) {
+    for (name, bytes) in binary_files() {
+        let target = name.rsplit('.').next().expect("extension");
+        let dir = root.join(target);
+        std::fs::create_dir_all(&dir).expect("corpus dir");
+        std::fs::write(dir.join(name), bytes).expect("seed");
+    }
+}
+
+/// `cargo test --test all write_fuzz_seed_corpus -- --ignored` writes fuzz/corpus/<target>/.
+#[test]
+#[ignore = "writes the cargo-fuzz seed corpus into fuzz/corpus; run on demand"]
+fn write_fuzz_seed_corpus() {
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus");
+    write_seed_corpus(&root);
+}
