@@ -37,9 +37,9 @@ pub struct Args {
     /// Blur samples per point for the empirical route.
     #[arg(long, default_value_t = 2)]
     pub samples_per_point: usize,
-    /// Bins per axis of the NDF grid.
-    #[arg(long, default_value_t = 64)]
-    pub bins: usize,
+    /// Cells across the NDF's Lambert disk (odd; default: chosen from the sample count as `ndfit ndf` does).
+    #[arg(long)]
+    pub bins: Option<usize>,
     /// Seed of the blur samples (the same seed gives the same result).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

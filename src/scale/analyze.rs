@@ -48,15 +48,15 @@ pub struct ScaleOptions {
     pub models: Vec<ModelId>,
     /// Blur samples per point for the empirical route (data_formats/scale.md sec. 4).
     pub samples_per_point: usize,
-    /// Bins per axis of the projected-disk grid (sec. 7).
-    pub bins: usize,
+    /// Cells across the NDF's Lambert disk (`src/ndf`); None chooses from the sample count.
+    pub bins: Option<usize>,
     /// Seed of the blur samples.
     pub seed: u64,
 }
 
 impl Default for ScaleOptions {
     fn default() -> Self {
-        ScaleOptions { footprints: vec![], models: ModelId::ALL.to_vec(), samples_per_point: 2, bins: 64, seed: 1 }
+        ScaleOptions { footprints: vec![], models: ModelId::ALL.to_vec(), samples_per_point: 2, bins: None, seed: 1 }
     }
 }
 

@@ -1,16 +1,18 @@
 //! The empirical route: the NDF as seen at footprint F (data_formats/scale.md eq. S1, sec. 4, 7).
 //!
 //! Every valid point `x0` contributes `k` slopes `s_F(x0) + L(x0) z` with `L L^T = Sigma_w(x0)` and `z`
-//! standard normal from a seeded generator, so the result is reproducible. The slopes are binned on a
-//! square grid over the projected unit disk, where a cell's projected solid angle is its area.
+//! standard normal from a seeded generator, so the result is reproducible. The slopes are binned the way
+//! `src/ndf` bins a scan's slopes.
 
-use nalgebra::{Matrix2, Vector2, Vector3};
+use nalgebra::{Matrix2, Vector2};
+use rayon::prelude::*;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 
 use super::footprint::FootprintField;
 use crate::error::{Error, ErrorKind, Result};
-use crate::ndf::{EmpiricalNdf, NdfBin};
+use crate::ndf::grid::MAX_CELLS_ACROSS;
+use crate::ndf::{BinGrid, EmpiricalNdf, NdfBin, NdfOptions, QuadOrder, SlopeFrame};
 
 /// Slopes drawn from (S1) at every valid point of a footprint field; `blur = false` gives the resolved
 /// slopes `s_F` alone (the NDF of the filtered surface, the analytic route's input).
@@ -88,76 +90,67 @@ pub fn slope_moments(s: &[Vector2<f64>]) -> Result<SlopeMoments> {
     Ok(SlopeMoments { n: s.len(), mean, cov, skewness })
 }
 
-/// Bin slopes into an empirical NDF on an `nb x nb` grid over the square `[-r, r]^2` of the projected
-/// disk, where `r` reaches the farthest sample (so no sample is dropped and the normalization of
-/// Heitz eq. 9 holds). Cells wholly outside the disk are left out.
-pub fn bin_slopes(slopes: &[Vector2<f64>], nb: usize) -> Result<EmpiricalNdf> {
+/// Samples used for the robust binning frame (a strided subsample), as in `src/ndf`.
+const FRAME_SUBSAMPLE: usize = 1 << 17;
+
+/// Bin slopes into an empirical NDF with the binning of `src/ndf` (robust whitened frame, Lambert
+/// equal-area disk that covers every slope, per-bin projected solid angles by quadrature), so the fitter
+/// sees the NDF at F exactly as it sees a scan's NDF. `cells_across` as in [`NdfOptions`] (None: chosen
+/// from the sample count; an even count is raised to the next odd one).
+pub fn bin_slopes(slopes: &[Vector2<f64>], cells_across: Option<usize>) -> Result<EmpiricalNdf> {
     if slopes.is_empty() {
         return Err(Error::new(ErrorKind::BadData, "no slopes to bin"));
     }
-    if !(4..=4096).contains(&nb) {
-        return Err(Error::invalid(format!("bins per axis must be in 4..=4096, got {nb}")));
-    }
-    let proj = |s: &Vector2<f64>| -> Vector2<f64> { Vector2::new(-s[0], -s[1]) / (1.0 + s.norm_squared()).sqrt() };
-    let rmax = slopes.iter().map(|s| proj(s).abs().max()).fold(0.0f64, f64::max);
-    // Never below 1e-6 (a flat surface) and never past the rim; a 1.0001 margin keeps the farthest
-    // sample inside the last cell.
-    let r = (rmax * 1.0001).clamp(1e-6, 1.0);
-    let h = 2.0 * r / nb as f64;
-    let mut counts = vec![0u64; nb * nb];
-    for s in slopes {
-        let p = proj(s);
-        let ix = (((p[0] + r) / h) as usize).min(nb - 1);
-        let iy = (((p[1] + r) / h) as usize).min(nb - 1);
-        counts[iy * nb + ix] += 1;
-    }
-    let n = slopes.len() as u64;
-    let mut bins = Vec::with_capacity(nb * nb);
-    const SUB: usize = 8; // sub-cells per axis for cells the rim cuts (area and 1/mz integral)
-    for iy in 0..nb {
-        for ix in 0..nb {
-            let (x0, y0) = (-r + ix as f64 * h, -r + iy as f64 * h);
-            let (mut area, mut sa, mut cx, mut cy) = (0.0, 0.0, 0.0, 0.0);
-            let hs = h / SUB as f64;
-            for a in 0..SUB {
-                for b in 0..SUB {
-                    let (x, y) = (x0 + (a as f64 + 0.5) * hs, y0 + (b as f64 + 0.5) * hs);
-                    let q = 1.0 - x * x - y * y;
-                    if q > 0.0 {
-                        area += hs * hs;
-                        sa += hs * hs / q.sqrt();
-                        cx += x * hs * hs;
-                        cy += y * hs * hs;
-                    }
-                }
-            }
-            if area <= 0.0 {
-                if counts[iy * nb + ix] > 0 {
-                    // Sub-cell sampling missed the sliver of disk this sample fell in: keep the sample by
-                    // giving the cell the one sub-cell nearest the rim.
-                    let (x, y) = (x0 + h / 2.0, y0 + h / 2.0);
-                    let t = 0.999 / (x * x + y * y).sqrt();
-                    area = hs * hs;
-                    sa = area / (1.0 - 0.999f64.powi(2)).sqrt();
-                    cx = x * t * area;
-                    cy = y * t * area;
-                } else {
-                    continue;
-                }
-            }
-            let (mx, my) = (cx / area, cy / area);
-            let mz = (1.0 - mx * mx - my * my).max(0.0).sqrt();
-            let c = counts[iy * nb + ix];
-            let w = area;
-            bins.push(NdfBin {
-                m: Vector3::new(mx, my, mz),
-                d: c as f64 / (n as f64 * w),
-                stderr: (c.max(1) as f64).sqrt() / (n as f64 * w),
-                count: c,
-                solid_angle: sa,
-                proj_solid_angle: w,
-            });
+    if let Some(c) = cells_across {
+        if !(3..=MAX_CELLS_ACROSS).contains(&c) {
+            return Err(Error::invalid(format!("bins across must be in 3..={MAX_CELLS_ACROSS}, got {c}")));
         }
     }
-    Ok(EmpiricalNdf { bins, n_samples: n })
+    let stride = (slopes.len() / FRAME_SUBSAMPLE).max(1);
+    let mut sub: Vec<[f64; 2]> = slopes.iter().step_by(stride).map(|s| [s[0], s[1]]).collect();
+    let frame = SlopeFrame::robust(&mut sub);
+    let opts = NdfOptions { cells_across: cells_across.map(|c| c | 1), ..NdfOptions::default() };
+    let grid = BinGrid::new(opts.cells_for(slopes.len() as u64));
+    let mut counts = vec![0u64; grid.cells()];
+    for s in slopes {
+        counts[grid.cell_of(frame.to_lambert(s[0], s[1]))] += 1;
+    }
+    let n = slopes.len() as u64;
+    let nf = n as f64;
+    let m = slope_moments(slopes).ok();
+    let cells: Vec<usize> = (0..grid.cells()).filter(|&c| grid.meets_disk(c) || counts[c] > 0).collect();
+    let bins: Vec<NdfBin> = cells
+        .par_iter()
+        .map(|&c| {
+            let (mut w, mut o, mut px, mut py) = (0.0, 0.0, 0.0, 0.0);
+            grid.quadrature(c, QuadOrder::Standard, |p, wt| {
+                let dw = frame.proj_density(p) * wt;
+                w += dw;
+                o += frame.solid_density(p) * wt;
+                px += p[0] * dw;
+                py += p[1] * dw;
+            });
+            let centroid = if w > 0.0 {
+                [px / w, py / w]
+            } else {
+                // A rim sliver with no projected solid angle takes its geometric centre.
+                let [x0, x1, y0, y1] = grid.bounds(c);
+                [0.5 * (x0 + x1), 0.5 * (y0 + y1)]
+            };
+            let count = counts[c];
+            // W = 0 only on a rim sliver: D there is 0, not 0/0.
+            let (d, stderr) =
+                if w > 0.0 { (count as f64 / (nf * w), (count.max(1) as f64).sqrt() / (nf * w)) } else { (0.0, 0.0) };
+            NdfBin { m: frame.normal_at(centroid), d, stderr, count, solid_angle: o, proj_solid_angle: w }
+        })
+        .collect();
+    let mut ndf = EmpiricalNdf::from_bins(bins, n);
+    ndf.frame = frame;
+    ndf.grid = grid;
+    ndf.bin_cells = cells.into_iter().map(|c| c as u32).collect();
+    if let Some(m) = m {
+        ndf.slope_mean = [m.mean[0], m.mean[1]];
+        ndf.slope_cov = [[m.cov[(0, 0)], m.cov[(0, 1)]], [m.cov[(1, 0)], m.cov[(1, 1)]]];
+    }
+    Ok(ndf)
 }

@@ -149,7 +149,7 @@ fn binned_ndf_is_normalized() {
     let hf = fs.heightfield(0).unwrap();
     let (sx, sy) = slope_field(&hf);
     let ff = footprint_field(hf.nx, hf.ny, DX, DX, &sx, &sy, kernel_sigma(5.0 * DX)).unwrap();
-    let ndf = bin_slopes(&sample_slopes(&ff, 2, true, 3), 48).unwrap();
+    let ndf = bin_slopes(&sample_slopes(&ff, 2, true, 3), Some(49)).unwrap();
     let total: f64 = ndf.bins.iter().map(|b| b.d * b.proj_solid_angle).sum();
     assert!((total - 1.0).abs() < 1e-12, "{total}");
     assert_eq!(ndf.bins.iter().map(|b| b.count).sum::<u64>(), ndf.n_samples);
