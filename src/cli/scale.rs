@@ -7,6 +7,7 @@ use std::process::ExitCode;
 use anyhow::anyhow;
 use ndfit::models::ModelId;
 use ndfit::scale::analyze::{analyze, recommend, Fitter, ScaleOptions};
+use ndfit::scale::ndf_at::Blur;
 use ndfit::scale::report::{report_json, write_csv};
 use serde_json::json;
 
@@ -40,12 +41,24 @@ pub struct Args {
     /// Cells across the NDF's Lambert disk (odd; default: chosen from the sample count as `ndfit ndf` does).
     #[arg(long)]
     pub bins: Option<usize>,
+    /// Blur of each footprint's resolved slope: per-footprint (its own within-footprint covariance,
+    /// scale.md eq. S1) or mean (one mean covariance Sigma_F for all, Tokuyoshi's single kernel, S1').
+    #[arg(long, default_value = "per-footprint", value_parser = parse_blur)]
+    pub blur: Blur,
     /// Seed of the blur samples (the same seed gives the same result).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Output directory for scale.json, scale.csv and scale.png; without it the JSON goes to stdout.
     #[arg(short = 'o', long)]
     pub out: Option<PathBuf>,
+}
+
+fn parse_blur(s: &str) -> Result<Blur, String> {
+    match s {
+        "per-footprint" => Ok(Blur::PerFootprint),
+        "mean" => Ok(Blur::Mean),
+        o => Err(format!("unknown blur {o:?}: use per-footprint or mean")),
+    }
 }
 
 /// Run `ndfit scale`.
@@ -75,7 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     footprints.dedup();
 
     let hf = args.scan.load()?;
-    let opts = ScaleOptions { footprints, models, samples_per_point: args.samples_per_point, bins: args.bins, seed: args.seed };
+    let opts = ScaleOptions { footprints, models, samples_per_point: args.samples_per_point, bins: args.bins, seed: args.seed, blur: args.blur };
     let fitter = ndfit::scale::default_fitter();
     let results = analyze(&hf, &opts, fitter.as_ref().map(|f| f as &dyn Fitter)).map_err(|e| anyhow!("{path}: {e}"))?;
     // The recommendation covers the scene's footprints, or every footprint given when there is no scene.
@@ -93,6 +106,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         "samples_per_point": opts.samples_per_point,
         "bins": opts.bins,
         "seed": opts.seed,
+        "blur": opts.blur,
         "fitter": if fitter.is_some() { "ndfit::fit" } else { "none" },
     });
     let report = report_json(input, options, &results, Some(&rec));

@@ -3,7 +3,7 @@
 use nalgebra::Matrix2;
 
 use super::footprint::{footprint_field, footprint_stats, kernel_sigma, slope_field, FootprintStats};
-use super::ndf_at::{bin_slopes, sample_slopes, slope_moments, SlopeMoments};
+use super::ndf_at::{bin_slopes, counts_on, sample_slopes, sample_slopes_with, slope_moments, Blur, SlopeMoments};
 use super::roughness::{
     aniso_params, filter_isotropic, filter_model, model_from_slope_form, skew_offset, slope_form, IsoRule, SlopeForm,
 };
@@ -52,11 +52,13 @@ pub struct ScaleOptions {
     pub bins: Option<usize>,
     /// Seed of the blur samples.
     pub seed: u64,
+    /// Per-footprint covariances (S1, default) or the one mean covariance (S1').
+    pub blur: Blur,
 }
 
 impl Default for ScaleOptions {
     fn default() -> Self {
-        ScaleOptions { footprints: vec![], models: ModelId::ALL.to_vec(), samples_per_point: 2, bins: None, seed: 1 }
+        ScaleOptions { footprints: vec![], models: ModelId::ALL.to_vec(), samples_per_point: 2, bins: None, seed: 1, blur: Blur::PerFootprint }
     }
 }
 
@@ -72,23 +74,40 @@ pub struct Delta {
     pub excess: f64,
 }
 
-/// [`Delta`] of `model` against `ndf`.
-pub fn delta(model: &impl Ndf, ndf: &EmpiricalNdf) -> Delta {
+/// [`Delta`] of `model` against `ndf`. `halves`: the counts of two disjoint halves of the samples on the
+/// same bins (data_formats/scale.md sec. 9); their disagreement measures the histogram's noise including
+/// the correlation of neighbouring slopes, which the Poisson term alone misses. The larger of the two
+/// noise estimates is used.
+pub fn delta(model: &impl Ndf, ndf: &EmpiricalNdf, halves: Option<(&[u64], &[u64])>) -> Delta {
     let n = ndf.n_samples.max(1) as f64;
-    let (mut sw, mut s2, mut sn) = (0.0, 0.0, 0.0);
-    for b in ndf.bins.iter().filter(|b| b.count > 0 && b.proj_solid_angle > 0.0) {
+    let (n1, n2) = halves.map_or((0.0, 0.0), |(a, b)| (a.iter().sum::<u64>() as f64, b.iter().sum::<u64>() as f64));
+    let (mut sw, mut s2, mut sn, mut ss) = (0.0, 0.0, 0.0, 0.0);
+    for (k, b) in ndf.bins.iter().enumerate() {
+        if b.count == 0 || b.proj_solid_angle <= 0.0 {
+            continue;
+        }
         let w = b.count as f64 / n; // D_ref W_k
         let r = model.d(b.m) / b.d - 1.0;
         sw += w;
         s2 += w * r * r;
         sn += w / b.count as f64;
+        if let Some((h1, h2)) = halves {
+            if n1 > 0.0 && n2 > 0.0 {
+                // Relative half-difference of the two halves' D in this bin: its square estimates the
+                // relative variance of the full-sample D (each half has twice the variance of the whole).
+                let (d1, d2) = (h1[k] as f64 / n1, h2[k] as f64 / n2);
+                let rel = 0.5 * (d1 - d2) / (b.count as f64 / n);
+                ss += w * rel * rel;
+            }
+        }
     }
     // No data: the metric is undefined; report infinity so no model passes on nothing.
     if sw <= 0.0 {
         return Delta { delta: f64::INFINITY, noise: 0.0, excess: f64::INFINITY };
     }
-    let (d2, n2) = (s2 / sw, sn / sw);
-    Delta { delta: d2.sqrt(), noise: n2.sqrt(), excess: (d2 - n2).max(0.0).sqrt() }
+    let d2 = s2 / sw;
+    let noise2 = (sn / sw).max(ss / sw);
+    Delta { delta: d2.sqrt(), noise: noise2.sqrt(), excess: (d2 - noise2).max(0.0).sqrt() }
 }
 
 /// One route's result for one model at one footprint.
@@ -166,11 +185,16 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
         let stats = footprint_stats(&ff, &sx, &sy, fp)?;
         let seed = opts.seed.wrapping_add(k as u64);
         let s_res = sample_slopes(&ff, 1, false, seed);
-        let s_at = sample_slopes(&ff, opts.samples_per_point, true, seed);
+        let s_at = sample_slopes_with(&ff, opts.samples_per_point, Some(opts.blur), seed);
         let resolved = slope_moments(&s_res)?;
         let at_f = slope_moments(&s_at)?;
         let ndf_res = bin_slopes(&s_res, opts.bins)?;
         let ndf_at = bin_slopes(&s_at, opts.bins)?;
+        // Split the samples into the footprints of the scan's lower and upper half (rows), spatially
+        // disjoint, for the noise estimate of `delta`.
+        let pts = ff.valid_points();
+        let split = pts.iter().take_while(|&&p| p / hf.nx < hf.ny / 2).count() * opts.samples_per_point;
+        let halves = (counts_on(&ndf_at, &s_at[..split]), counts_on(&ndf_at, &s_at[split..]));
         let pixel_roughness = aniso_params(&(2.0 * stats.sigma_f)).ok();
         let traces: Vec<f64> = ff.valid_points().iter().map(|&p| ff.wxx[p] + ff.wyy[p]).collect();
         let tm = traces.iter().sum::<f64>() / traces.len().max(1) as f64;
@@ -194,7 +218,7 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
         let mut fitted: Vec<_> = opts
             .models
             .iter()
-            .map(|&id| model_at_footprint(id, &stats, &resolved, &ndf_res, &ndf_at, fitter))
+            .map(|&id| model_at_footprint(id, &stats, &resolved, &ndf_res, &ndf_at, (&halves.0, &halves.1), fitter))
             .collect();
         fill_ic(&mut fitted);
         let models = fitted.into_iter().map(|(m, _)| m).collect();
@@ -209,13 +233,15 @@ fn model_at_footprint(
     resolved: &SlopeMoments,
     ndf_res: &EmpiricalNdf,
     ndf_at: &EmpiricalNdf,
+    halves: (&[u64], &[u64]),
     fitter: Option<&dyn Fitter>,
 ) -> (ModelAtFootprint, Option<Fitted>) {
+    let delta = |m: &Model| delta(m, ndf_at, Some(halves));
     let failed = |source, e: String| RouteResult { model: None, ic: None, delta: None, source, error: Some(e) };
     let empirical = match fitter.map(|f| f.fit(ndf_at, id)) {
         Some(Ok(f)) => {
             // The criterion needs the overdispersion of the richest model; `analyze` fills `ic` in.
-            let r = RouteResult { model: Some(f.model), ic: None, delta: Some(delta(&f.model, ndf_at)), source: "fit", error: None };
+            let r = RouteResult { model: Some(f.model), ic: None, delta: Some(delta(&f.model)), source: "fit", error: None };
             (r, Some(f))
         }
         Some(Err(e)) => (failed("fit", e.to_string()), None),
@@ -238,7 +264,7 @@ fn model_at_footprint(
             }
             .map(|a| (filter_isotropic(a, &stats.sigma_f, IsoRule::Eq10), filter_isotropic(a, &stats.sigma_f, IsoRule::Eq13)));
             match filter_model(&m, &stats.sigma_f) {
-                Ok(f) => (RouteResult { model: Some(f), ic: None, delta: Some(delta(&f, ndf_at)), source, error: None }, iso),
+                Ok(f) => (RouteResult { model: Some(f), ic: None, delta: Some(delta(&f)), source, error: None }, iso),
                 Err(e) => (failed(source, e.to_string()), iso),
             }
         }
@@ -319,7 +345,7 @@ pub fn recommend(results: &[FootprintResult], tolerance: f64) -> Recommendation 
     let mut cands: Vec<Candidate> = ids
         .into_iter()
         .map(|id| {
-            let (mut worst, mut at, mut ic, mut all_ic) = (0.0f64, f64::NAN, 0.0, true);
+            let (mut worst, mut at, mut ic, mut all_ic) = (f64::NEG_INFINITY, f64::NAN, 0.0, true);
             for r in results {
                 let e = r.models.iter().find(|m| m.id == id).map(|m| &m.empirical);
                 let d = e.and_then(|e| e.delta).map(|d| d.excess).unwrap_or(f64::INFINITY);

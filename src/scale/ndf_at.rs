@@ -14,10 +14,32 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::ndf::grid::MAX_CELLS_ACROSS;
 use crate::ndf::{BinGrid, EmpiricalNdf, NdfBin, NdfOptions, QuadOrder, SlopeFrame};
 
+/// Which covariance blurs each footprint's resolved slope (data_formats/scale.md sec. 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Blur {
+    /// Each footprint's own `Sigma_w(x0)` (eq. S1): what a renderer with per-pixel covariances (LEAN
+    /// mapping) shows.
+    PerFootprint,
+    /// The one mean covariance `Sigma_F` for every footprint (eq. S1'): Tokuyoshi's single kernel.
+    Mean,
+}
+
 /// Slopes drawn from (S1) at every valid point of a footprint field; `blur = false` gives the resolved
 /// slopes `s_F` alone (the NDF of the filtered surface, the analytic route's input).
 pub fn sample_slopes(ff: &FootprintField, per_point: usize, blur: bool, seed: u64) -> Vec<Vector2<f64>> {
+    sample_slopes_with(ff, per_point, blur.then_some(Blur::PerFootprint), seed)
+}
+
+/// [`sample_slopes`] with a choice of blur (`None`: the resolved slopes alone).
+pub fn sample_slopes_with(ff: &FootprintField, per_point: usize, blur: Option<Blur>, seed: u64) -> Vec<Vector2<f64>> {
     let pts = ff.valid_points();
+    let mean_l = {
+        let n = pts.len().max(1) as f64;
+        chol2(&(pts.iter().map(|&p| ff.sigma_w(p)).fold(Matrix2::zeros(), |a, b| a + b) / n))
+    };
+    let blur_kind = blur;
+    let blur = blur.is_some();
     let k = if blur { per_point.max(1) } else { 1 };
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let mut out = Vec::with_capacity(pts.len() * k);
@@ -27,7 +49,10 @@ pub fn sample_slopes(ff: &FootprintField, per_point: usize, blur: bool, seed: u6
             out.push(c);
             continue;
         }
-        let l = chol2(&ff.sigma_w(p));
+        let l = match blur_kind {
+            Some(Blur::Mean) => mean_l,
+            _ => chol2(&ff.sigma_w(p)),
+        };
         for _ in 0..k {
             let z = Vector2::new(rng.sample::<f64, _>(StandardNormal), rng.sample::<f64, _>(StandardNormal));
             out.push(c + l * z);
@@ -98,6 +123,26 @@ const FRAME_SUBSAMPLE: usize = 1 << 17;
 /// sees the NDF at F exactly as it sees a scan's NDF. `cells_across` as in [`NdfOptions`] (None: chosen
 /// from the sample count; an even count is raised to the next odd one).
 pub fn bin_slopes(slopes: &[Vector2<f64>], cells_across: Option<usize>) -> Result<EmpiricalNdf> {
+    bin_slopes_on(slopes, cells_across, None)
+}
+
+/// Per-bin counts of `slopes` on the bins of an NDF made by [`bin_slopes`] (same frame and grid), for
+/// split-half noise estimates. Slopes outside every bin are not counted.
+pub fn counts_on(ndf: &EmpiricalNdf, slopes: &[Vector2<f64>]) -> Vec<u64> {
+    let mut counts = vec![0u64; ndf.bins.len()];
+    if ndf.grid.n == 0 {
+        return counts;
+    }
+    for s in slopes {
+        let c = ndf.grid.cell_of(ndf.frame.to_lambert(s[0], s[1])) as u32;
+        if let Ok(k) = ndf.bin_cells.binary_search(&c) {
+            counts[k] += 1;
+        }
+    }
+    counts
+}
+
+fn bin_slopes_on(slopes: &[Vector2<f64>], cells_across: Option<usize>, frame: Option<SlopeFrame>) -> Result<EmpiricalNdf> {
     if slopes.is_empty() {
         return Err(Error::new(ErrorKind::BadData, "no slopes to bin"));
     }
@@ -106,9 +151,11 @@ pub fn bin_slopes(slopes: &[Vector2<f64>], cells_across: Option<usize>) -> Resul
             return Err(Error::invalid(format!("bins across must be in 3..={MAX_CELLS_ACROSS}, got {c}")));
         }
     }
-    let stride = (slopes.len() / FRAME_SUBSAMPLE).max(1);
-    let mut sub: Vec<[f64; 2]> = slopes.iter().step_by(stride).map(|s| [s[0], s[1]]).collect();
-    let frame = SlopeFrame::robust(&mut sub);
+    let frame = frame.unwrap_or_else(|| {
+        let stride = (slopes.len() / FRAME_SUBSAMPLE).max(1);
+        let mut sub: Vec<[f64; 2]> = slopes.iter().step_by(stride).map(|s| [s[0], s[1]]).collect();
+        SlopeFrame::robust(&mut sub)
+    });
     let opts = NdfOptions { cells_across: cells_across.map(|c| c | 1), ..NdfOptions::default() };
     let grid = BinGrid::new(opts.cells_for(slopes.len() as u64));
     let mut counts = vec![0u64; grid.cells()];

@@ -229,3 +229,89 @@ mod cli {
         }
     }
 }
+
+mod routes {
+    use ndfit::models::{Model, ModelId};
+    use ndfit::ndf::EmpiricalNdf;
+    use ndfit::scale::analyze::{analyze, recommend, Fitted, Fitter, ScaleOptions};
+    use ndfit::scale::ndf_at::{sample_slopes_with, Blur};
+    use ndfit::scale::roughness::{model_from_slope_form, SlopeForm};
+
+    use super::*;
+
+    /// A second algorithm standing in for the fitter: the method of moments. For Beckmann it is the
+    /// maximum-likelihood estimate (a Gaussian's ML covariance is the sample covariance); GGX gets the
+    /// same roughness matrix, which is the wrong shape on purpose, so the recommendation must reject it.
+    struct Moments;
+
+    impl Fitter for Moments {
+        fn fit(&self, ndf: &EmpiricalNdf, id: ModelId) -> ndfit::Result<Fitted> {
+            let c = ndf.slope_cov;
+            let f = SlopeForm {
+                a2: 2.0 * Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]),
+                mu: nalgebra::Vector2::new(ndf.slope_mean[0], ndf.slope_mean[1]),
+            };
+            Ok(Fitted { model: model_from_slope_form(id, &f)?, objective: None, reduced_chi2: None, n_samples: ndf.n_samples as f64 })
+        }
+    }
+
+    fn beckmann_params(m: &Option<Model>) -> Vec<f64> {
+        m.as_ref().map(|m| m.params()).unwrap_or_default()
+    }
+
+    #[test]
+    fn gaussian_surface_routes_agree_and_beckmann_is_recommended() {
+        // With Tokuyoshi's single kernel covariance (S1') the NDF at F of a Gaussian surface is exactly
+        // Beckmann (scale.md sec. 5), so Beckmann must be recommended and GGX rejected.
+        // 256^2 samples: with a correlation length of 6 samples the filtered surface at F = 24 samples
+        // still holds ~ (256/12)^2 = 450 independent footprints.
+        let fs = FourierSurface::gaussian_spectrum(256, DX, 600, (6.0 * DX, 6.0 * DX), 0.0, 0.2, 8).unwrap();
+        let hf = fs.heightfield(0).unwrap();
+        let opts = ScaleOptions { footprints: vec![2.0 * DX, 8.0 * DX, 24.0 * DX], blur: Blur::Mean, ..ScaleOptions::default() };
+        let res = analyze(&hf, &opts, Some(&Moments)).unwrap();
+        for r in &res {
+            let b = r.models.iter().find(|m| m.id == ModelId::Beckmann).unwrap();
+            let (e, a) = (beckmann_params(&b.empirical.model), beckmann_params(&b.analytic.model));
+            // Both routes estimate the same alpha^2 = E|s|^2 of (S1): the empirical one from the blurred
+            // samples, the analytic one as 2 Cov(s_F) + tr... (Tokuyoshi eq. 3). They differ by the blur's
+            // sampling error and the edge reweighting of the law of total covariance (S3), both under
+            // 1 % of alpha^2 at 128^2 points (the edge band of 5 sigma_K holds < 10 % of the points and
+            // its Sigma_w differs from the interior's by far less than its own size).
+            assert!((e[0] * e[0] / (a[0] * a[0]) - 1.0).abs() < 0.02, "F={:e}: {e:?} vs {a:?}", r.stats.footprint);
+            assert!(b.route_gap.unwrap() < 0.02);
+        }
+        let rec = recommend(&res, 0.05);
+        eprintln!("{}", rec.explanation);
+        assert_eq!(rec.model, Some(ModelId::Beckmann), "{}", rec.explanation);
+        let ggx = rec.candidates.iter().find(|c| c.model == ModelId::Ggx).unwrap();
+        assert!(!ggx.passes && ggx.worst_delta_model > 0.05);
+        // Reproducible: the same input gives the same recommendation and numbers.
+        let res2 = analyze(&hf, &opts, Some(&Moments)).unwrap();
+        assert_eq!(recommend(&res2, 0.05), rec);
+    }
+
+    #[test]
+    fn per_footprint_covariances_make_a_heavier_tailed_ndf() {
+        // Where the theory does not apply: with each footprint's own Sigma_w (S1) the NDF at F is a
+        // mixture of Gaussians of different widths, heavier-tailed than one Gaussian even for a Gaussian
+        // surface, while its second moment is unchanged (S3). At F = 8 samples (kernel sigma 4 samples,
+        // correlation length 6) tr Sigma_w varies by ~40 % between footprints; the kurtosis of a slope
+        // component must exceed the Gaussian 3 by far more than its sampling spread (sqrt(24/n) ~ 0.03 at
+        // n = 32768, but neighbouring footprints correlate; 0.3 is 10 such spreads).
+        let fs = gaussian_surface();
+        let hf = fs.heightfield(0).unwrap();
+        let (sx, sy) = slope_field(&hf);
+        let ff = footprint_field(hf.nx, hf.ny, DX, DX, &sx, &sy, kernel_sigma(8.0 * DX)).unwrap();
+        let kurt = |s: &[nalgebra::Vector2<f64>]| {
+            let n = s.len() as f64;
+            let m2: f64 = s.iter().map(|v| v[0] * v[0]).sum::<f64>() / n;
+            s.iter().map(|v| v[0].powi(4)).sum::<f64>() / n / (m2 * m2)
+        };
+        let per = sample_slopes_with(&ff, 2, Some(Blur::PerFootprint), 1);
+        let mean = sample_slopes_with(&ff, 2, Some(Blur::Mean), 1);
+        let (kp, km) = (kurt(&per), kurt(&mean));
+        assert!(kp > 3.3 && (km - 3.0).abs() < 0.3, "kurtosis per-footprint {kp}, mean {km}");
+        let (cp, cm) = (slope_moments(&per).unwrap().cov, slope_moments(&mean).unwrap().cov);
+        assert!((cp.trace() / cm.trace() - 1.0).abs() < 0.02, "{} vs {}", cp.trace(), cm.trace());
+    }
+}
