@@ -35,21 +35,27 @@ impl Ellipsoid {
         let tx = checked_angle("theta_x", theta_x)?;
         let ty = checked_angle("theta_y", theta_y)?;
         let tz = checked_angle("theta_z", theta_z)?;
+        Ok(Ellipsoid::build([ax, ay, tx, ty, tz]))
+    }
+
+    /// `A = S R` from parameters already known to be finite with positive alphas.
+    fn build(p: [f64; 5]) -> Self {
+        let [ax, ay, tx, ty, tz] = p;
         let r = rotation_xyz(tx, ty, tz);
         let s = Matrix3::from_diagonal(&Vector3::new(ax, ay, 1.0));
         let s_inv = Matrix3::from_diagonal(&Vector3::new(1.0 / ax, 1.0 / ay, 1.0));
         let a = s * r;
         let an = a.column(2).into_owned();
-        Ok(Ellipsoid { a, a_inv_t: s_inv * r, det_a: ax * ay, an, an_norm: an.norm(), params: [ax, ay, tx, ty, tz] })
+        Ellipsoid { a, a_inv_t: s_inv * r, det_a: ax * ay, an, an_norm: an.norm(), params: p }
     }
 
     /// An ellipsoid from any invertible A (eq. 1 depends on A only through `A^T A` up to scale). The result
-    /// is the canonical equivalent (see [`canonical::decompose`]): [`Ellipsoid::a`] then returns `S R` of
-    /// the canonical parameters, not the matrix given. A matrix whose smallest singular value is below
-    /// `1e-12` times its largest (numerically singular), or that is not finite, is refused.
+    /// is the canonical equivalent (see [`canonical::decompose`]) with exactly the same D: [`Ellipsoid::a`]
+    /// then returns `S R` of the canonical parameters, not the matrix given, and the alphas are not floored
+    /// at [`super::ALPHA_MIN`] (they lie within `[1e-12, 1e12]`). A matrix whose smallest singular value is
+    /// below `1e-12` times its largest (numerically singular), or that is not finite, is refused.
     pub fn from_matrix(a: Matrix3<f64>) -> Result<Self> {
-        let p = canonical::decompose(&a)?;
-        Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4])
+        Ok(Ellipsoid::build(canonical::decompose(&a)?))
     }
 
     /// The shape matrix `A = S R`.
@@ -65,10 +71,14 @@ impl Ellipsoid {
     /// The same distribution with the canonical parameters (see [`canonical::decompose`]): the ellipsoid axis
     /// nearest `n` is the third axis, `alpha_x >= alpha_y`, `theta_z` in `(-pi/2, pi/2]`, `theta_z = 0` when
     /// the alphas tie. Idempotent.
+    /// The canonical alphas keep D exactly: they are ratios of singular values and are not floored (an
+    /// ellipsoid relabeled from `alpha = (1e-4, 10)` with a large tilt can have a canonical alpha of `1e-5`).
     pub fn canonical(&self) -> Ellipsoid {
-        match canonical::decompose(&self.a) {
-            Ok(p) => Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4]).unwrap_or(*self),
-            // A = S R with alpha in [ALPHA_MIN, ALPHA_MAX] is never singular; keep self if it somehow were.
+        // The principal axes are the rows of R with singular values (alpha_x, alpha_y, 1): no SVD needed.
+        let [ax, ay, tx, ty, tz] = self.params;
+        match canonical::relabel(&rotation_xyz(tx, ty, tz), ax, ay) {
+            Ok(p) => Ellipsoid::build(p),
+            // A = S R with alphas in [ALPHA_MIN, ALPHA_MAX] has condition number <= 1e10 and is never refused.
             Err(_) => *self,
         }
     }
@@ -79,6 +89,8 @@ impl Ellipsoid {
     }
 
     /// The projected area of the ellipsoid along `u` (eq. 26, `C_e = 1`): `pi ||A u|| / |A|`.
+    /// (The text of eq. 28 prints `||A||` where the determinant `|A|` is meant, as eq. 26 and the check
+    /// `A_l(u, u) = A_e(u)` show; `|A|` is used.)
     pub fn projected_area(&self, u: Vector3<f64>) -> f64 {
         std::f64::consts::PI * (self.a * u).norm() / self.det_a
     }

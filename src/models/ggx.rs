@@ -49,7 +49,7 @@ impl Ggx {
         let l = rotate_z(self.theta_z, Vector3::new(slope.x, slope.y, 0.0));
         let r2 = (l.x / self.alpha_x).powi(2) + (l.y / self.alpha_y).powi(2);
         let q = 1.0 + r2;
-        // Beyond ~1e77 the square overflows; the true value is 0 there to f64 precision anyway.
+        // q^2 overflows past 1e154; P22 < 1e-290 from q = 1e150 on, so 0 is exact to f64 precision.
         if !q.is_finite() || q > 1e150 {
             return 0.0;
         }

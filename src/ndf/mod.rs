@@ -21,12 +21,14 @@
 pub mod frame;
 pub mod grid;
 pub mod normals;
+pub mod output;
+pub mod plot;
 
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
 pub use frame::SlopeFrame;
-pub use grid::{BinGrid, QuadOrder};
+pub use grid::{BinGrid, QuadOrder, RimShape};
 pub use normals::NormalScheme;
 
 use crate::error::{Error, ErrorKind, Result};
@@ -260,7 +262,7 @@ fn histogram(hf: &Heightfield, scheme: NormalScheme, frame: &SlopeFrame, grid: &
 /// Integrals over one cell: projected solid angle, solid angle and the W-weighted centroid.
 fn cell_integrals(frame: &SlopeFrame, grid: &BinGrid, c: usize) -> (f64, f64, [f64; 2]) {
     let (mut w, mut o, mut px, mut py) = (0.0, 0.0, 0.0, 0.0);
-    grid.quadrature(c, QuadOrder::Standard, |p, wt| {
+    grid.quadrature(c, QuadOrder::Standard, &frame.rim_shape(), |p, wt| {
         let dw = frame.proj_density(p) * wt;
         w += dw;
         o += frame.solid_density(p) * wt;
@@ -335,7 +337,7 @@ impl EmpiricalNdf {
     pub fn bin_integral(&self, k: usize, order: QuadOrder, f: impl Fn(Vector3<f64>) -> f64) -> Option<f64> {
         let c = *self.bin_cells.get(k)? as usize;
         let mut sum = 0.0;
-        self.grid.quadrature(c, order, |p, wt| {
+        self.grid.quadrature(c, order, &self.frame.rim_shape(), |p, wt| {
             let dw = self.frame.proj_density(p) * wt;
             if dw > 0.0 {
                 sum += f(self.frame.normal_at(p)) * dw;
@@ -347,5 +349,40 @@ impl EmpiricalNdf {
     /// Sum of `d * proj_solid_angle` (1 up to rounding for a computed NDF).
     pub fn total(&self) -> f64 {
         self.bins.iter().map(|b| b.d * b.proj_solid_angle).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// For any frame, the bins' projected solid angles sum to pi (the integral of cos over the
+    /// hemisphere) and their solid angles to 2 pi: exact values, reached to the quadrature error,
+    /// including near-delta frames (the floor), strong anisotropy and tilted centres, where the whole
+    /// hemisphere beyond the data is squeezed into a thin rim zone of the disk.
+    #[test]
+    fn bins_tile_the_hemisphere_for_extreme_frames() {
+        let frames = [
+            SlopeFrame::new([0.0, 0.0], [[0.09, 0.0], [0.0, 0.09]]),
+            SlopeFrame::new([0.3, -0.1], [[0.0, 0.0], [0.0, 0.0]]),
+            SlopeFrame::new([0.5, 0.4], [[1e-6, 0.0], [0.0, 1.0]]),
+            SlopeFrame::new([-0.2, 0.1], [[4e-4, 3e-4], [3e-4, 9e-4]]),
+            SlopeFrame::new([0.0, 0.0], [[100.0, 0.0], [0.0, 25.0]]),
+        ];
+        for f in frames {
+            for n in [15, 61] {
+                let g = BinGrid::new(n);
+                let (mut w, mut o) = (0.0, 0.0);
+                for c in 0..g.cells() {
+                    let (cw, co, _) = cell_integrals(&f, &g, c);
+                    w += cw;
+                    o += co;
+                }
+                eprintln!("frame {:?} n {n}: W - pi = {:.2e}, omega - 2pi = {:.2e}", f.cov, w - std::f64::consts::PI, o - 2.0 * std::f64::consts::PI);
+                // Measured: <= 1e-10 for ordinary frames, 6e-7 at the anisotropy cap with a tilted centre.
+                assert!((w - std::f64::consts::PI).abs() < 2e-6, "W {w}");
+                assert!((o - 2.0 * std::f64::consts::PI).abs() < 2e-6, "omega {o}");
+            }
+        }
     }
 }

@@ -1,0 +1,143 @@
+//! The objective of `data_formats/objective.md`: per-bin residuals whose squares sum to the objective,
+//! and their derivative with respect to `ln D` (the chain rule then gives the Jacobian from [`super::lnd`]).
+
+use nalgebra::Vector3;
+
+use crate::error::{Error, ErrorKind, Result};
+use crate::ndf::EmpiricalNdf;
+
+/// Which residuals the fit minimizes (both defined in `data_formats/objective.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Objective {
+    /// Poisson deviance of the bin counts (the likelihood-ratio statistic); every bin with `W > 0`.
+    #[default]
+    Poisson,
+    /// Count-weighted least squares on `ln D` over bins with `c >= 10`.
+    Logd,
+}
+
+impl Objective {
+    /// The name used on the command line and in the JSON.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Objective::Poisson => "poisson",
+            Objective::Logd => "logd",
+        }
+    }
+}
+
+impl std::str::FromStr for Objective {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "poisson" => Ok(Objective::Poisson),
+            "logd" => Ok(Objective::Logd),
+            _ => Err(Error::invalid(format!("unknown objective '{s}' (expected poisson or logd)"))),
+        }
+    }
+}
+
+/// Minimum count of a bin in the `logd` objective (objective.md): below it `ln d` is too noisy (and
+/// undefined at 0) for a Gaussian model of its error.
+pub const LOGD_MIN_COUNT: f64 = 10.0;
+
+/// One bin as the objective sees it, with per-bin constants precomputed once.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bin {
+    /// Central direction (unit, `z > 0`).
+    pub m: Vector3<f64>,
+    /// Count `c_k`.
+    pub c: f64,
+    /// Projected solid angle `W_k` (sr).
+    pub w: f64,
+    /// `ln(N W_k)`, so `ln E_k = ln_nw + ln D(m_k)`.
+    pub ln_nw: f64,
+}
+
+/// The bins a fit uses: `W_k > 0` and `m.z > 0` (objective.md), with `N = sum c_k`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitData {
+    /// Bins used by the objective.
+    pub bins: Vec<Bin>,
+    /// `N`, the total count.
+    pub n: f64,
+    /// Number of bins with `c_k > 0`.
+    pub k_nonzero: usize,
+    /// The objective.
+    pub objective: Objective,
+}
+
+impl FitData {
+    /// Select and prepare the bins of `ndf` for `objective`. Fails on an NDF with no counts.
+    pub fn new(ndf: &EmpiricalNdf, objective: Objective) -> Result<FitData> {
+        let usable = |b: &&crate::ndf::NdfBin| {
+            // Bins at or below the horizon have no projected area and D = 0 there: not data.
+            b.proj_solid_angle > 0.0 && b.proj_solid_angle.is_finite() && b.m.z > 0.0 && b.m.iter().all(|v| v.is_finite())
+        };
+        let n: f64 = ndf.bins.iter().filter(usable).map(|b| b.count as f64).sum();
+        if n <= 0.0 {
+            return Err(Error::new(ErrorKind::BadData, "the empirical NDF has no counts (no valid normals)"));
+        }
+        let min_c = match objective {
+            Objective::Poisson => 0.0,
+            Objective::Logd => LOGD_MIN_COUNT,
+        };
+        let bins: Vec<Bin> = ndf
+            .bins
+            .iter()
+            .filter(usable)
+            .filter(|b| b.count as f64 >= min_c)
+            .map(|b| Bin { m: b.m.normalize(), c: b.count as f64, w: b.proj_solid_angle, ln_nw: (n * b.proj_solid_angle).ln() })
+            .collect();
+        let k_nonzero = bins.iter().filter(|b| b.c > 0.0).count();
+        if bins.is_empty() {
+            return Err(Error::new(ErrorKind::BadData, format!("no NDF bin qualifies for the {} objective", objective.as_str())));
+        }
+        Ok(FitData { bins, n, k_nonzero, objective })
+    }
+}
+
+/// `x - 1 - ln x` for `x = 1 + t`, accurate near `t = 0` where the direct form cancels.
+#[inline]
+fn t_minus_ln1p(t: f64) -> f64 {
+    if t.abs() < 1e-3 {
+        // Series; the first omitted term t^7/7 is below 1e-16 relative to t^2/2 here.
+        let t2 = t * t;
+        t2 * (0.5 - t / 3.0 + t2 / 4.0 - t2 * t / 5.0 + t2 * t2 / 6.0)
+    } else {
+        t - t.ln_1p()
+    }
+}
+
+/// Residual `r_k` and `d r_k / d ln D(m_k)` for a bin given `ln D(m_k)`.
+#[inline]
+pub fn residual(objective: Objective, bin: &Bin, ln_d: f64) -> (f64, f64) {
+    match objective {
+        Objective::Poisson => {
+            let ln_e = bin.ln_nw + ln_d;
+            let e = ln_e.exp();
+            let c = bin.c;
+            // h = E - c + c ln(c/E) >= 0, in the form that is accurate in each regime.
+            let h = if c == 0.0 {
+                e
+            } else {
+                let ln_ratio = ln_e - c.ln();
+                if ln_ratio.abs() < 0.5 {
+                    c * t_minus_ln1p(ln_ratio.exp_m1())
+                } else {
+                    e - c - c * ln_ratio
+                }
+            };
+            let r = if c > e { (2.0 * h).sqrt() } else { -(2.0 * h).sqrt() };
+            // dr/dlnD = (E - c)/r; at r = 0 its limit is -sqrt(c) (r ~ -(E-c)/sqrt(c) near E = c).
+            let dr = if r != 0.0 { (e - c) / r } else { -c.sqrt() };
+            (r, dr)
+        }
+        Objective::Logd => {
+            let sc = bin.c.sqrt();
+            // ln d_k = ln(c_k / (N W_k)) = ln c_k - ln_nw.
+            (sc * (ln_d - (bin.c.ln() - bin.ln_nw)), sc)
+        }
+    }
+}

@@ -1,0 +1,76 @@
+//! The least-squares problem handed to the `levenberg-marquardt` crate (and, through the same residual
+//! code, to the argmin solvers): residuals of [`super::objective`] with the analytic Jacobian of
+//! [`super::lnd`].
+
+use levenberg_marquardt::LeastSquaresProblem;
+use nalgebra::{DMatrix, DVector, Dyn, Owned};
+
+use super::lnd::LnD;
+use super::objective::{residual, FitData};
+use crate::models::ModelId;
+
+/// Residuals into `r` (length = bins) at internal vector `x`; returns the objective `sum r^2`.
+pub fn residuals_into(data: &FitData, id: ModelId, x: &[f64], r: &mut [f64]) -> f64 {
+    let f = LnD::new(id, x);
+    let mut sum = 0.0;
+    for (rk, bin) in r.iter_mut().zip(&data.bins) {
+        let (v, _) = residual(data.objective, bin, f.value(&bin.m));
+        *rk = v;
+        sum += v * v;
+    }
+    sum
+}
+
+/// Residuals and the Jacobian (column-major, bins x params) at `x`. Buffers are the caller's.
+pub fn jacobian_into(data: &FitData, id: ModelId, x: &[f64], r: &mut [f64], jac: &mut DMatrix<f64>) {
+    let f = LnD::new(id, x);
+    let p = x.len();
+    let mut g = [0.0; 5];
+    for (k, bin) in data.bins.iter().enumerate() {
+        let ln_d = f.value_grad(&bin.m, &mut g[..p]);
+        let (v, dr) = residual(data.objective, bin, ln_d);
+        r[k] = v;
+        for (j, gj) in g[..p].iter().enumerate() {
+            jac[(k, j)] = dr * gj;
+        }
+    }
+}
+
+/// The LM problem: a model id, the data and the current internal parameters.
+#[derive(Debug, Clone)]
+pub struct Problem<'a> {
+    /// The data.
+    pub data: &'a FitData,
+    /// The model being fitted.
+    pub id: ModelId,
+    /// Current internal parameters.
+    pub x: DVector<f64>,
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.x.copy_from(x);
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.x.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        let mut r = DVector::zeros(self.data.bins.len());
+        let f = residuals_into(self.data, self.id, self.x.as_slice(), r.as_mut_slice());
+        // A non-finite objective is reported to LM as a failed evaluation, never passed on as NaN.
+        f.is_finite().then_some(r)
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        let mut r = vec![0.0; self.data.bins.len()];
+        let mut j = DMatrix::zeros(self.data.bins.len(), self.x.len());
+        jacobian_into(self.data, self.id, self.x.as_slice(), &mut r, &mut j);
+        j.iter().all(|v| v.is_finite()).then_some(j)
+    }
+}

@@ -1,0 +1,195 @@
+//! The fit result as the contract's `ndfit.fit/1` JSON (documented key by key in `data_formats/fit.md`,
+//! schema in `data_formats/fit.schema.json`).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use crate::heightfield::Heightfield;
+use crate::models::ModelId;
+
+/// The schema id of a fit result.
+pub const SCHEMA: &str = "ndfit.fit/1";
+
+/// The scanned input (contract: `input` {path, format, nx, ny, dx, dy}).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct InputInfo {
+    /// The scan's path as given.
+    pub path: String,
+    /// Format id.
+    pub format: String,
+    /// Columns.
+    pub nx: usize,
+    /// Rows.
+    pub ny: usize,
+    /// Spacing along x (m).
+    pub dx: f64,
+    /// Spacing along y (m).
+    pub dy: f64,
+    /// Masked points.
+    pub invalid: usize,
+}
+
+impl InputInfo {
+    /// Describe `hf` read from `path`.
+    pub fn new(path: &Path, hf: &Heightfield) -> InputInfo {
+        InputInfo {
+            path: path.display().to_string(),
+            format: hf.meta.format.clone(),
+            nx: hf.nx,
+            ny: hf.ny,
+            dx: hf.dx,
+            dy: hf.dy,
+            invalid: hf.invalid_count(),
+        }
+    }
+}
+
+/// How well the model describes the data.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Quality {
+    /// `poisson` or `logd` (objective.md).
+    pub objective: String,
+    /// The objective `F = sum r_k^2` at the optimum (the Poisson deviance, or the weighted log-D sum).
+    pub objective_value: f64,
+    /// Degrees of freedom `K - p`.
+    pub dof: i64,
+    /// `F / (K - p)`; near 1 for independent Poisson counts, larger for correlated normals.
+    pub reduced_chi2: Option<f64>,
+    /// Bins in the objective.
+    pub n_bins: usize,
+    /// Bins with a non-zero count (`K`).
+    pub n_bins_nonzero: usize,
+    /// Total count `N`.
+    pub n_samples: f64,
+    /// `delta(D_fit; D_empirical)` over the bins (objective.md), counting noise included.
+    pub delta_data: Option<f64>,
+    /// Numerical rank of the Jacobian at the optimum (= parameter count when all are determined).
+    pub rank: usize,
+    /// Condition number of the column-scaled `J^T J` (absent when rank deficient).
+    pub condition: Option<f64>,
+}
+
+/// What the solver did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SolverInfo {
+    /// `lm`, `nelder-mead` or `lbfgs`.
+    pub name: String,
+    /// The termination reason of the best start, as the solver names it.
+    pub termination: String,
+    /// Whether the solver reports convergence for the best start.
+    pub converged: bool,
+    /// Objective evaluations, summed over all starts.
+    pub evaluations: usize,
+    /// Number of starting points tried.
+    pub starts: usize,
+    /// Index of the start that gave the best objective.
+    pub best_start: usize,
+    /// Best objective of every start, in order (shows whether the problem was multimodal).
+    pub start_objectives: Vec<f64>,
+}
+
+/// Wall-clock times in milliseconds.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Timings {
+    /// Reading and preprocessing the scan (CLI only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub read_ms: Option<f64>,
+    /// Building the empirical NDF (CLI only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ndf_ms: Option<f64>,
+    /// The fit (all starts, covariance, for `auto` all candidate models).
+    pub fit_ms: f64,
+}
+
+/// One candidate of `--model auto`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Candidate {
+    /// Model id.
+    pub model: ModelId,
+    /// Canonical parameters.
+    pub params: BTreeMap<String, f64>,
+    /// Parameter count `p`.
+    pub n_params: usize,
+    /// Objective at the optimum.
+    pub objective_value: f64,
+    /// Reduced chi-square.
+    pub reduced_chi2: Option<f64>,
+    /// `delta(D_fit; D_empirical)`.
+    pub delta_data: Option<f64>,
+    /// The information criterion (see [`Selection::criterion`]); lower is better.
+    pub criterion: f64,
+    /// The model this one extends in its nested chain (ggx -> ggx-aniso -> ellipsoid, beckmann ->
+    /// beckmann-aniso), if any.
+    pub parent: Option<ModelId>,
+    /// `criterion - criterion(parent)`: negative when the extra parameters pay for themselves.
+    pub d_criterion: Option<f64>,
+    /// `delta_data - delta_data(parent)`: what the extra parameters buy in fit error.
+    pub d_delta_data: Option<f64>,
+    /// Whether the solver converged.
+    pub converged: bool,
+}
+
+/// Model selection of `--model auto`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Selection {
+    /// The criterion: `qbic` = `F / c + p ln N` (BIC with the quasi-likelihood overdispersion `c`).
+    pub criterion: String,
+    /// The overdispersion `c = max(1, reduced_chi2 of the richest model)`.
+    pub overdispersion: f64,
+    /// Every model fitted, simplest first.
+    pub candidates: Vec<Candidate>,
+}
+
+/// A fit result (`ndfit.fit/1`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FitReport {
+    /// Always [`SCHEMA`].
+    pub schema: String,
+    /// The model id (for `auto`, the model chosen).
+    pub model: ModelId,
+    /// Canonical parameters by name (radians for angles).
+    pub params: BTreeMap<String, f64>,
+    /// Row-major A in the scan frame, for models that are ellipsoid special cases.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub matrix_a: Option<[[f64; 3]; 3]>,
+    /// The input scan (set by the caller that read it).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub input: Option<InputInfo>,
+    /// Standard errors by parameter name; `null` for a parameter the data do not determine.
+    pub std_errors: BTreeMap<String, Option<f64>>,
+    /// Parameter names in the order of the rows and columns of `correlation`.
+    pub param_order: Vec<String>,
+    /// Correlation matrix of the parameters (`null` entries for undetermined parameters).
+    pub correlation: Vec<Vec<Option<f64>>>,
+    /// The lobe is not resolved by the NDF's bins (over half of the samples in one bin): a mirror-like
+    /// surface whose alpha is an upper bound set by the binning, not a measurement.
+    pub specular: bool,
+    /// Goodness of fit.
+    pub quality: Quality,
+    /// Solver details.
+    pub solver: SolverInfo,
+    /// Wall-clock times.
+    pub timings: Timings,
+    /// For `--model auto`: every candidate and the criterion.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub selection: Option<Selection>,
+    /// Anything the user should know (non-convergence, undetermined parameters, specular data).
+    pub warnings: Vec<String>,
+}
+
+impl FitReport {
+    /// The parameters in the order of [`ModelId::param_names`].
+    pub fn param_vec(&self) -> Vec<f64> {
+        self.model.param_names().iter().map(|n| self.params.get(*n).copied().unwrap_or(f64::NAN)).collect()
+    }
+
+    /// The standard errors in the order of [`ModelId::param_names`] (NaN when undetermined).
+    pub fn std_error_vec(&self) -> Vec<f64> {
+        self.model.param_names().iter().map(|n| self.std_errors.get(*n).copied().flatten().unwrap_or(f64::NAN)).collect()
+    }
+
+    /// The fitted model as a [`crate::models::Model`].
+    pub fn to_model(&self) -> crate::Result<crate::models::Model> {
+        crate::models::Model::from_params(self.model, &self.param_vec())
+    }
+}

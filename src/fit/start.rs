@@ -1,0 +1,118 @@
+//! Starting points from the empirical NDF's slope distribution, in closed form.
+//!
+//! Every model here is a stretched isotropic slope distribution (Heitz eq. 88-90): in the principal frame
+//! `s' = Rz(theta_z) s`, the marginal of `s'_x / alpha_x` is a fixed distribution, so the median of
+//! `|s'_x|` is `alpha_x` times a constant:
+//! - Beckmann: the marginal is normal with variance 1/2 (Heitz eq. 82), median `|t|` = 0.476936;
+//! - GGX: the marginal density is `(1/2)(1 + t^2)^(-3/2)` (P22 of Heitz eq. 85 integrated over the other
+//!   slope), whose CDF gives `P(|t| < T) = T / sqrt(1 + T^2)`, so the median `|t|` is `1/sqrt(3)`.
+//!
+//! Medians, not variances: the GGX slope variance is infinite. `theta_z` comes from the eigenvectors of
+//! the (bounded) covariance of the normals' tangential components, which share the principal axes.
+//! The ellipsoid's skew starts from the mean normal direction (the peak of a narrow lobe lies along the
+//! ellipsoid's third axis, row 3 of R in Walter et al. eq. 3).
+
+use super::objective::FitData;
+use crate::models::ModelId;
+
+/// Median `|t|` of the unit Beckmann marginal: `0.6744898 / sqrt(2)`.
+const BECKMANN_MEDIAN: f64 = 0.476_936_276_204_47;
+/// Median `|t|` of the unit GGX marginal: `1 / sqrt(3)`.
+const GGX_MEDIAN: f64 = 0.577_350_269_189_625_8;
+/// Smallest starting alpha: a lobe narrower than this is reached by LM from above in a few steps.
+const START_ALPHA_MIN: f64 = 1e-3;
+
+/// Weighted median of `(value, weight)` pairs (values sorted in place).
+fn weighted_median(v: &mut [(f64, f64)]) -> f64 {
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = v.iter().map(|p| p.1).sum();
+    let mut acc = 0.0;
+    for &(x, w) in v.iter() {
+        acc += w;
+        if acc >= 0.5 * total {
+            return x;
+        }
+    }
+    v.last().map_or(0.0, |p| p.0)
+}
+
+/// Summary of the data used for starting points.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlopeSummary {
+    /// `theta_z` of the principal frame (local x axis = major axis).
+    pub theta_z: f64,
+    /// Median `|s'_x|`, `|s'_y|` in the principal frame.
+    pub median_abs: [f64; 2],
+    /// Median radial slope `|s|`.
+    pub median_radial: f64,
+    /// Count-weighted mean normal (unit).
+    pub mean_normal: [f64; 3],
+}
+
+/// The slope summary of the bins (count-weighted, each bin at its central direction).
+pub fn summarize(data: &FitData) -> SlopeSummary {
+    let (mut sw, mut mx, mut my, mut mz) = (0.0, 0.0, 0.0, 0.0);
+    for b in &data.bins {
+        sw += b.c;
+        mx += b.c * b.m.x;
+        my += b.c * b.m.y;
+        mz += b.c * b.m.z;
+    }
+    let (mx, my, mz) = (mx / sw, my / sw, mz / sw);
+    let (mut cxx, mut cxy, mut cyy) = (0.0, 0.0, 0.0);
+    for b in &data.bins {
+        let (dx, dy) = (b.m.x - mx, b.m.y - my);
+        cxx += b.c * dx * dx;
+        cxy += b.c * dx * dy;
+        cyy += b.c * dy * dy;
+    }
+    // Major axis angle phi of the 2x2 covariance; the local frame m' = Rz(theta_z) m puts it on x
+    // when theta_z = -phi.
+    let phi = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
+    let tz = -phi;
+    let (s, c) = tz.sin_cos();
+    let mut ax = Vec::with_capacity(data.bins.len());
+    let mut ay = Vec::with_capacity(data.bins.len());
+    let mut rad = Vec::with_capacity(data.bins.len());
+    for b in data.bins.iter().filter(|b| b.c > 0.0) {
+        let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
+        ax.push(((c * sx - s * sy).abs(), b.c));
+        ay.push(((s * sx + c * sy).abs(), b.c));
+        rad.push((sx.hypot(sy), b.c));
+    }
+    let norm = (mx * mx + my * my + mz * mz).sqrt();
+    SlopeSummary {
+        theta_z: tz,
+        median_abs: [weighted_median(&mut ax), weighted_median(&mut ay)],
+        median_radial: weighted_median(&mut rad),
+        mean_normal: [mx / norm, my / norm, mz / norm],
+    }
+}
+
+/// The closed-form starting point (contract parameters) of a one- or three-parameter model.
+/// For the ellipsoid it gives the GTR2aniso start with zero skew; see [`skew_start`].
+pub fn closed_form(id: ModelId, s: &SlopeSummary) -> Vec<f64> {
+    let beck = matches!(id, ModelId::Beckmann | ModelId::BeckmannAniso);
+    let k = if beck { 1.0 / BECKMANN_MEDIAN } else { 1.0 / GGX_MEDIAN };
+    // Radial median: GGX P(|s| < R) = 1 - 1/(1 + R^2/a^2) gives R = a; Beckmann 1 - exp(-R^2/a^2)
+    // gives R = a sqrt(ln 2).
+    let iso = if beck { s.median_radial / std::f64::consts::LN_2.sqrt() } else { s.median_radial };
+    let ax = (k * s.median_abs[0]).max(START_ALPHA_MIN);
+    let ay = (k * s.median_abs[1]).max(START_ALPHA_MIN);
+    match id {
+        ModelId::Ggx | ModelId::Beckmann => vec![iso.max(START_ALPHA_MIN)],
+        ModelId::GgxAniso | ModelId::BeckmannAniso => vec![ax, ay, s.theta_z],
+        ModelId::Ellipsoid => vec![ax, ay, 0.0, 0.0, s.theta_z],
+    }
+}
+
+/// `(theta_x, theta_y)` that put the ellipsoid's third axis along the mean normal, given `theta_z`:
+/// row 3 of `R = Rx Ry Rz` is `w^T Rz` with `w = (-cx sy, sx, cx cy)`, so `w = Rz(theta_z) p`.
+pub fn skew_start(s: &SlopeSummary, theta_z: f64) -> (f64, f64) {
+    let [px, py, pz] = s.mean_normal;
+    let (sn, cs) = theta_z.sin_cos();
+    let w = [cs * px - sn * py, sn * px + cs * py, pz];
+    let tx = w[1].clamp(-1.0, 1.0).asin();
+    let ty = (-w[0]).atan2(w[2]);
+    (tx, ty)
+}

@@ -1,0 +1,108 @@
+//! The analytic Jacobians against central finite differences.
+//!
+//! Tolerance: central differences with step `h` err by `h^2 |f'''| / 6` (truncation) plus
+//! `eps |f| / h` (rounding); with `h = 1e-5`, `|ln D| < 30` and `|f'''| < 1e4` over the test domain that
+//! is below 2e-6, so `2e-5 (1 + |g|)` cannot hide a wrong term (those are O(|g|)) yet is safe.
+
+use nalgebra::{DMatrix, Vector3};
+use ndfit::fit::lnd::LnD;
+use ndfit::fit::objective::{FitData, Objective};
+use ndfit::fit::params::{to_internal, to_public};
+use ndfit::fit::problem::{jacobian_into, residuals_into};
+use ndfit::models::{ModelId, Ndf};
+use rand::{RngExt, SeedableRng};
+
+use super::fixtures::{model, ndf_of};
+
+const H: f64 = 1e-5;
+
+fn random_params(id: ModelId, rng: &mut rand::rngs::StdRng) -> Vec<f64> {
+    let a = |rng: &mut rand::rngs::StdRng| 10f64.powf(rng.random_range(-2.5..0.5));
+    let t = |rng: &mut rand::rngs::StdRng, r: f64| rng.random_range(-r..r);
+    match id {
+        ModelId::Ggx | ModelId::Beckmann => vec![a(rng)],
+        ModelId::GgxAniso | ModelId::BeckmannAniso => vec![a(rng), a(rng), t(rng, 3.0)],
+        ModelId::Ellipsoid => vec![a(rng), a(rng), t(rng, 1.2), t(rng, 1.2), t(rng, 3.0)],
+    }
+}
+
+#[test]
+fn ln_d_matches_the_models_d() {
+    // Independent source: the models module's D (Walter eq. 1, Heitz eq. 82) evaluated directly.
+    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+    for id in ModelId::ALL {
+        for _ in 0..50 {
+            let p = random_params(id, &mut rng);
+            let m = model(id, &p);
+            let f = LnD::new(id, &to_internal(id, &p));
+            let dir = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(0.05..1.0)).normalize();
+            let want = m.d(dir);
+            if want > 1e-300 {
+                let got = f.value(&dir).exp();
+                assert!((got / want - 1.0).abs() < 1e-11, "{id} {p:?} at {dir:?}: {got} vs {want}");
+            }
+        }
+    }
+}
+
+#[test]
+fn ln_d_gradient_matches_central_differences() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(2);
+    for id in ModelId::ALL {
+        for _ in 0..40 {
+            let x = to_internal(id, &random_params(id, &mut rng));
+            let dir = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(0.2..1.0)).normalize();
+            let mut g = vec![0.0; x.len()];
+            let v = LnD::new(id, &x).value_grad(&dir, &mut g);
+            assert!((v - LnD::new(id, &x).value(&dir)).abs() < 1e-12 * v.abs().max(1.0));
+            for j in 0..x.len() {
+                let (mut xp, mut xm) = (x.clone(), x.clone());
+                xp[j] += H;
+                xm[j] -= H;
+                let fd = (LnD::new(id, &xp).value(&dir) - LnD::new(id, &xm).value(&dir)) / (2.0 * H);
+                assert!((fd - g[j]).abs() < 2e-5 * (1.0 + g[j].abs()), "{id} x={x:?} m={dir:?} param {j}: analytic {} vs FD {fd}", g[j]);
+            }
+        }
+    }
+}
+
+#[test]
+fn residual_jacobian_matches_central_differences() {
+    // Through the objective's chain rule, for both objectives, at a point away from the optimum so
+    // that both signs of c - E occur; bins with small and zero counts included.
+    for objective in [Objective::Poisson, Objective::Logd] {
+        for (id, truth, at) in [
+            (ModelId::Ellipsoid, vec![0.3, 0.15, 0.2, -0.1, 0.5], vec![0.25, 0.2, 0.1, -0.2, 0.7]),
+            (ModelId::BeckmannAniso, vec![0.2, 0.1, 0.3], vec![0.18, 0.12, 0.2]),
+            (ModelId::Ggx, vec![0.1], vec![0.13]),
+        ] {
+            let ndf = ndf_of(&model(id, &truth), 2e4, 3);
+            let data = FitData::new(&ndf, objective).expect("data");
+            let x = to_internal(id, &at);
+            let k = data.bins.len();
+            let mut r = vec![0.0; k];
+            let mut j = DMatrix::zeros(k, x.len());
+            jacobian_into(&data, id, &x, &mut r, &mut j);
+            for p in 0..x.len() {
+                let (mut xp, mut xm) = (x.clone(), x.clone());
+                xp[p] += H;
+                xm[p] -= H;
+                let (mut rp, mut rm) = (vec![0.0; k], vec![0.0; k]);
+                residuals_into(&data, id, &xp, &mut rp);
+                residuals_into(&data, id, &xm, &mut rm);
+                for b in 0..k {
+                    let fd = (rp[b] - rm[b]) / (2.0 * H);
+                    // The Poisson residual has a kink in its second derivative only where c = 0 and
+                    // E -> 0 (sqrt(2E)); relative tolerance as above on |r| and |J|.
+                    let tol = 2e-5 * (1.0 + j[(b, p)].abs() + r[b].abs());
+                    assert!((fd - j[(b, p)]).abs() < tol, "{objective:?} {id} bin {b} param {p}: {} vs {fd}", j[(b, p)]);
+                }
+            }
+            // Parameter maps round-trip.
+            let back = to_internal(id, &to_public(id, &x));
+            for (a, b) in x.iter().zip(&back) {
+                assert!((a - b).abs() < 1e-12);
+            }
+        }
+    }
+}

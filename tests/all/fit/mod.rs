@@ -1,0 +1,10 @@
+//! Integration tests of the fitter (`ndfit::fit`): Jacobians against central differences, recovery of
+//! synthetic truth, coverage of the reported standard errors, extremes, model selection, the JSON schema
+//! and the CLI.
+
+mod fixtures;
+
+mod canonical;
+mod covariance;
+mod jacobian;
+mod recovery;
