@@ -90,7 +90,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let hf = args.scan.load()?;
     let opts = ScaleOptions { footprints, models, samples_per_point: args.samples_per_point, bins: args.bins, seed: args.seed, blur: args.blur };
     let fitter = ndfit::scale::default_fitter();
-    let results = analyze(&hf, &opts, fitter.as_ref().map(|f| f as &dyn Fitter)).map_err(|e| anyhow!("{path}: {e}"))?;
+    let results = analyze(&hf, &opts, Some(&fitter as &dyn Fitter)).map_err(|e| anyhow!("{path}: {e}"))?;
     // The recommendation covers the scene's footprints, or every footprint given when there is no scene.
     let rec_fps: Vec<f64> = if scene_fps.is_empty() { args.footprint.clone() } else { scene_fps.clone() };
     let rec_results: Vec<_> = results.iter().filter(|r| rec_fps.contains(&r.stats.footprint)).cloned().collect();
@@ -107,7 +107,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         "bins": opts.bins,
         "seed": opts.seed,
         "blur": opts.blur,
-        "fitter": if fitter.is_some() { "ndfit::fit" } else { "none" },
+        "fitter": "ndfit::fit::fit_model (Levenberg-Marquardt, Poisson deviance)",
     });
     let report = report_json(input, options, &results, Some(&rec));
     let text = serde_json::to_string_pretty(&report)? + "\n";

@@ -14,6 +14,7 @@
 pub mod analyze;
 pub mod fields;
 pub mod filter;
+pub mod fitter;
 pub mod ndf_at;
 pub mod footprint;
 pub mod plot;
@@ -21,17 +22,7 @@ pub mod report;
 pub mod roughness;
 pub mod scene;
 
-/// The fitter of `src/fit/` behind [`analyze::Fitter`], or `None` while the crate has none.
-pub fn default_fitter() -> Option<impl analyze::Fitter> {
-    None::<NoFitter>
-}
-
-/// Placeholder type for [`default_fitter`] until `src/fit/` provides fits.
-#[derive(Debug, Clone, Copy)]
-pub struct NoFitter;
-
-impl analyze::Fitter for NoFitter {
-    fn fit(&self, _ndf: &crate::ndf::EmpiricalNdf, _id: crate::models::ModelId) -> crate::Result<analyze::Fitted> {
-        Err(crate::Error::new(crate::ErrorKind::Unsupported, "no fitter in this build"))
-    }
+/// The fitter of `src/fit/` behind [`analyze::Fitter`].
+pub fn default_fitter() -> fitter::FitFitter {
+    fitter::FitFitter::default()
 }

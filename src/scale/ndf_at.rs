@@ -170,7 +170,7 @@ fn bin_slopes_on(slopes: &[Vector2<f64>], cells_across: Option<usize>, frame: Op
         .par_iter()
         .map(|&c| {
             let (mut w, mut o, mut px, mut py) = (0.0, 0.0, 0.0, 0.0);
-            grid.quadrature(c, QuadOrder::Standard, |p, wt| {
+            grid.quadrature(c, QuadOrder::Standard, &frame.rim_shape(), |p, wt| {
                 let dw = frame.proj_density(p) * wt;
                 w += dw;
                 o += frame.solid_density(p) * wt;
