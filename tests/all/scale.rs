@@ -315,3 +315,97 @@ mod routes {
         assert!((cp.trace() / cm.trace() - 1.0).abs() < 0.02, "{} vs {}", cp.trace(), cm.trace());
     }
 }
+
+mod fitted {
+    use ndfit::models::ModelId;
+    use ndfit::scale::analyze::Fitter;
+    use ndfit::scale::fitter::FitFitter;
+    use ndfit::scale::ndf_at::{sample_slopes_with, Blur};
+
+    use super::*;
+
+    #[test]
+    fn gaussian_surface_beckmann_fit_grows_by_twice_the_kernel_variance() {
+        // The identity with the real fitter (src/fit, Poisson deviance): on an isotropic Gaussian
+        // surface the Beckmann alpha^2 fitted to the NDF at F (S1', Tokuyoshi's single kernel) exceeds the
+        // one fitted to the filtered surface h_F by twice the kernel's per-axis slope variance, and both
+        // match the closed forms of the spectrum (fields.rs): alpha_F^2 = tr Cov(s_F), alpha^2(F) =
+        // alpha_F^2 + 2 sigma_F^2. Tolerance: the fit estimates alpha^2 from n samples of which only
+        // ~ (L / (corr + sigma_K))^2 are independent for s_F; the relative standard error of a Gaussian
+        // variance from m independent samples is sqrt(2/m) ~ 5 % at m = 1000; 10 % allows 2 of them.
+        let fs = FourierSurface::gaussian_spectrum(256, DX, 600, (6.0 * DX, 6.0 * DX), 0.0, 0.2, 8).unwrap();
+        let cov_s = fs.slope_cov(&[1.0], &[1.0]);
+        let fitter = FitFitter::default();
+        for footprint in [3.0 * DX, 10.0 * DX] {
+            let sig = kernel_sigma(footprint) / DX;
+            let taps = gaussian_taps(sig).unwrap();
+            let pad = taps.len() / 2 + 2;
+            let hf = fs.heightfield(pad).unwrap();
+            let (sx, sy) = slope_field(&hf);
+            let mut ff = footprint_field(hf.nx, hf.ny, DX, DX, &sx, &sy, kernel_sigma(footprint)).unwrap();
+            let keep: std::collections::HashSet<usize> = fs.central_points(pad).into_iter().collect();
+            for p in 0..ff.sfx.len() {
+                if !keep.contains(&p) {
+                    ff.sfx[p] = f64::NAN;
+                }
+            }
+            let cov_f = fs.slope_cov(&taps, &taps);
+            let a2_f_true = cov_f.trace();
+            let kvar = (cov_s - cov_f).trace() / 2.0;
+            let fit = |s: &[nalgebra::Vector2<f64>]| {
+                let ndf = bin_slopes(s, None).unwrap();
+                let m = fitter.fit(&ndf, ModelId::Beckmann).unwrap().model;
+                m.params()[0].powi(2)
+            };
+            let a2_f = fit(&sample_slopes_with(&ff, 1, None, 1));
+            let a2_at = fit(&sample_slopes_with(&ff, 2, Some(Blur::Mean), 2));
+            eprintln!(
+                "F={footprint:e}: alpha_F^2 fit {a2_f:.5} closed {a2_f_true:.5}; alpha^2(F) fit {a2_at:.5} closed {:.5}; growth {:.5} vs 2 sigma_F^2 {:.5}",
+                a2_f_true + 2.0 * kvar,
+                a2_at - a2_f,
+                2.0 * kvar
+            );
+            assert!((a2_f / a2_f_true - 1.0).abs() < 0.10);
+            assert!((a2_at / (a2_f_true + 2.0 * kvar) - 1.0).abs() < 0.10);
+            // The growth itself: the same sampling error, relative to the total alpha^2.
+            assert!(((a2_at - a2_f) - 2.0 * kvar).abs() < 0.10 * (a2_f_true + 2.0 * kvar));
+        }
+    }
+
+    #[test]
+    fn bump_field_fitted_ellipsoid_tilt_fades() {
+        // The skew of identical tilted caps, as the ellipsoid fit sees it: the scale-free offset of the
+        // lobe centre sqrt(mu^T A2^-1 mu) (roughness.rs) and the tilt angles, fitted to the NDF at F by
+        // both routes. Once the footprint covers many bumps the NDF at F is a Gaussian blur centred on
+        // the mean slope, so both must fall well below their value at the scan's own scale.
+        // Wide caps that leave little flat ground (a flat floor is a spike at the macro normal that the
+        // fit must also follow).
+        let bumps = BumpField {
+            period: 16.0 * DX,
+            semi_axes: Vector3::new(7.9, 7.0, 4.0) * DX,
+            angles: Vector3::new(0.35, -0.3, 0.3),
+            depth: 0.5 * DX,
+        };
+        let hf = bumps.heightfield(160, DX).unwrap();
+        let opts = ndfit::scale::analyze::ScaleOptions {
+            footprints: vec![0.0, 64.0 * DX],
+            models: vec![ModelId::Ellipsoid],
+            ..Default::default()
+        };
+        let res = ndfit::scale::analyze::analyze(&hf, &opts, Some(&FitFitter::default())).unwrap();
+        let skew = |r: &ndfit::scale::analyze::FootprintResult, analytic: bool| {
+            let m = &r.models[0];
+            let rr = if analytic { &m.analytic } else { &m.empirical };
+            let model = rr.model.expect("ellipsoid fit");
+            let p = model.params();
+            (ndfit::scale::analyze::model_skew(&model), p[2].hypot(p[3]))
+        };
+        let (e0, t0) = skew(&res[0], false);
+        let (e1, t1) = skew(&res[1], false);
+        let (a1, ta1) = skew(&res[1], true);
+        eprintln!("skew offset / tilt: F=0 {e0:.3}/{t0:.3}; F=64 empirical {e1:.3}/{t1:.3}, analytic {a1:.3}/{ta1:.3}");
+        assert!(e0 > 0.2, "the caps' NDF must be skewed at the scan's scale: {e0}");
+        assert!(e1 < 0.25 * e0 && a1 < 0.25 * e0, "skew must fade: {e0} -> {e1} (analytic {a1})");
+        assert!(t1 < 0.25 * t0 && ta1 < 0.25 * t0, "tilt must fade: {t0} -> {t1} (analytic {ta1})");
+    }
+}
