@@ -139,7 +139,8 @@ fn draw_panel<DB: DrawingBackend>(
         let c = *color;
         let style = if *analytic { c.stroke_width(1) } else { c.stroke_width(2) };
         let s = chart.draw_series(LineSeries::new(pts.clone(), style)).map_err(plot_err)?;
-        s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2)));
+        let w = if *analytic { 1 } else { 3 };
+        s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(w)));
         if *analytic {
             chart
                 .draw_series(pts.iter().map(|&(x, y)| TriangleMarker::new((x, y), 5, c.filled())))
