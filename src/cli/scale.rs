@@ -35,8 +35,8 @@ pub struct Args {
     /// Largest acceptable model error delta_model at the scene's footprints.
     #[arg(long, default_value_t = 0.1)]
     pub tolerance: f64,
-    /// Blur samples per point for the empirical route.
-    #[arg(long, default_value_t = 2)]
+    /// Blur samples per point for the empirical route (Monte Carlo noise only; see data_formats/scale.md).
+    #[arg(long, default_value_t = 4)]
     pub samples_per_point: usize,
     /// Cells across the NDF's Lambert disk (odd; default: chosen from the sample count as `ndfit ndf` does).
     #[arg(long)]

@@ -10,7 +10,7 @@ use super::roughness::{
 use crate::error::{Error, ErrorKind, Result};
 use crate::heightfield::Heightfield;
 use crate::models::{Model, ModelId, Ndf};
-use crate::ndf::EmpiricalNdf;
+use crate::ndf::{EmpiricalNdf, NdfOptions};
 
 /// A fitted model and what the information criterion needs, as the fitting code reports them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,7 +58,7 @@ pub struct ScaleOptions {
 
 impl Default for ScaleOptions {
     fn default() -> Self {
-        ScaleOptions { footprints: vec![], models: ModelId::ALL.to_vec(), samples_per_point: 2, bins: None, seed: 1, blur: Blur::PerFootprint }
+        ScaleOptions { footprints: vec![], models: ModelId::ALL.to_vec(), samples_per_point: 4, bins: None, seed: 1, blur: Blur::PerFootprint }
     }
 }
 
@@ -188,8 +188,12 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
         let s_at = sample_slopes_with(&ff, opts.samples_per_point, Some(opts.blur), seed);
         let resolved = slope_moments(&s_res)?;
         let at_f = slope_moments(&s_at)?;
-        let ndf_res = bin_slopes(&s_res, opts.bins)?;
-        let ndf_at = bin_slopes(&s_at, opts.bins)?;
+        // One grid size for both NDFs, chosen from the number of footprints (as `ndfit ndf` chooses it
+        // from the number of slopes), not from the blur samples: extra samples per point only lower
+        // the Monte Carlo noise, they must not refine the bins a misspecified model is judged on.
+        let cells = opts.bins.unwrap_or_else(|| NdfOptions::default().cells_for(s_res.len() as u64));
+        let ndf_res = bin_slopes(&s_res, Some(cells))?;
+        let ndf_at = bin_slopes(&s_at, Some(cells))?;
         // Split the samples into the footprints of the scan's lower and upper half (rows), spatially
         // disjoint, for the noise estimate of `delta`.
         let pts = ff.valid_points();

@@ -280,14 +280,17 @@ mod routes {
             assert!((e[0] * e[0] / (a[0] * a[0]) - 1.0).abs() < 0.02, "F={:e}: {e:?} vs {a:?}", r.stats.footprint);
             assert!(b.route_gap.unwrap() < 0.02);
         }
-        let rec = recommend(&res, 0.05);
+        // Tolerance 0.1 (the command's default): at F = 24 samples the filtered field is carried by the
+        // few lowest modes of this one realization, whose slight anisotropy costs the isotropic Beckmann
+        // a delta_model of ~0.05 against the anisotropic one; GGX, the wrong shape, is off by > 1.
+        let rec = recommend(&res, 0.1);
         eprintln!("{}", rec.explanation);
         assert_eq!(rec.model, Some(ModelId::Beckmann), "{}", rec.explanation);
         let ggx = rec.candidates.iter().find(|c| c.model == ModelId::Ggx).unwrap();
-        assert!(!ggx.passes && ggx.worst_delta_model > 0.05);
+        assert!(!ggx.passes && ggx.worst_delta_model > 1.0);
         // Reproducible: the same input gives the same recommendation and numbers.
         let res2 = analyze(&hf, &opts, Some(&Moments)).unwrap();
-        assert_eq!(recommend(&res2, 0.05), rec);
+        assert_eq!(recommend(&res2, 0.1), rec);
     }
 
     #[test]
