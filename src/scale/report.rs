@@ -100,7 +100,7 @@ pub fn footprint_json(r: &FootprintResult) -> Value {
 pub fn report_json(input: Value, options: Value, results: &[FootprintResult], rec: Option<&Recommendation>) -> Value {
     json!({
         "schema": "ndfit.scale/1",
-        "definition": "NDF as seen at footprint F: the slopes of the low-passed surface h_F = K_F * h, each blurred by a Gaussian of its footprint's within-footprint slope covariance (data_formats/scale.md eq. S1). Empirical route: that distribution sampled, binned and fitted. Analytic route: the model fitted to h_F's NDF plus twice the mean within-footprint covariance Sigma_F in the roughness matrix (Tokuyoshi eq. 3). Kernel: Gaussian with sigma = F/2 (Tokuyoshi eq. 2).",
+        "definition": "NDF as seen at footprint F: the slopes of the low-passed surface h_F = K_F * h, each blurred by a Gaussian of its footprint's within-footprint slope covariance (data_formats/scale.md eq. S1). Empirical route: that distribution sampled, binned and fitted. Analytic route: the model fitted to h_F's NDF plus twice the mean within-footprint covariance Sigma_F in the roughness matrix (Tokuyoshi eq. 3). Kernel: Gaussian with sigma = F/2 (Tokuyoshi eq. 2). The routes agree exactly only for Beckmann on Gaussian statistics with one kernel covariance; for GGX and the ellipsoid A + 2 Sigma is an approximation (Tokuyoshi sec. 2), and varying within-footprint covariances make the NDF at F heavier-tailed than either route's single Gaussian kernel: route_gap and theory_notes say how far and why.",
         "input": input,
         "options": options,
         "footprints": results.iter().map(footprint_json).collect::<Vec<_>>(),
