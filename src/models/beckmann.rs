@@ -87,6 +87,7 @@ impl Masking for Beckmann {
         if !l.is_finite() {
             return f64::MAX; // a so small that 1/a overflowed: the grazing limit
         }
+        // The two terms nearly cancel for large a; rounding may leave an ulp below 0.
         l.max(0.0)
     }
 

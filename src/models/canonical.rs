@@ -110,6 +110,7 @@ fn principal_axes(a: &Matrix3<f64>) -> Result<([Vector3<f64>; 3], Vector3<f64>)>
     // ||A v|| is accurate to eps s_max / s_mid, 1 / ||A^-T v|| to eps s_mid / s_min: take the better one.
     let (sa, sb) = ((a * v_mid).norm(), 1.0 / (inv_t * v_mid).norm());
     let s_mid = if sa * sa >= s_max * s_min { sa } else { sb };
+    // Cannot happen after the condition check above; kept so that no NaN alpha can ever leave.
     if !(s_max.is_finite() && s_min > 0.0 && s_mid.is_finite() && s_mid > 0.0) {
         return Err(singular_error());
     }

@@ -89,8 +89,6 @@ impl Ellipsoid {
     }
 
     /// The projected area of the ellipsoid along `u` (eq. 26, `C_e = 1`): `pi ||A u|| / |A|`.
-    /// (The text of eq. 28 prints `||A||` where the determinant `|A|` is meant, as eq. 26 and the check
-    /// `A_l(u, u) = A_e(u)` show; `|A|` is used.)
     pub fn projected_area(&self, u: Vector3<f64>) -> f64 {
         std::f64::consts::PI * (self.a * u).norm() / self.det_a
     }
@@ -98,6 +96,8 @@ impl Ellipsoid {
     /// The projected area along `u` of the ellipsoidal lune cut by the planes of `u` and `v` (eq. 28, `C_e = 1`):
     /// `pi (||Au|| ||Av|| + Au.Av) / (2 |A| ||Av||)`, evaluated as `pi ||Au|| |Au^ + Av^|^2 / (4 |A|)` with
     /// unit `Au^`, `Av^` (identical algebra, no cancellation when `Au` and `Av` are nearly opposite).
+    /// (The text of eq. 28 prints `||A||` where the determinant `|A|` is meant, as eq. 26 and the check
+    /// `A_l(u, u) = A_e(u)` show; `|A|` is used.)
     pub fn projected_area_lune(&self, u: Vector3<f64>, v: Vector3<f64>) -> f64 {
         let au = self.a * u;
         let av = self.a * v;
@@ -122,6 +122,7 @@ impl Ellipsoid {
     /// `G1(u, m) = min(1, 2 ||An||^2 |u.n| / (||Au|| ||An|| + Au.An)) X+(u.m)`. In `[0, 1]`; 0 on the horizon.
     /// It is the Smith G1 of GGX when `theta_x = theta_y = 0` (sec. 4.2).
     pub fn g1(&self, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
+        // X+(u.m); written negated so that a NaN input gives 0 rather than NaN.
         if !(u.dot(&m) >= 0.0) {
             return 0.0;
         }
@@ -149,7 +150,8 @@ impl Ellipsoid {
             let first = if beta > 0.0 { tau2 / (nu + beta) } else { nu - beta };
             let p = (self.a * Vector3::new(u.x, u.y, 0.0)).dot(&c);
             let l = (first + 2.0 * p) / (2.0 * self.an_norm * u.z);
-            // Overflow for uz ~ 1e-308: the horizon limit.
+            // Overflow for uz ~ 1e-308: the horizon limit. Negative (skewed A) means eq. 32's min(1, .) is
+            // active and G1 = 1, i.e. Lambda = 0.
             return if l.is_finite() { l.max(0.0) } else { f64::MAX };
         }
         let g = self.visible_ratio(u);
@@ -158,6 +160,7 @@ impl Ellipsoid {
         if !l.is_finite() {
             return f64::MAX;
         }
+        // Negative: the min(1, .) of eq. 32 is active (G1 = 1), Lambda = 0.
         l.max(0.0)
     }
 
@@ -165,6 +168,7 @@ impl Ellipsoid {
     /// `p_h(m) = A_e(n) / A_l(u, n) X+(m.u) D(m) |m.u|`. Integrates to 1 over `m` for any `u` except `-n`.
     pub fn pdf_visible_normal(&self, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
         let mu = m.dot(&u);
+        // X+(m.u) of eq. 33 (a NaN input also lands here).
         if !(mu > 0.0) {
             return 0.0;
         }
@@ -197,6 +201,7 @@ impl Ellipsoid {
             return 0.0;
         }
         let m = h / hn;
+        // X+(m.psi) of eq. 48.
         if !(m.dot(&psi) > 0.0) {
             return 0.0;
         }
@@ -216,6 +221,7 @@ impl Ellipsoid {
         let r = self.visible_ratio(psi);
         // G1(psi) / r = min(1, r) / r = min(1/r, 1); r = 0 on the horizon has the limit 1, r NaN only for u = 0.
         let f = if r.is_nan() { 0.0 } else if r > 1.0 { 1.0 / r } else { 1.0 };
+        // F is a reflectance: a caller's rounding outside [0, 1] must not lift the weight past 1 (eq. 52).
         self.g1(omega, m) * fresnel.clamp(0.0, 1.0) * f
     }
 }

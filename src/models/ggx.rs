@@ -56,8 +56,8 @@ impl Ggx {
         1.0 / (std::f64::consts::PI * self.alpha_x * self.alpha_y * q * q)
     }
 
-    /// The projected roughness `alpha_o` in the azimuth of `u` (Heitz eq. 80), for `u` off the normal;
-    /// `sqrt(alpha_x alpha_y)`-free form `sqrt(ax^2 ux'^2 + ay^2 uy'^2) / sqrt(ux^2 + uy^2)`.
+    /// The projected roughness `alpha_o` in the azimuth of `u` (Heitz eq. 80), for `u` off the normal,
+    /// computed without angles as `sqrt(ax^2 ux'^2 + ay^2 uy'^2) / sqrt(ux^2 + uy^2)` with `u' = Rz u`.
     /// For `u` exactly along the normal the azimuth is undefined and `alpha_x` is returned.
     pub fn alpha_o(&self, u: Vector3<f64>) -> f64 {
         projected_roughness(self.alpha_x, self.alpha_y, self.theta_z, u)

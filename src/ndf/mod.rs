@@ -160,19 +160,18 @@ pub fn empirical_ndf(hf: &Heightfield, opts: &NdfOptions) -> Result<EmpiricalNdf
     if stencils == 0 {
         return Err(Error::new(ErrorKind::BadData, format!("grid {} x {} is too small for {} normals", hf.nx, hf.ny, scheme.as_str())));
     }
+    // The strided subsample gives the robust frame and the valid fraction (for the automatic grid size;
+    // the exact count is known only after the full pass).
+    let need_sample = opts.frame.is_none() || opts.cells_across.is_none();
+    let (mut sample, visited) = if need_sample { subsample(hf, scheme, FRAME_SUBSAMPLE) } else { (Vec::new(), 0) };
+    if need_sample && sample.is_empty() {
+        return Err(no_valid(hf));
+    }
     let frame = match opts.frame {
         Some(f) => f,
-        None => {
-            let mut sample = subsample(hf, scheme, FRAME_SUBSAMPLE);
-            if sample.is_empty() {
-                return Err(no_valid(hf));
-            }
-            SlopeFrame::robust(&mut sample)
-        }
+        None => SlopeFrame::robust(&mut sample),
     };
-    // The grid size depends on the sample count, known only after the pass; estimate it from the
-    // valid fraction (exact when cells are given).
-    let n_est = estimate_valid(hf, scheme);
+    let n_est = if visited > 0 { (stencils as f64 * sample.len() as f64 / visited as f64).round() as u64 } else { stencils };
     let grid = BinGrid::new(opts.cells_for(n_est));
 
     let acc = histogram(hf, scheme, &frame, &grid, rows);
@@ -209,23 +208,29 @@ fn no_valid(hf: &Heightfield) -> Error {
     )
 }
 
-/// A strided subsample of about `target` valid slopes (all of them for small scans).
-fn subsample(hf: &Heightfield, scheme: NormalScheme, target: usize) -> Vec<[f64; 2]> {
+/// A strided subsample of about `target` valid slopes (all of them for small scans), and the number of
+/// stencils visited to get them.
+fn subsample(hf: &Heightfield, scheme: NormalScheme, target: usize) -> (Vec<[f64; 2]>, u64) {
     let rows = scheme.rows(hf);
     let total = rows.len() * scheme.per_row(hf);
     let stride = ((total as f64 / target as f64).sqrt().floor() as usize).max(1);
     let mut out = Vec::with_capacity(target.min(total) + 16);
+    let mut visited = 0u64;
+    let per_row = scheme.per_row(hf) as u64;
+    let per_visit = if scheme == NormalScheme::Triangles { 2 } else { 1 };
     for i in rows.step_by(stride) {
         scheme.row_slopes(hf, i, stride, |sx, sy| out.push([sx, sy]));
+        visited += (per_row / per_visit).div_ceil(stride as u64) * per_visit;
     }
-    out
-}
-
-/// Valid samples, estimated from the fraction of valid points (for the automatic grid size).
-fn estimate_valid(hf: &Heightfield, scheme: NormalScheme) -> u64 {
-    let total = scheme.rows(hf).len() as f64 * scheme.per_row(hf) as f64;
-    let frac = hf.valid_count() as f64 / hf.z.len() as f64;
-    (total * frac).round() as u64
+    if out.is_empty() && stride > 1 {
+        // Sparse valid data can fall between the strided rows: take every stencil instead (none of the
+        // visited ones was valid, so this collects only the few valid ones there are).
+        for i in scheme.rows(hf) {
+            scheme.row_slopes(hf, i, 1, |sx, sy| out.push([sx, sy]));
+        }
+        visited = total as u64;
+    }
+    (out, visited)
 }
 
 /// The parallel pass: rows split into a few contiguous chunks per thread, one histogram per chunk.
