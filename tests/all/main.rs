@@ -7,4 +7,5 @@ mod fit;
 mod models;
 mod ndf;
 mod readers;
+mod scale;
 mod synth;
