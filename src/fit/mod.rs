@@ -169,7 +169,11 @@ fn fit_ellipsoid(s: &Session, aniso: &Fitted, opts: &FitOptions) -> Result<Fitte
     let p = public(aniso);
     let (ax, ay, tz) = (p[0], p[1], p[2]);
     let (tx, ty) = start::skew_start(&s.summary, tz);
-    let mut starts = vec![vec![ax, ay, 0.0, 0.0, tz], vec![ax, ay, tx, ty, tz]];
+    let mut starts = vec![vec![ax, ay, 0.0, 0.0, tz]];
+    // The mean-normal skew start is skipped when it is the zero-skew start to 0.01 rad.
+    if tx.hypot(ty) > 0.01 {
+        starts.push(vec![ax, ay, tx, ty, tz]);
+    }
     for (sx, sy) in [(0.3, 0.0), (-0.3, 0.0), (0.0, 0.3), (0.0, -0.3)].into_iter().take(opts.extra_starts) {
         starts.push(vec![ax, ay, sx, sy, tz]);
     }
@@ -186,7 +190,9 @@ fn fit_chain(s: &Session, id: ModelId, opts: &FitOptions) -> Result<Fitted> {
         ModelId::GgxAniso => fit_aniso(s, id, Some(&fit_iso(s, ModelId::Ggx, opts)?), opts),
         ModelId::BeckmannAniso => fit_aniso(s, id, Some(&fit_iso(s, ModelId::Beckmann, opts)?), opts),
         ModelId::Ellipsoid => {
-            let aniso = fit_aniso(s, ModelId::GgxAniso, Some(&fit_iso(s, ModelId::Ggx, opts)?), opts)?;
+            // The closed-form GTR2aniso start suffices here (the isotropic pre-fit only matters when the
+            // anisotropic start is poor, and the ellipsoid stage has its own starts).
+            let aniso = fit_aniso(s, ModelId::GgxAniso, None, opts)?;
             fit_ellipsoid(s, &aniso, opts)
         }
     }

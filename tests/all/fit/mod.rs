@@ -7,6 +7,7 @@ mod fixtures;
 mod canonical;
 mod covariance;
 mod jacobian;
+mod compare;
 mod end_to_end;
 mod recovery;
 mod schema;
