@@ -115,8 +115,23 @@ fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) ->
         .unwrap_or_else(|_| local.x.clone());
     let mut r = vec![0.0; s.data.bins.len()];
     let fc = problem::residuals_into(&s.data, id, &xc, &mut r);
-    let (x, f) = if fc.is_finite() && (fc - local.f).abs() <= 1e-8 * local.f.abs().max(1.0) {
+    let same = |f: f64| f.is_finite() && (f - local.f).abs() <= 1e-8 * local.f.abs().max(1.0);
+    // An undetermined angle (theta_z of a nearly isotropic lobe) can drift to huge values where its
+    // float reduction mod pi is inexact, so the canonical point differs slightly: polish from there with
+    // the same solver and canonicalize again.
+    let polished = if same(fc) {
+        None
+    } else {
+        solve::minimize(&s.data, id, &xc, opts.solver, opts.tolerances).ok().and_then(|pl| {
+            let x2 = Model::from_params(id, &params::to_public(id, &pl.x)).ok().map(|m| params::to_internal(id, &m.canonical().params()))?;
+            let f2 = problem::residuals_into(&s.data, id, &x2, &mut r);
+            (f2.is_finite() && f2 <= local.f + 1e-8 * local.f.abs().max(1.0)).then_some((x2, f2))
+        })
+    };
+    let (x, f) = if same(fc) {
         (xc, fc)
+    } else if let Some((x2, f2)) = polished {
+        (x2, f2)
     } else {
         warnings.push(format!("{id}: canonical form changed the objective ({} -> {fc}); kept the solver's parameters", local.f));
         (local.x.clone(), local.f)
