@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::anyhow;
 use ndfit::fit::{fit_auto, fit_model, FitOptions, InputInfo, Objective, Solver};
 use ndfit::models::ModelId;
-use ndfit::ndf::{empirical_ndf, NdfOptions, NormalScheme};
+use ndfit::ndf::empirical_ndf;
 
 use super::scan_args::ScanArgs;
 
@@ -37,12 +37,8 @@ pub struct Args {
     /// Plot of the data against the fit, with residuals (PNG).
     #[arg(long)]
     plot: Option<PathBuf>,
-    /// NDF bins across the Lambert disk (odd); chosen from the sample count when absent.
-    #[arg(long)]
-    ndf_cells: Option<usize>,
-    /// Normal scheme of the NDF: `central` or `triangles`.
-    #[arg(long, default_value = "central")]
-    ndf_scheme: String,
+    #[command(flatten)]
+    ndf: super::ndf::NdfArgs,
 }
 
 /// Run `ndfit fit`.
@@ -58,8 +54,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         "auto" => None,
         m => Some(m.parse::<ModelId>().map_err(|e| anyhow!("--model: {}", e.message()))?),
     };
-    let scheme = args.ndf_scheme.parse::<NormalScheme>().map_err(|e| anyhow!("--ndf-scheme: {}", e.message()))?;
-    let ndf_opts = NdfOptions { scheme, cells_across: args.ndf_cells, ..NdfOptions::default() };
+    let ndf_opts = args.ndf.options()?;
 
     let t0 = Instant::now();
     let hf = args.scan.load()?;

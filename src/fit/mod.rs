@@ -70,6 +70,8 @@ struct Fitted {
     start_objectives: Vec<f64>,
     best_start: usize,
     warnings: Vec<String>,
+    /// All samples in one bin: a delta NDF, reported at the alpha floor with no standard errors.
+    delta: bool,
 }
 
 /// The data of one fit session: the bins and their slope summary.
@@ -113,13 +115,47 @@ fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) ->
         .unwrap_or_else(|_| local.x.clone());
     let mut r = vec![0.0; s.data.bins.len()];
     let fc = problem::residuals_into(&s.data, id, &xc, &mut r);
-    let (x, f) = if fc.is_finite() && (fc - local.f).abs() <= 1e-8 * local.f.abs().max(1.0) {
+    let same = |f: f64| f.is_finite() && (f - local.f).abs() <= 1e-8 * local.f.abs().max(1.0);
+    // An undetermined angle (theta_z of a nearly isotropic lobe) can drift to huge values where its
+    // float reduction mod pi is inexact, so the canonical point differs slightly: polish from there with
+    // the same solver and canonicalize again.
+    let polished = if same(fc) {
+        None
+    } else {
+        solve::minimize(&s.data, id, &xc, opts.solver, opts.tolerances).ok().and_then(|pl| {
+            let x2 = Model::from_params(id, &params::to_public(id, &pl.x)).ok().map(|m| params::to_internal(id, &m.canonical().params()))?;
+            let f2 = problem::residuals_into(&s.data, id, &x2, &mut r);
+            (f2.is_finite() && f2 <= local.f + 1e-8 * local.f.abs().max(1.0)).then_some((x2, f2))
+        })
+    };
+    let (x, f) = if same(fc) {
         (xc, fc)
+    } else if let Some((x2, f2)) = polished {
+        (x2, f2)
     } else {
         warnings.push(format!("{id}: canonical form changed the objective ({} -> {fc}); kept the solver's parameters", local.f));
         (local.x.clone(), local.f)
     };
-    Ok(Fitted { id, x, f, local, evaluations, start_objectives, best_start, warnings })
+    Ok(Fitted { id, x, f, local, evaluations, start_objectives, best_start, warnings, delta: false })
+}
+
+/// The fit of a delta NDF (every sample in one bin, e.g. a plane after form removal): no lobe width can
+/// be measured, so the alphas are the models' floor [`crate::models::ALPHA_MIN`] and the lobe points at
+/// the bin (for the ellipsoid through its skew; the other models are centred on n by definition).
+fn delta_fit(s: &Session, id: ModelId) -> Fitted {
+    let (tx, ty) = start::skew_start(&s.summary, 0.0);
+    let a = crate::models::ALPHA_MIN;
+    let p = match id {
+        ModelId::Ggx | ModelId::Beckmann => vec![a],
+        ModelId::GgxAniso | ModelId::BeckmannAniso => vec![a, a, 0.0],
+        ModelId::Ellipsoid => vec![a, a, tx, ty, 0.0],
+    };
+    let x = params::to_internal(id, &p);
+    let mut r = vec![0.0; s.data.bins.len()];
+    let f = problem::residuals_into(&s.data, id, &x, &mut r);
+    let termination = "delta NDF: every sample in one bin; alpha set to the model floor".to_string();
+    let local = solve::Local { x: x.clone(), f, termination, converged: true, evaluations: 0 };
+    Fitted { id, x, f, local, evaluations: 0, start_objectives: vec![f], best_start: 0, warnings: Vec::new(), delta: true }
 }
 
 /// Public parameters of a fit.
@@ -148,7 +184,11 @@ fn fit_ellipsoid(s: &Session, aniso: &Fitted, opts: &FitOptions) -> Result<Fitte
     let p = public(aniso);
     let (ax, ay, tz) = (p[0], p[1], p[2]);
     let (tx, ty) = start::skew_start(&s.summary, tz);
-    let mut starts = vec![vec![ax, ay, 0.0, 0.0, tz], vec![ax, ay, tx, ty, tz]];
+    let mut starts = vec![vec![ax, ay, 0.0, 0.0, tz]];
+    // The mean-normal skew start is skipped when it is the zero-skew start to 0.01 rad.
+    if tx.hypot(ty) > 0.01 {
+        starts.push(vec![ax, ay, tx, ty, tz]);
+    }
     for (sx, sy) in [(0.3, 0.0), (-0.3, 0.0), (0.0, 0.3), (0.0, -0.3)].into_iter().take(opts.extra_starts) {
         starts.push(vec![ax, ay, sx, sy, tz]);
     }
@@ -157,12 +197,17 @@ fn fit_ellipsoid(s: &Session, aniso: &Fitted, opts: &FitOptions) -> Result<Fitte
 
 /// Fit `id` with the chain of simpler fits it starts from.
 fn fit_chain(s: &Session, id: ModelId, opts: &FitOptions) -> Result<Fitted> {
+    if s.data.k_nonzero == 1 {
+        return Ok(delta_fit(s, id));
+    }
     match id {
         ModelId::Ggx | ModelId::Beckmann => fit_iso(s, id, opts),
         ModelId::GgxAniso => fit_aniso(s, id, Some(&fit_iso(s, ModelId::Ggx, opts)?), opts),
         ModelId::BeckmannAniso => fit_aniso(s, id, Some(&fit_iso(s, ModelId::Beckmann, opts)?), opts),
         ModelId::Ellipsoid => {
-            let aniso = fit_aniso(s, ModelId::GgxAniso, Some(&fit_iso(s, ModelId::Ggx, opts)?), opts)?;
+            // The closed-form GTR2aniso start suffices here (the isotropic pre-fit only matters when the
+            // anisotropic start is poor, and the ellipsoid stage has its own starts).
+            let aniso = fit_aniso(s, ModelId::GgxAniso, None, opts)?;
             fit_ellipsoid(s, &aniso, opts)
         }
     }
@@ -190,13 +235,13 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     let cov = covariance::covariance(&j, s2);
     let g = params::public_derivative(id, &fit.x);
     let se: Vec<Option<f64>> = (0..p)
-        .map(|a| (!cov.undetermined[a]).then(|| g[a].abs() * cov.cov[(a, a)].max(0.0).sqrt()))
+        .map(|a| (!cov.undetermined[a] && !fit.delta).then(|| g[a].abs() * cov.cov[(a, a)].max(0.0).sqrt()))
         .collect();
     let correlation: Vec<Vec<Option<f64>>> = (0..p)
         .map(|a| {
             (0..p)
                 .map(|b| {
-                    let ok = !cov.undetermined[a] && !cov.undetermined[b];
+                    let ok = !cov.undetermined[a] && !cov.undetermined[b] && !fit.delta;
                     let den = (cov.cov[(a, a)] * cov.cov[(b, b)]).sqrt();
                     // The sign of g (always positive) does not change correlations.
                     (ok && den > 0.0).then(|| (cov.cov[(a, b)] / den).clamp(-1.0, 1.0))
@@ -290,14 +335,22 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
             None
         }
     };
-    let ggx = keep(fit_iso(&s, ModelId::Ggx, opts));
-    let ggx_a = keep(fit_aniso(&s, ModelId::GgxAniso, ggx.as_ref(), opts));
-    let ell = match &ggx_a {
-        Some(a) => keep(fit_ellipsoid(&s, a, opts)),
-        None => None,
+    let delta = s.data.k_nonzero == 1;
+    let (ggx, ggx_a, ell, beck, beck_a) = if delta {
+        // A delta NDF: every model is at its floor; the simplest wins below.
+        let d = |id| Some(delta_fit(&s, id));
+        (d(ModelId::Ggx), d(ModelId::GgxAniso), d(ModelId::Ellipsoid), d(ModelId::Beckmann), d(ModelId::BeckmannAniso))
+    } else {
+        let ggx = keep(fit_iso(&s, ModelId::Ggx, opts));
+        let ggx_a = keep(fit_aniso(&s, ModelId::GgxAniso, ggx.as_ref(), opts));
+        let ell = match &ggx_a {
+            Some(a) => keep(fit_ellipsoid(&s, a, opts)),
+            None => None,
+        };
+        let beck = keep(fit_iso(&s, ModelId::Beckmann, opts));
+        let beck_a = keep(fit_aniso(&s, ModelId::BeckmannAniso, beck.as_ref(), opts));
+        (ggx, ggx_a, ell, beck, beck_a)
     };
-    let beck = keep(fit_iso(&s, ModelId::Beckmann, opts));
-    let beck_a = keep(fit_aniso(&s, ModelId::BeckmannAniso, beck.as_ref(), opts));
     let fits: Vec<Fitted> = [ggx, beck, ggx_a, beck_a, ell].into_iter().flatten().collect();
     if fits.is_empty() {
         return Err(Error::new(ErrorKind::Numerical, format!("no model could be fitted ({})", warnings.join("; "))));

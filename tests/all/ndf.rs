@@ -41,10 +41,14 @@ fn compare_ellipsoid(ndf: &EmpiricalNdf, g: &EllipsoidGeometry, s: &SynthSetting
     let semi_minor_px = (q[(2, 2)] * g.c * g.c / lmax).sqrt() / s.dx.max(s.dy);
     let (mut k, mut chi2, mut sum_c, mut sum_e, mut max_mid, mut mid2, mut wsum) = (0, 0.0, 0.0, 0.0, 0.0f64, 0.0, 0.0);
     for (i, b) in ndf.bins.iter().enumerate() {
-        let e = n_foot * ndf.bin_integral(i, QuadOrder::Fine(3), |m| model.d(m)).expect("a computed NDF has a grid");
         let Some((_, depth)) = g.point_of(b.m) else { continue };
         // Depth is 1 - r^2 in footprint units; distance from the rim is about (depth / 2) semi-axes.
-        if e < MIN_EXPECTED || 0.5 * depth * semi_minor_px < RIM_PX {
+        if 0.5 * depth * semi_minor_px < RIM_PX {
+            continue;
+        }
+        // Reference: 2 x 2 sub-cells of 8 x 8 Gauss-Legendre each (the NDF's own W uses 4 x 4 per cell).
+        let e = n_foot * ndf.bin_integral(i, QuadOrder::Fine(2), |m| model.d(m)).expect("a computed NDF has a grid");
+        if e < MIN_EXPECTED {
             continue;
         }
         let c = b.count as f64;
@@ -270,7 +274,14 @@ fn height_offset_changes_nothing_beyond_rounding() {
     eprintln!("offset: moved {moved} samples (expected {expected:.2e}), frame centre shift {:?}", [b.frame.center[0] - a.frame.center[0], b.frame.center[1] - a.frame.center[1]]);
     assert!((moved as f64) <= 10.0 * expected + 10.0, "moved {moved}");
     assert!((b.frame.center[0] - a.frame.center[0]).abs() < 1e-8 && (b.frame.cov[0][0] / a.frame.cov[0][0] - 1.0).abs() < 1e-6);
-    assert!(max_rel_d < 1e-9 || moved > 0, "d changed without any sample moving: {max_rel_d}");
+    // The robust frame moves by the slopes' rounding too (relative to the slope scale); the bins'
+    // W_k and so d follow it smoothly (the measured amplification is about 1), so allow 100 times it.
+    let rel_frame = ((b.frame.center[0] - a.frame.center[0]).abs().max((b.frame.center[1] - a.frame.center[1]).abs()) / sigma_min)
+        .max((b.frame.cov[0][0] / a.frame.cov[0][0] - 1.0).abs())
+        .max((b.frame.cov[1][1] / a.frame.cov[1][1] - 1.0).abs());
+    eprintln!("offset: frame moved {rel_frame:.2e} (relative), d moved {max_rel_d:.2e} (relative)");
+    assert!(rel_frame < 100.0 * eps_p, "frame moved {rel_frame}");
+    assert!(max_rel_d < 100.0 * rel_frame + 1e-12, "d moved {max_rel_d}");
 }
 
 /// A tilted plane is a delta NDF: every sample in one bin, whose direction is within that bin's size of
@@ -318,4 +329,106 @@ fn empty_scans_are_errors() {
     let z: Vec<f64> = (0..100).map(|k| if (k / 10 + k % 10) % 2 == 0 { 0.0 } else { f64::NAN }).collect();
     let hf = Heightfield::new(10, 10, 1e-6, 1e-6, z).expect("shape is valid");
     assert_eq!(empirical_ndf(&hf, &NdfOptions::default()).expect_err("no stencil").kind(), ErrorKind::BadData);
+}
+
+/// The CLI end to end: `ndfit synth` writes an X3P and its truth, `ndfit ndf` writes the CSV of the
+/// contract (header starting `mx,my,mz,d`, sum d W = 1), JSON, EXR and PNGs; bad input fails with one
+/// line naming the file and leaves no output behind.
+#[test]
+fn cli_synth_and_ndf() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scan = dir.path().join("e.x3p");
+    let out = std::process::Command::new(crate::common::ndfit_bin())
+        .args(["synth"])
+        .arg(&scan)
+        .args(["--nx", "256", "--ny", "200", "--alpha-x", "0.2", "--alpha-y", "0.4", "--theta-x", "0.2", "--theta-z", "0.3"])
+        .output()
+        .expect("runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let truth: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("e.truth.json")).expect("truth written")).expect("JSON");
+    assert_eq!(truth["schema"], "ndfit.synth/1");
+    assert_eq!(truth["model"], "ellipsoid");
+    let csv = dir.path().join("e.csv");
+    let prefix = dir.path().join("e");
+    let out = std::process::Command::new(crate::common::ndfit_bin())
+        .args(["ndf"])
+        .arg(&scan)
+        .args(["--form", "none", "-o"])
+        .arg(&csv)
+        .arg("--exr")
+        .arg(dir.path().join("e.exr"))
+        .arg("--png")
+        .arg(&prefix)
+        .output()
+        .expect("runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = std::fs::read_to_string(&csv).expect("csv written");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    assert_eq!(&header[..4], ["mx", "my", "mz", "d"]);
+    let col = |name: &str| header.iter().position(|h| *h == name).expect("column");
+    let (id, iw) = (col("d"), col("proj_solid_angle"));
+    let total: f64 = lines
+        .map(|l| {
+            let f: Vec<f64> = l.split(',').map(|v| v.parse().expect("number")).collect();
+            f[id] * f[iw]
+        })
+        .sum();
+    assert!((total - 1.0).abs() < 1e-9, "sum d W = {total}");
+    for f in ["e.exr", "e.map.png", "e.slices.png"] {
+        assert!(dir.path().join(f).metadata().expect("written").len() > 1000, "{f}");
+    }
+    // Bad input: a file that is not a scan.
+    let bad = dir.path().join("bad.x3p");
+    std::fs::write(&bad, b"not a scan").expect("write");
+    let o2 = dir.path().join("bad.csv");
+    let out = std::process::Command::new(crate::common::ndfit_bin()).args(["ndf"]).arg(&bad).arg("-o").arg(&o2).output().expect("runs");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("bad.x3p"), "{err}");
+    assert!(!o2.exists());
+}
+
+/// The real scans of ../shared/data/scans give finite, normalized NDFs with both schemes.
+#[test]
+fn real_scans_give_normalized_ndfs() {
+    let Some(dir) = crate::common::shared_scans("real_scans_give_normalized_ndfs") else { return };
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).expect("readable") {
+        let p = e.expect("entry").path();
+        let ext = p.extension().and_then(|x| x.to_str()).unwrap_or("");
+        if matches!(ext, "json" | "md") {
+            continue;
+        }
+        let hf = ndfit::io::read_scan(&p, &Default::default()).expect("shared scans are readable");
+        let hf = ndfit::preprocess::apply(hf, &Default::default()).expect("plane removal");
+        for scheme in [NormalScheme::Central, NormalScheme::Triangles] {
+            let ndf = empirical_ndf(&hf, &NdfOptions { scheme, ..Default::default() }).expect("valid stencils");
+            assert!((ndf.total() - 1.0).abs() < 1e-9, "{}: {}", p.display(), ndf.total());
+            assert!(ndf.bins.iter().all(|b| b.d.is_finite() && b.m.iter().all(|v| v.is_finite())));
+            assert!(ndf.frame.cov[0][0].is_finite() && ndf.slope_mean.iter().all(|v| v.is_finite()));
+        }
+        n += 1;
+    }
+    assert!(n >= 10);
+}
+
+/// Sparse valid data that the strided frame subsample misses (one valid 5 x 5 patch in a 2000 x 2000
+/// grid) still gives its NDF: 9 central stencils, not an error.
+#[test]
+fn sparse_valid_patch_is_found() {
+    let n = 2000;
+    let mut z = vec![f64::NAN; n * n];
+    for i in 1001..1006 {
+        for j in 1001..1006 {
+            z[i * n + j] = 1e-6 * (i as f64 * 0.3 + j as f64 * 0.1);
+        }
+    }
+    let hf = Heightfield::new(n, n, 1e-6, 1e-6, z).expect("shape");
+    let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("9 valid stencils");
+    assert_eq!(ndf.n_samples, 9);
+    let b = ndf.bins.iter().find(|b| b.count == 9).expect("a plane: one bin");
+    let s = [-b.m.x / b.m.z, -b.m.y / b.m.z];
+    assert!((s[0] - 0.1).abs() < 1e-6 && (s[1] - 0.3).abs() < 1e-6, "{s:?}");
 }
