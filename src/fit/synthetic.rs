@@ -151,5 +151,5 @@ pub fn finish(mut bins: Vec<NdfBin>) -> EmpiricalNdf {
         b.d = b.count as f64 / (nf * b.proj_solid_angle);
         b.stderr = (b.count.max(1) as f64).sqrt() / (nf * b.proj_solid_angle);
     }
-    EmpiricalNdf { bins, n_samples: n }
+    EmpiricalNdf::from_bins(bins, n)
 }

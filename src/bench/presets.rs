@@ -1,0 +1,103 @@
+//! The presets `--preset fast|balanced|accurate`: points picked from the measured Pareto front of
+//! `ndfit bench` (time against error on the synthetic set; see `docs/PERFORMANCE.md` for the figures
+//! behind each choice).
+
+use super::knobs::{Binning, Knobs};
+use crate::fit::{FitOptions, Solver};
+use crate::ndf::{NdfOptions, NormalScheme};
+
+/// A named speed/accuracy trade.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Preset {
+    /// Fastest point on the front whose error is still well below the counting noise of a typical scan.
+    Fast,
+    /// The knee of the front: the default options.
+    #[default]
+    Balanced,
+    /// The smallest error measured, whatever it costs.
+    Accurate,
+}
+
+impl Preset {
+    /// Every preset, fastest first.
+    pub const ALL: [Preset; 3] = [Preset::Fast, Preset::Balanced, Preset::Accurate];
+
+    /// The name used on the command line and in the CSV.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Preset::Fast => "fast",
+            Preset::Balanced => "balanced",
+            Preset::Accurate => "accurate",
+        }
+    }
+
+    /// The knobs of this preset (scan size and model are the caller's: they are not speed knobs of
+    /// the pipeline but properties of the job).
+    pub fn knobs(self) -> PresetKnobs {
+        match self {
+            Preset::Fast => PresetKnobs { stride: 2, scheme: NormalScheme::Central, target_count: 64.0, tol: 1e-6, extra_starts: 0 },
+            Preset::Balanced => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: 64.0, tol: 1e-10, extra_starts: 0 },
+            Preset::Accurate => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: 32.0, tol: 1e-12, extra_starts: 4 },
+        }
+    }
+
+    /// The NDF options of this preset.
+    pub fn ndf_options(self) -> NdfOptions {
+        let k = self.knobs();
+        NdfOptions { scheme: k.scheme, cells_across: None, target_count: k.target_count, frame: None }
+    }
+
+    /// The fit options of this preset.
+    pub fn fit_options(self) -> FitOptions {
+        let mut f = FitOptions::default();
+        let k = self.knobs();
+        f.tolerances.rel = k.tol;
+        f.extra_starts = k.extra_starts;
+        f.solver = Solver::Lm;
+        f
+    }
+
+    /// Subsampling stride of this preset (1: every point).
+    pub fn stride(self) -> usize {
+        self.knobs().stride
+    }
+
+    /// The full benchmark knobs of this preset for a scan of `size` points per side.
+    pub fn bench_knobs(self, size: usize) -> Knobs {
+        let k = self.knobs();
+        Knobs {
+            size,
+            stride: k.stride,
+            scheme: k.scheme,
+            binning: Binning::Whitened,
+            cells: None,
+            target_count: k.target_count,
+            tol: k.tol,
+            extra_starts: k.extra_starts,
+            solver: Solver::Lm,
+            ..Knobs::default()
+        }
+    }
+}
+
+impl std::fmt::Display for Preset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// The knob values a preset sets.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PresetKnobs {
+    /// Subsampling stride.
+    pub stride: usize,
+    /// Normal scheme.
+    pub scheme: NormalScheme,
+    /// Mean count per bin (automatic bin count).
+    pub target_count: f64,
+    /// Relative solver tolerance.
+    pub tol: f64,
+    /// Extra ellipsoid starts.
+    pub extra_starts: usize,
+}

@@ -1,0 +1,226 @@
+//! The sweep: which points are measured (one knob at a time around the defaults, plus the sizes and
+//! the presets), and the measured row of each.
+
+use std::path::Path;
+
+use super::accuracy::{delta_ndf, param_errors, RefNodes};
+use super::knobs::{Binning, Knobs};
+use super::pipeline::{self, Outcome, StageTimes};
+use super::presets::Preset;
+use super::scene::Scene;
+use crate::error::Result;
+use crate::fit::Solver;
+use crate::models::ModelId;
+use crate::ndf::NormalScheme;
+
+/// Sizes and repetitions of a sweep.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// Scan sides for the size sweep (cost model in scan size).
+    pub sizes: Vec<usize>,
+    /// Scan side on which every other knob is swept (and the Pareto front drawn).
+    pub knob_size: usize,
+    /// Repetitions of each point (the median time is reported).
+    pub repeats: usize,
+    /// Fixed bin counts across the disk for the bin-count cost model.
+    pub cells: Vec<usize>,
+}
+
+impl Plan {
+    /// The quick plan: small scans, one repetition (seconds; what the test runs).
+    pub fn quick() -> Plan {
+        Plan { sizes: vec![128, 256], knob_size: 256, repeats: 1, cells: vec![31, 63, 127] }
+    }
+
+    /// The full plan of `docs/PERFORMANCE.md`: 512^2 to 8192^2, knobs at 2048^2, three repetitions.
+    pub fn full() -> Plan {
+        Plan { sizes: vec![512, 1024, 2048, 4096, 8192], knob_size: 2048, repeats: 3, cells: vec![31, 63, 127, 255, 511] }
+    }
+
+    /// Every point of the plan with its group (the knob it varies).
+    pub fn points(&self) -> Vec<(String, Knobs)> {
+        let mut out = Vec::new();
+        for &s in &self.sizes {
+            out.push(("size".to_string(), Knobs { size: s, ..Knobs::default() }));
+            out.push(("size_ndf".to_string(), Knobs { size: s, model: None, ..Knobs::default() }));
+        }
+        let base = Knobs { size: self.knob_size, ..Knobs::default() };
+        for stride in [2, 4, 8] {
+            out.push(("stride".into(), Knobs { stride, ..base.clone() }));
+        }
+        for t in [8.0, 16.0, 32.0, 128.0, 256.0, 1024.0] {
+            out.push(("target_count".into(), Knobs { target_count: t, ..base.clone() }));
+        }
+        for &c in &self.cells {
+            out.push(("cells".into(), Knobs { cells: Some(c), ..base.clone() }));
+        }
+        out.push(("scheme".into(), Knobs { scheme: NormalScheme::Triangles, ..base.clone() }));
+        out.push(("binning".into(), Knobs { binning: Binning::Plain, ..base.clone() }));
+        for solver in [Solver::Lbfgs, Solver::NelderMead] {
+            out.push(("solver".into(), Knobs { solver, ..base.clone() }));
+        }
+        for tol in [1e-3, 1e-6, 1e-12] {
+            out.push(("tol".into(), Knobs { tol, ..base.clone() }));
+        }
+        out.push(("starts".into(), Knobs { extra_starts: 4, ..base.clone() }));
+        for m in [ModelId::Ggx, ModelId::GgxAniso, ModelId::BeckmannAniso] {
+            out.push(("model".into(), Knobs { model: Some(m), ..base.clone() }));
+        }
+        for p in Preset::ALL {
+            out.push((format!("preset_{}", p.as_str()), p.bench_knobs(self.knob_size)));
+        }
+        out
+    }
+}
+
+/// One measured point: the knobs, the median stage times, memory, and accuracy against the truth.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Row {
+    /// The knob this point varies (`size`, `stride`, `cells`, ..., `preset_<name>`).
+    pub group: String,
+    /// Scan side.
+    pub size: usize,
+    /// Subsampling stride.
+    pub stride: usize,
+    /// Normal scheme.
+    pub scheme: String,
+    /// Binning scheme.
+    pub binning: String,
+    /// Cells across (a number, or `auto<target count>`).
+    pub cells: String,
+    /// Model fitted (empty: NDF only).
+    pub model: String,
+    /// Solver.
+    pub solver: String,
+    /// Relative tolerance.
+    pub tol: f64,
+    /// Extra ellipsoid starts.
+    pub extra_starts: usize,
+    /// Samples (normals) binned.
+    pub samples: u64,
+    /// Bins with `W > 0` (every bin the fit sees).
+    pub bins: usize,
+    /// Median read time (ms).
+    pub t_read_ms: f64,
+    /// Median subsample time (ms).
+    pub t_subsample_ms: f64,
+    /// Median NDF time (ms).
+    pub t_ndf_ms: f64,
+    /// Median fit time (ms).
+    pub t_fit_ms: f64,
+    /// Median whole-pipeline time (ms).
+    pub t_total_ms: f64,
+    /// NDF throughput: samples per second of the NDF stage, in millions.
+    pub ndf_mpts_per_s: f64,
+    /// Peak resident memory of the pipeline above its start (MiB; empty when unavailable).
+    pub peak_mib: Option<f64>,
+    /// Peak of the NDF stage above the pipeline's start (MiB).
+    pub peak_ndf_mib: Option<f64>,
+    /// `delta(D_empirical; D_truth)` on the NDF's bins.
+    pub ndf_delta: Option<f64>,
+    /// `delta(D_fit; D_truth)` on the fixed reference nodes.
+    pub fit_delta: Option<f64>,
+    /// Largest relative alpha error (ellipsoid fits only).
+    pub alpha_err: Option<f64>,
+    /// Largest angle error in radians (ellipsoid fits only).
+    pub angle_err: Option<f64>,
+    /// Whether the solver converged.
+    pub converged: Option<bool>,
+    /// Residual evaluations of the solver.
+    pub evaluations: Option<usize>,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Median of each stage over runs.
+pub fn median_times(runs: &[StageTimes]) -> StageTimes {
+    let m = |f: fn(&StageTimes) -> f64| median(runs.iter().map(f).collect());
+    StageTimes { read: m(|t| t.read), subsample: m(|t| t.subsample), ndf: m(|t| t.ndf), fit: m(|t| t.fit) }
+}
+
+const MIB: f64 = 1024.0 * 1024.0;
+
+/// Measure one point `repeats` times on `scene` and turn it into a row.
+pub fn measure(group: &str, knobs: &Knobs, scene: &Scene, nodes: &RefNodes, repeats: usize) -> Result<Row> {
+    let ro = scene.read_options();
+    let mut runs = Vec::with_capacity(repeats.max(1));
+    let mut first: Option<Outcome> = None;
+    for _ in 0..repeats.max(1) {
+        let o = pipeline::run(&scene.path, &ro, knobs)?;
+        runs.push(o.times);
+        first.get_or_insert(o);
+    }
+    let o = first.expect("at least one run was made");
+    let t = median_times(&runs);
+    let fit_model = o.fit.as_ref().and_then(|r| r.to_model().ok());
+    let perr = fit_model.as_ref().and_then(|m| param_errors(m, &scene.truth));
+    Ok(Row {
+        group: group.to_string(),
+        size: knobs.size,
+        stride: knobs.stride,
+        scheme: knobs.scheme.as_str().into(),
+        binning: knobs.binning.as_str().into(),
+        cells: knobs.cells_label(),
+        model: knobs.model.map_or(String::new(), |m| m.as_str().to_string()),
+        solver: knobs.solver.as_str().into(),
+        tol: knobs.tol,
+        extra_starts: knobs.extra_starts,
+        samples: o.ndf.n_samples,
+        bins: o.ndf.bins.iter().filter(|b| b.proj_solid_angle > 0.0).count(),
+        t_read_ms: t.read,
+        t_subsample_ms: t.subsample,
+        t_ndf_ms: t.ndf,
+        t_fit_ms: t.fit,
+        t_total_ms: t.total(),
+        ndf_mpts_per_s: o.ndf.n_samples as f64 / (t.ndf * 1e3),
+        peak_mib: o.peaks.total().map(|b| b as f64 / MIB),
+        peak_ndf_mib: o.peaks.ndf.map(|b| b as f64 / MIB),
+        ndf_delta: delta_ndf(&o.ndf, &scene.truth),
+        fit_delta: fit_model.as_ref().and_then(|m| nodes.delta_model(m, &scene.truth)),
+        alpha_err: perr.map(|p| p.0),
+        angle_err: perr.map(|p| p.1),
+        converged: o.fit.as_ref().map(|r| r.solver.converged),
+        evaluations: o.fit.as_ref().map(|r| r.solver.evaluations),
+    })
+}
+
+/// Run every point of `plan`, writing the scans into `dir`; `progress` is told each row.
+pub fn run(plan: &Plan, dir: &Path, mut progress: impl FnMut(&Row)) -> Result<Vec<Row>> {
+    let points = plan.points();
+    let mut sizes: Vec<usize> = points.iter().map(|p| p.1.size).collect();
+    sizes.sort_unstable();
+    sizes.dedup();
+    let mut rows = Vec::with_capacity(points.len());
+    let mut nodes: Option<RefNodes> = None;
+    for size in sizes {
+        let scene = Scene::create(dir, size)?;
+        // The reference nodes follow the lobe: the robust frame of the first scan's default NDF.
+        if nodes.is_none() {
+            let o = pipeline::run(&scene.path, &scene.read_options(), &Knobs { size, model: None, ..Knobs::default() })?;
+            nodes = Some(RefNodes::new(&o.ndf.frame, REF_CELLS));
+        }
+        let nodes = nodes.as_ref().expect("set just above");
+        for (group, k) in points.iter().filter(|p| p.1.size == size) {
+            let row = measure(group, k, &scene, nodes, plan.repeats)?;
+            progress(&row);
+            rows.push(row);
+        }
+        // Keep the disk use of the sweep to one scan at a time.
+        let _ = std::fs::remove_file(&scene.path);
+    }
+    Ok(rows)
+}
+
+/// Cells across the reference grid of the fit error: finer than any automatic NDF grid of the sweep
+/// (at most [`crate::ndf::MAX_AUTO_CELLS`] = 255), so the quadrature of delta is not the limit.
+pub const REF_CELLS: usize = 301;
