@@ -28,7 +28,7 @@ pub struct Scene {
     pub path: PathBuf,
     /// The true NDF.
     pub truth: Model,
-    /// Valid points of the scan.
+    /// Valid points of the scan (0 when opened rather than created).
     pub valid: usize,
 }
 
@@ -40,6 +40,14 @@ impl Scene {
         let path = dir.join(format!("ellipsoid_{size}.npy"));
         write_npy_f64(&path, &hf)?;
         Ok(Scene { size, path, truth: truth.to_model()?, valid: hf.valid_count() })
+    }
+
+    /// A scene already on disk (written by [`Scene::create`] with the same size); the truth is
+    /// [`truth_params`].
+    pub fn open(path: &Path, size: usize) -> Result<Scene> {
+        let s = SynthSettings { nx: size, ny: size, dx: DX, dy: DX, seed: 1, ..SynthSettings::default() };
+        let g = crate::synth::ellipsoid::EllipsoidGeometry::new(&truth_params(), &s)?;
+        Ok(Scene { size, path: path.to_path_buf(), truth: Model::Ellipsoid(g.model), valid: 0 })
     }
 
     /// The read options of the scene's NPY file (spacing and unit are not in the file).

@@ -8,7 +8,7 @@ use super::knobs::{Binning, Knobs};
 use super::pipeline::{self, Outcome, StageTimes};
 use super::presets::Preset;
 use super::scene::Scene;
-use crate::error::Result;
+use crate::error::{Error, ErrorKind, Result};
 use crate::fit::Solver;
 use crate::models::ModelId;
 use crate::ndf::NormalScheme;
@@ -74,7 +74,7 @@ impl Plan {
 }
 
 /// One measured point: the knobs, the median stage times, memory, and accuracy against the truth.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Row {
     /// The knob this point varies (`size`, `stride`, `cells`, ..., `preset_<name>`).
     pub group: String,
@@ -112,7 +112,8 @@ pub struct Row {
     pub t_total_ms: f64,
     /// NDF throughput: samples per second of the NDF stage, in millions.
     pub ndf_mpts_per_s: f64,
-    /// Peak resident memory of the pipeline above its start (MiB; empty when unavailable).
+    /// Peak resident memory of the pipeline above its start (MiB; empty when unavailable). With
+    /// [`Isolation::Child`] the start is a fresh process, so this is the pipeline's own footprint.
     pub peak_mib: Option<f64>,
     /// Peak of the NDF stage above the pipeline's start (MiB).
     pub peak_ndf_mib: Option<f64>,
@@ -194,24 +195,76 @@ pub fn measure(group: &str, knobs: &Knobs, scene: &Scene, nodes: &RefNodes, repe
     })
 }
 
+/// How each point is measured.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Isolation {
+    /// In this process (peaks then count only fresh pages: memory the allocator kept from an earlier
+    /// point is reused without raising `VmHWM`, so small scans read low).
+    InProcess,
+    /// In a fresh child process per point, this executable run as `EXE bench --child-point JSON`, so
+    /// each point's peak memory starts from an empty heap.
+    Child(std::path::PathBuf),
+}
+
+/// What a child process is handed: one point, its scan and the reference frame of the fit error.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ChildPoint {
+    /// Group label.
+    pub group: String,
+    /// Knobs.
+    pub knobs: Knobs,
+    /// The scene's NPY file.
+    pub path: std::path::PathBuf,
+    /// Repetitions.
+    pub repeats: usize,
+    /// Frame of the reference nodes.
+    pub frame: crate::ndf::SlopeFrame,
+}
+
+/// Run a [`ChildPoint`] (in the child): the scene's truth is [`super::scene::truth_params`].
+pub fn run_child_point(p: &ChildPoint) -> Result<Row> {
+    let scene = Scene::open(&p.path, p.knobs.size)?;
+    let nodes = RefNodes::new(&p.frame, REF_CELLS);
+    measure(&p.group, &p.knobs, &scene, &nodes, p.repeats)
+}
+
+fn measure_isolated(iso: &Isolation, group: &str, k: &Knobs, scene: &Scene, nodes: &RefNodes, frame: &crate::ndf::SlopeFrame, repeats: usize) -> Result<Row> {
+    match iso {
+        Isolation::InProcess => measure(group, k, scene, nodes, repeats),
+        Isolation::Child(exe) => {
+            let cp = ChildPoint { group: group.into(), knobs: k.clone(), path: scene.path.clone(), repeats, frame: *frame };
+            let arg = serde_json::to_string(&cp).map_err(|e| Error::invalid(format!("child point: {e}")))?;
+            let out = std::process::Command::new(exe)
+                .args(["bench", "--child-point", &arg])
+                .output()
+                .map_err(|e| Error::new(ErrorKind::Io, format!("cannot run {}: {e}", exe.display())))?;
+            if !out.status.success() {
+                let err = String::from_utf8_lossy(&out.stderr);
+                return Err(Error::new(ErrorKind::Numerical, format!("point {group} failed: {}", err.trim())));
+            }
+            serde_json::from_slice(&out.stdout).map_err(|e| Error::new(ErrorKind::BadData, format!("child output: {e}")))
+        }
+    }
+}
+
 /// Run every point of `plan`, writing the scans into `dir`; `progress` is told each row.
-pub fn run(plan: &Plan, dir: &Path, mut progress: impl FnMut(&Row)) -> Result<Vec<Row>> {
+pub fn run(plan: &Plan, dir: &Path, iso: &Isolation, mut progress: impl FnMut(&Row)) -> Result<Vec<Row>> {
     let points = plan.points();
     let mut sizes: Vec<usize> = points.iter().map(|p| p.1.size).collect();
     sizes.sort_unstable();
     sizes.dedup();
     let mut rows = Vec::with_capacity(points.len());
-    let mut nodes: Option<RefNodes> = None;
+    let mut reference: Option<(RefNodes, crate::ndf::SlopeFrame)> = None;
     for size in sizes {
         let scene = Scene::create(dir, size)?;
         // The reference nodes follow the lobe: the robust frame of the first scan's default NDF.
-        if nodes.is_none() {
+        if reference.is_none() {
             let o = pipeline::run(&scene.path, &scene.read_options(), &Knobs { size, model: None, ..Knobs::default() })?;
-            nodes = Some(RefNodes::new(&o.ndf.frame, REF_CELLS));
+            reference = Some((RefNodes::new(&o.ndf.frame, REF_CELLS), o.ndf.frame));
         }
-        let nodes = nodes.as_ref().expect("set just above");
+        let (nodes, frame) = reference.as_ref().expect("set just above");
         for (group, k) in points.iter().filter(|p| p.1.size == size) {
-            let row = measure(group, k, &scene, nodes, plan.repeats)?;
+            let row = measure_isolated(iso, group, k, &scene, nodes, frame, plan.repeats)?;
             progress(&row);
             rows.push(row);
         }

@@ -11,7 +11,7 @@ use ndfit::bench::analysis::{cost_model, pareto_front};
 use ndfit::bench::numpy::{compare, default_script, Comparison};
 use ndfit::bench::plot::{label_of, plot_pareto};
 use ndfit::bench::scene::Scene;
-use ndfit::bench::sweep::{self, Plan, Row, REF_CELLS};
+use ndfit::bench::sweep::{self, Isolation, Plan, Row, REF_CELLS};
 use ndfit::bench::{pipeline, Knobs};
 
 /// Arguments of `ndfit bench`.
@@ -48,6 +48,13 @@ pub struct Args {
     /// Folder for the temporary scans (default: a temporary folder inside --out).
     #[arg(long)]
     pub work_dir: Option<PathBuf>,
+    /// Measure every point in this process instead of a fresh child process per point (faster to
+    /// start; peak memory then undercounts what the allocator kept from earlier points).
+    #[arg(long)]
+    pub in_process: bool,
+    /// Internal: measure one point (JSON) and print its row as JSON (how the isolated sweep runs).
+    #[arg(long, hide = true)]
+    pub child_point: Option<String>,
 }
 
 /// Everything `summary.json` holds besides the CSV.
@@ -91,6 +98,12 @@ fn machine() -> Machine {
 
 /// Run `ndfit bench`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    if let Some(json) = &args.child_point {
+        let p: sweep::ChildPoint = serde_json::from_str(json).context("--child-point: unreadable point")?;
+        let row = sweep::run_child_point(&p)?;
+        println!("{}", serde_json::to_string(&row).context("row JSON")?);
+        return Ok(ExitCode::SUCCESS);
+    }
     let mut plan = if args.quick { Plan::quick() } else { Plan::full() };
     if let Some(s) = &args.sizes {
         anyhow::ensure!(!s.is_empty() && s.iter().all(|&v| (16..=32768).contains(&v)), "--sizes: each side must be 16 to 32768");
@@ -118,7 +131,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     };
 
     let stderr = std::io::stderr();
-    let rows = sweep::run(&plan, &work, |r| {
+    let iso = if args.in_process {
+        Isolation::InProcess
+    } else {
+        Isolation::Child(std::env::current_exe().context("cannot find the ndfit executable to run points in")?)
+    };
+    let rows = sweep::run(&plan, &work, &iso, |r| {
         let _ = writeln!(
             stderr.lock(),
             "{:>12} {:>5} {:<14} total {:>9.1} ms (read {:>7.1}, ndf {:>7.1}, fit {:>7.1})  {:>6.1} Mpts/s  ndf_delta {:<8} fit_delta {}",
