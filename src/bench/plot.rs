@@ -82,7 +82,8 @@ pub fn label_of(r: &Row) -> String {
         "tol" => format!("tol {:e}", r.tol),
         "starts" => format!("+{} starts", r.extra_starts),
         "model" => r.model.clone(),
-        "size" => "defaults".into(),
+        "size" => "balanced".into(),
+        "defaults" => "NDF defaults".into(),
         g => g.to_string(),
     }
 }

@@ -40,15 +40,17 @@ impl Plan {
     /// Every point of the plan with its group (the knob it varies).
     pub fn points(&self) -> Vec<(String, Knobs)> {
         let mut out = Vec::new();
+        // Every knob moves from the balanced preset (the knee); `defaults` is the library's NDF default.
         for &s in &self.sizes {
-            out.push(("size".to_string(), Knobs { size: s, ..Knobs::default() }));
-            out.push(("size_ndf".to_string(), Knobs { size: s, model: None, ..Knobs::default() }));
+            out.push(("size".to_string(), Preset::Balanced.bench_knobs(s)));
+            out.push(("size_ndf".to_string(), Knobs { model: None, ..Preset::Balanced.bench_knobs(s) }));
         }
-        let base = Knobs { size: self.knob_size, ..Knobs::default() };
+        let base = Preset::Balanced.bench_knobs(self.knob_size);
+        out.push(("defaults".into(), Knobs { size: self.knob_size, ..Knobs::default() }));
         for stride in [2, 4, 8] {
             out.push(("stride".into(), Knobs { stride, ..base.clone() }));
         }
-        for t in [8.0, 16.0, 32.0, 128.0, 256.0, 1024.0] {
+        for t in [16.0, 64.0, 128.0, 512.0, 1024.0] {
             out.push(("target_count".into(), Knobs { target_count: t, ..base.clone() }));
         }
         for &c in &self.cells {
@@ -247,8 +249,9 @@ fn measure_isolated(iso: &Isolation, group: &str, k: &Knobs, scene: &Scene, node
     }
 }
 
-/// Run every point of `plan`, writing the scans into `dir`; `progress` is told each row.
-pub fn run(plan: &Plan, dir: &Path, iso: &Isolation, mut progress: impl FnMut(&Row)) -> Result<Vec<Row>> {
+/// Run every point of `plan`, writing the scans into `dir` (removed after use unless `keep`);
+/// `progress` is told each row.
+pub fn run(plan: &Plan, dir: &Path, iso: &Isolation, keep: bool, mut progress: impl FnMut(&Row)) -> Result<Vec<Row>> {
     let points = plan.points();
     let mut sizes: Vec<usize> = points.iter().map(|p| p.1.size).collect();
     sizes.sort_unstable();
@@ -269,7 +272,9 @@ pub fn run(plan: &Plan, dir: &Path, iso: &Isolation, mut progress: impl FnMut(&R
             rows.push(row);
         }
         // Keep the disk use of the sweep to one scan at a time.
-        let _ = std::fs::remove_file(&scene.path);
+        if !keep {
+            let _ = std::fs::remove_file(&scene.path);
+        }
     }
     Ok(rows)
 }

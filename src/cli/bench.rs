@@ -45,7 +45,8 @@ pub struct Args {
     /// Scan side of the scan -> ellipsoid fit comparison (default 1024, quick 128).
     #[arg(long)]
     pub numpy_fit_size: Option<usize>,
-    /// Folder for the temporary scans (default: a temporary folder inside --out).
+    /// Folder for the scans, kept there after the run (default: a temporary folder inside --out,
+    /// removed).
     #[arg(long)]
     pub work_dir: Option<PathBuf>,
     /// Measure every point in this process instead of a fresh child process per point (faster to
@@ -136,7 +137,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     } else {
         Isolation::Child(std::env::current_exe().context("cannot find the ndfit executable to run points in")?)
     };
-    let rows = sweep::run(&plan, &work, &iso, |r| {
+    let rows = sweep::run(&plan, &work, &iso, args.work_dir.is_some(), |r| {
         let _ = writeln!(
             stderr.lock(),
             "{:>12} {:>5} {:<14} total {:>9.1} ms (read {:>7.1}, ndf {:>7.1}, fit {:>7.1})  {:>6.1} Mpts/s  ndf_delta {:<8} fit_delta {}",
@@ -196,7 +197,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                 fmt_opt(c.numpy_fit_delta)
             );
             comparisons.push(c);
-            let _ = std::fs::remove_file(&scene.path);
+            if args.work_dir.is_none() {
+                let _ = std::fs::remove_file(&scene.path);
+            }
         }
     }
 

@@ -196,6 +196,10 @@ fn looks_like_text(head: &[u8]) -> bool {
         && head.iter().find(|b| !b.is_ascii_whitespace()).is_some_and(|&b| b.is_ascii_digit() || b"+-.#%nN".contains(&b))
 }
 
+/// Files at least this large are memory-mapped instead of read into a buffer (smaller ones are not
+/// worth the mapping's set-up cost).
+const MMAP_MIN: u64 = 1 << 20;
+
 /// Read any supported scan file. Errors name `path` and the problem in one line.
 pub fn read_scan(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
     read_scan_inner(path, opts).map_err(|e| e.with_path(path))
@@ -206,7 +210,20 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
     if md.is_dir() {
         return Err(Error::new(ErrorKind::InvalidInput, "is a directory, not a scan file"));
     }
-    let bytes = std::fs::read(path)?;
+    let file = std::fs::File::open(path)?;
+    let len = file.metadata()?.len();
+    let (map, owned);
+    let bytes: &[u8] = if len >= MMAP_MIN {
+        // Large scans are mapped rather than copied into a buffer: every reader takes `&[u8]`, so the
+        // bytes are read once, straight from the page cache (measured in docs/PERFORMANCE.md).
+        // SAFETY: the map is read-only and lives only for this call. If another process truncates the
+        // file meanwhile, reads past the new end fault; every mmap-based reader shares this caveat.
+        map = unsafe { memmap2::Mmap::map(&file)? };
+        &map
+    } else {
+        owned = std::fs::read(path)?;
+        &owned
+    };
     if bytes.is_empty() {
         return Err(Error::new(ErrorKind::BadData, "file is empty"));
     }
@@ -221,7 +238,7 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
             Error::new(ErrorKind::UnknownFormat, "unknown scan format (neither its content nor its extension is recognised)")
         })?,
     };
-    let hf = read_bytes(format, &bytes, opts)?;
+    let hf = read_bytes(format, bytes, opts)?;
     check_usable(&hf)?;
     Ok(hf)
 }
