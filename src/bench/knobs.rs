@@ -41,6 +41,9 @@ pub struct Knobs {
     pub cells: Option<usize>,
     /// Mean count per bin aimed at when `cells` is `None`.
     pub target_count: f64,
+    /// Cap on the automatic cells across (`None`: the NDF's own cap).
+    #[serde(default)]
+    pub max_cells: Option<usize>,
     /// Model fitted (`None`: the pipeline stops at the empirical NDF).
     pub model: Option<ModelId>,
     /// Local solver.
@@ -62,6 +65,7 @@ impl Default for Knobs {
             scheme: n.scheme,
             binning: Binning::Whitened,
             cells: n.cells_across,
+            max_cells: None,
             target_count: n.target_count,
             model: Some(ModelId::Ellipsoid),
             solver: f.solver,
@@ -72,11 +76,17 @@ impl Default for Knobs {
 }
 
 impl Knobs {
-    /// The NDF options of these knobs.
-    pub fn ndf_options(&self) -> NdfOptions {
+    /// The NDF options of these knobs for a scan with about `samples` valid normals.
+    pub fn ndf_options(&self, samples: u64) -> NdfOptions {
+        let auto = NdfOptions { target_count: self.target_count, ..NdfOptions::default() };
+        let cells = match (self.cells, self.max_cells) {
+            (Some(c), _) => Some(c),
+            (None, Some(m)) => Some(auto.cells_for(samples).min(m)),
+            (None, None) => None,
+        };
         NdfOptions {
             scheme: self.scheme,
-            cells_across: self.cells,
+            cells_across: cells,
             target_count: self.target_count,
             frame: match self.binning {
                 Binning::Whitened => None,
@@ -98,9 +108,10 @@ impl Knobs {
 
     /// Bins as written in the CSV: the fixed count across, or `auto<target>`.
     pub fn cells_label(&self) -> String {
-        match self.cells {
-            Some(c) => c.to_string(),
-            None => format!("auto{}", self.target_count),
+        match (self.cells, self.max_cells) {
+            (Some(c), _) => c.to_string(),
+            (None, Some(m)) => format!("auto{}max{m}", self.target_count),
+            (None, None) => format!("auto{}", self.target_count),
         }
     }
 }

@@ -6,6 +6,7 @@ use std::process::Command;
 
 use super::accuracy::RefNodes;
 use super::knobs::Knobs;
+use super::presets::Preset;
 use super::pipeline::{self, StageTimes};
 use super::scene::{Scene, DX};
 use super::sweep::median_times;
@@ -90,9 +91,14 @@ pub fn run_numpy(python: &Path, script: &Path, npy: &Path, fit: bool, repeats: u
         .map_err(|e| Error::new(ErrorKind::BadData, format!("{}: unreadable output: {e}", script.display())))
 }
 
-/// Compare on `scene`: task `ndf` times read + NDF, task `fit` the whole pipeline to the ellipsoid.
+/// Compare on `scene`: task `ndf` times read + NDF with the NDF defaults (what `ndfit ndf` writes),
+/// task `fit` the whole pipeline to the ellipsoid with the `balanced` preset (what `ndfit fit` does).
 pub fn compare(python: &Path, script: &Path, scene: &Scene, nodes: &RefNodes, fit: bool, repeats: usize) -> Result<Comparison> {
-    let knobs = Knobs { size: scene.size, model: fit.then_some(ModelId::Ellipsoid), ..Knobs::default() };
+    let knobs = if fit {
+        Knobs { model: Some(ModelId::Ellipsoid), ..Preset::Balanced.bench_knobs(scene.size) }
+    } else {
+        Knobs { size: scene.size, model: None, ..Knobs::default() }
+    };
     let ro = scene.read_options();
     let mut runs = Vec::new();
     let mut last = None;

@@ -90,7 +90,9 @@ pub fn run(path: &Path, read_opts: &ReadOptions, knobs: &Knobs) -> Result<Outcom
 
     mem::reset_peak();
     let t = Instant::now();
-    let ndf = empirical_ndf(&hf, &knobs.ndf_options())?;
+    // The bin count of a capped automatic grid needs the sample count: the valid points estimate it.
+    let opts = knobs.ndf_options(hf.valid_count() as u64);
+    let ndf = empirical_ndf(&hf, &opts)?;
     times.ndf = ms(t);
     peaks.ndf = above(mem::peak_rss());
     drop(hf);

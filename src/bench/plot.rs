@@ -37,6 +37,9 @@ pub fn plot_pareto(path: &Path, rows: &[Row], front: &[usize], title: &str) -> R
         c.configure_mesh()
             .x_desc("whole pipeline time (ms, median)")
             .y_desc("fit error delta(D_fit; D_truth)")
+            .x_labels(6)
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
             .label_style((crate::plot::FONT, 14))
             .draw()
             .map_err(perr)?;
@@ -56,12 +59,16 @@ pub fn plot_pareto(path: &Path, rows: &[Row], front: &[usize], title: &str) -> R
             let preset = p.2.group.strip_prefix("preset_");
             if let Some(name) = preset {
                 c.draw_series(std::iter::once(Circle::new((p.0, p.1), 7, BLUE.stroke_width(2)))).map_err(perr)?;
-                c.draw_series(std::iter::once(Text::new(name.to_string(), (p.0, p.1), (crate::plot::FONT, 15).into_font().color(&BLUE))))
-                    .map_err(perr)?;
+                c.draw_series(std::iter::once(
+                    EmptyElement::at((p.0, p.1)) + Text::new(name.to_string(), (10, 4), (crate::plot::FONT, 15).into_font().color(&BLUE)),
+                ))
+                .map_err(perr)?;
             } else if on_front {
                 let label = label_of(p.2);
-                c.draw_series(std::iter::once(Text::new(label, (p.0, p.1), (crate::plot::FONT, 12).into_font().color(&RED))))
-                    .map_err(perr)?;
+                c.draw_series(std::iter::once(
+                    EmptyElement::at((p.0, p.1)) + Text::new(label, (8, -16), (crate::plot::FONT, 12).into_font().color(&RED)),
+                ))
+                .map_err(perr)?;
             }
         }
         c.configure_series_labels().border_style(BLACK).background_style(WHITE).label_font((crate::plot::FONT, 14)).draw().map_err(perr)?;

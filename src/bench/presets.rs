@@ -6,11 +6,16 @@ use super::knobs::{Binning, Knobs};
 use crate::fit::{FitOptions, Solver};
 use crate::ndf::{NdfOptions, NormalScheme};
 
-/// Mean count per bin of the NDF a fit sees. Measured (docs/PERFORMANCE.md, knob `target_count`): on the
-/// synthetic set the fit error is smallest near 256 samples per bin and the fit time falls in proportion
-/// to the bin count, so 256 is both faster (about 4x fewer bins than the NDF default of 64) and more
-/// accurate; the NDF written by `ndfit ndf` keeps its own finer default.
+/// Mean count per bin of the NDF a fit sees. Measured (docs/PERFORMANCE.md, knobs `target_count` and
+/// `cells`): the fit error is smallest with a few thousand bins holding at least a few hundred normals
+/// each, and the fit time grows in proportion to the bin count (exponent ~1.05), so the fit's NDF is
+/// coarser than the NDF default of 64 per bin (the NDF written by `ndfit ndf` keeps that default).
 pub const FIT_TARGET_COUNT: f64 = 256.0;
+
+/// Most cells across the disk of the NDF a fit sees: 63 (about 3200 bins) measured as accurate as 127 and
+/// 255 on a 2048^2 scan at a quarter and a sixteenth of the fit time, so the fit's cost stops growing
+/// with the scan size.
+pub const FIT_MAX_CELLS: usize = 63;
 
 /// A named speed/accuracy trade.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
@@ -18,7 +23,8 @@ pub const FIT_TARGET_COUNT: f64 = 256.0;
 pub enum Preset {
     /// Every second point along both axes (4x fewer normals), looser solver tolerance.
     Fast,
-    /// The knee of the front: every point, [`FIT_TARGET_COUNT`] samples per bin, the default solver.
+    /// The knee of the front: every point, [`FIT_TARGET_COUNT`] samples per bin up to [`FIT_MAX_CELLS`]
+    /// cells across, the default solver.
     #[default]
     Balanced,
     /// Triangle facets (twice the normals), a tighter tolerance and four extra ellipsoid starts (a
@@ -43,16 +49,18 @@ impl Preset {
     /// the pipeline but properties of the job).
     pub fn knobs(self) -> PresetKnobs {
         match self {
-            Preset::Fast => PresetKnobs { stride: 2, scheme: NormalScheme::Central, target_count: FIT_TARGET_COUNT, tol: 1e-6, extra_starts: 0 },
-            Preset::Balanced => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: FIT_TARGET_COUNT, tol: 1e-10, extra_starts: 0 },
-            Preset::Accurate => PresetKnobs { stride: 1, scheme: NormalScheme::Triangles, target_count: FIT_TARGET_COUNT, tol: 1e-12, extra_starts: 4 },
+            Preset::Fast => PresetKnobs { stride: 2, scheme: NormalScheme::Central, target_count: FIT_TARGET_COUNT, max_cells: FIT_MAX_CELLS, tol: 1e-6, extra_starts: 0 },
+            Preset::Balanced => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: FIT_TARGET_COUNT, max_cells: FIT_MAX_CELLS, tol: 1e-10, extra_starts: 0 },
+            Preset::Accurate => PresetKnobs { stride: 1, scheme: NormalScheme::Triangles, target_count: FIT_TARGET_COUNT, max_cells: FIT_MAX_CELLS, tol: 1e-12, extra_starts: 4 },
         }
     }
 
-    /// The NDF options of this preset.
-    pub fn ndf_options(self) -> NdfOptions {
+    /// The NDF options of this preset for a scan with about `samples` valid normals (the bin count is
+    /// the automatic one for [`PresetKnobs::target_count`], capped at [`PresetKnobs::max_cells`]).
+    pub fn ndf_options(self, samples: u64) -> NdfOptions {
         let k = self.knobs();
-        NdfOptions { scheme: k.scheme, cells_across: None, target_count: k.target_count, frame: None }
+        let auto = NdfOptions { scheme: k.scheme, cells_across: None, target_count: k.target_count, frame: None };
+        NdfOptions { cells_across: Some(auto.cells_for(samples).min(k.max_cells)), ..auto }
     }
 
     /// The fit options of this preset.
@@ -79,6 +87,7 @@ impl Preset {
             scheme: k.scheme,
             binning: Binning::Whitened,
             cells: None,
+            max_cells: Some(k.max_cells),
             target_count: k.target_count,
             tol: k.tol,
             extra_starts: k.extra_starts,
@@ -103,6 +112,8 @@ pub struct PresetKnobs {
     pub scheme: NormalScheme,
     /// Mean count per bin (automatic bin count).
     pub target_count: f64,
+    /// Cap on the cells across the disk.
+    pub max_cells: usize,
     /// Relative solver tolerance.
     pub tol: f64,
     /// Extra ellipsoid starts.

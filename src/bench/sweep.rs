@@ -50,9 +50,10 @@ impl Plan {
         for stride in [2, 4, 8] {
             out.push(("stride".into(), Knobs { stride, ..base.clone() }));
         }
-        for t in [16.0, 64.0, 128.0, 512.0, 1024.0] {
-            out.push(("target_count".into(), Knobs { target_count: t, ..base.clone() }));
+        for t in [16.0, 64.0, 1024.0, 4096.0] {
+            out.push(("target_count".into(), Knobs { target_count: t, max_cells: None, ..base.clone() }));
         }
+        out.push(("target_count".into(), Knobs { max_cells: None, ..base.clone() }));
         for &c in &self.cells {
             out.push(("cells".into(), Knobs { cells: Some(c), ..base.clone() }));
         }

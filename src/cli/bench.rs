@@ -53,6 +53,10 @@ pub struct Args {
     /// start; peak memory then undercounts what the allocator kept from earlier points).
     #[arg(long)]
     pub in_process: bool,
+    /// Measure nothing: read an earlier run's bench.csv and redo the front, plot and cost model from it
+    /// (writes pareto.png and front.json into --out).
+    #[arg(long, value_name = "CSV")]
+    pub from_csv: Option<PathBuf>,
     /// Internal: measure one point (JSON) and print its row as JSON (how the isolated sweep runs).
     #[arg(long, hide = true)]
     pub child_point: Option<String>,
@@ -104,6 +108,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let row = sweep::run_child_point(&p)?;
         println!("{}", serde_json::to_string(&row).context("row JSON")?);
         return Ok(ExitCode::SUCCESS);
+    }
+    if let Some(csv_in) = &args.from_csv {
+        return replot(csv_in, &args.out);
     }
     let mut plan = if args.quick { Plan::quick() } else { Plan::full() };
     if let Some(s) = &args.sizes {
@@ -222,6 +229,25 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         eprintln!("cost model: {} ~ {}^{:.2} ({} points)", e.quantity, e.against, e.exponent, e.n);
     }
     eprintln!("wrote {}, {}, {}", csv_path.display(), png.display(), args.out.join("summary.json").display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--from-csv`: the front, plot and cost model of an earlier run.
+fn replot(csv_in: &std::path::Path, out: &std::path::Path) -> anyhow::Result<ExitCode> {
+    let mut rd = csv::Reader::from_path(csv_in).with_context(|| format!("{}: cannot open", csv_in.display()))?;
+    let rows: Vec<Row> = rd.deserialize().collect::<Result<_, _>>().with_context(|| format!("{}: not a bench.csv", csv_in.display()))?;
+    let knob_size = rows.iter().find(|r| r.group == "preset_balanced").map(|r| r.size).with_context(|| format!("{}: no preset_balanced row", csv_in.display()))?;
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the output folder", out.display()))?;
+    let knob_rows: Vec<Row> = rows.iter().filter(|r| r.size == knob_size && !r.model.is_empty()).cloned().collect();
+    let front = pareto_front(&knob_rows, |r| r.t_total_ms, |r| r.fit_delta);
+    let png = out.join("pareto.png");
+    plot_pareto(&png, &knob_rows, &front, &format!("ndfit: time against fit error, {knob_size}x{knob_size} synthetic ellipsoid scan"))?;
+    let json = serde_json::json!({
+        "pareto_front": front.iter().map(|&i| &knob_rows[i]).collect::<Vec<_>>(),
+        "cost_model": cost_model(&rows),
+    });
+    ndfit::io::write_bytes_atomic(&out.join("front.json"), serde_json::to_string_pretty(&json).context("JSON")?.as_bytes())?;
+    eprintln!("wrote {} and {}", png.display(), out.join("front.json").display());
     Ok(ExitCode::SUCCESS)
 }
 

@@ -125,9 +125,14 @@ fn presets_are_ordered() {
     let (f, b, a) = (Preset::Fast.knobs(), Preset::Balanced.knobs(), Preset::Accurate.knobs());
     assert!(f.stride >= b.stride && b.stride >= a.stride);
     assert!(f.tol >= b.tol && b.tol >= a.tol);
-    // Balanced is the library's fit default on a coarser NDF (FIT_TARGET_COUNT samples per bin).
-    let want = ndfit::ndf::NdfOptions { target_count: ndfit::bench::presets::FIT_TARGET_COUNT, ..Default::default() };
-    assert_eq!(Preset::Balanced.ndf_options(), want);
+    // Balanced is the library's fit default on a coarser NDF: FIT_TARGET_COUNT samples per bin, at
+    // most FIT_MAX_CELLS across. 2e5 samples at 256 per bin: sqrt(8e5 / (pi 256)) = 31.5 -> 32, made
+    // odd (33) by the grid; 1e8 samples would want 705, capped at 63.
+    use ndfit::bench::presets::{FIT_MAX_CELLS, FIT_TARGET_COUNT};
+    assert_eq!(FIT_TARGET_COUNT, 256.0);
+    assert_eq!(ndfit::ndf::BinGrid::new(Preset::Balanced.ndf_options(200_000).cells_across.expect("set")).n, 33);
+    assert_eq!(Preset::Balanced.ndf_options(100_000_000).cells_across, Some(FIT_MAX_CELLS));
+    assert_eq!(Preset::Balanced.ndf_options(1_000_000).scheme, NormalScheme::Central);
     assert_eq!(Preset::Balanced.fit_options(), ndfit::fit::FitOptions::default());
-    assert_eq!(Preset::Accurate.ndf_options().scheme, NormalScheme::Triangles);
+    assert_eq!(Preset::Accurate.ndf_options(1_000_000).scheme, NormalScheme::Triangles);
 }
