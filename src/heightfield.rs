@@ -58,7 +58,25 @@ impl Heightfield {
             return Err(Error::invalid(format!("spacing must be finite and positive, got dx={dx}, dy={dy}")));
         }
         // Infinities are not heights either: mask them like NaN so no later stage sees them.
-        let z = z.into_iter().map(|h| if h.is_finite() { h } else { f64::NAN }).collect();
+        // (In place, writing only where needed: readers of large files pass through here.)
+        let mut z = z;
+        for h in z.iter_mut().filter(|h| h.is_infinite()) {
+            *h = f64::NAN;
+        }
+        Ok(Heightfield { nx, ny, dx, dy, x0: 0.0, y0: 0.0, z, meta: ScanMeta::default() })
+    }
+
+    /// [`Heightfield::new`] for readers whose heights are already finite or NaN (no infinities):
+    /// skips the masking pass over the data, which matters for files of hundreds of megabytes.
+    pub(crate) fn new_finite_or_nan(nx: usize, ny: usize, dx: f64, dy: f64, z: Vec<f64>) -> Result<Self> {
+        debug_assert!(z.iter().all(|h| !h.is_infinite()));
+        let n = nx.checked_mul(ny).ok_or_else(|| Error::invalid("grid size overflows"))?;
+        if nx == 0 || ny == 0 || z.len() != n {
+            return Err(Error::invalid(format!("{} heights for a {nx} x {ny} grid", z.len())));
+        }
+        if !(dx.is_finite() && dx > 0.0 && dy.is_finite() && dy > 0.0) {
+            return Err(Error::invalid(format!("spacing must be finite and positive, got dx={dx}, dy={dy}")));
+        }
         Ok(Heightfield { nx, ny, dx, dy, x0: 0.0, y0: 0.0, z, meta: ScanMeta::default() })
     }
 

@@ -1,13 +1,95 @@
-//! `ndfit fit`.
+//! `ndfit fit SCAN`: read, preprocess, build the empirical NDF, fit, write `ndfit.fit/1` JSON.
 
+use std::io::Write;
+use std::path::PathBuf;
 use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::anyhow;
+use ndfit::fit::{fit_auto, fit_model, FitOptions, InputInfo, Objective, Solver};
+use ndfit::models::ModelId;
+use ndfit::ndf::{empirical_ndf, NdfOptions, NormalScheme};
+
+use super::scan_args::ScanArgs;
 
 /// Arguments of `ndfit fit`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    #[command(flatten)]
+    scan: ScanArgs,
+    /// Model id (ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid) or `auto` (fit the nested models and
+    /// choose by the quasi-likelihood BIC).
+    #[arg(long, default_value = "auto")]
+    model: String,
+    /// Output JSON (written atomically); standard output when absent.
+    #[arg(short = 'o', long)]
+    output: Option<PathBuf>,
+    /// Residuals: `poisson` (deviance of the bin counts) or `logd` (count-weighted log D); see
+    /// data_formats/objective.md.
+    #[arg(long, default_value = "poisson")]
+    objective: String,
+    /// Local optimizer: `lm` (Levenberg-Marquardt), `nelder-mead` or `lbfgs` (argmin).
+    #[arg(long, default_value = "lm")]
+    solver: String,
+    /// Extra skew starts for the ellipsoid (0-4) beyond the default two.
+    #[arg(long, default_value_t = 0)]
+    extra_starts: usize,
+    /// Plot of the data against the fit, with residuals (PNG).
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// NDF bins across the Lambert disk (odd); chosen from the sample count when absent.
+    #[arg(long)]
+    ndf_cells: Option<usize>,
+    /// Normal scheme of the NDF: `central` or `triangles`.
+    #[arg(long, default_value = "central")]
+    ndf_scheme: String,
+}
 
 /// Run `ndfit fit`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let _ = args;
-    anyhow::bail!("'ndfit fit' is not implemented yet")
+    let path = args.scan.scan.display().to_string();
+    let opts = FitOptions {
+        objective: args.objective.parse::<Objective>().map_err(|e| anyhow!("--objective: {}", e.message()))?,
+        solver: args.solver.parse::<Solver>().map_err(|e| anyhow!("--solver: {}", e.message()))?,
+        extra_starts: args.extra_starts.min(4),
+        ..FitOptions::default()
+    };
+    let model = match args.model.as_str() {
+        "auto" => None,
+        m => Some(m.parse::<ModelId>().map_err(|e| anyhow!("--model: {}", e.message()))?),
+    };
+    let scheme = args.ndf_scheme.parse::<NormalScheme>().map_err(|e| anyhow!("--ndf-scheme: {}", e.message()))?;
+    let ndf_opts = NdfOptions { scheme, cells_across: args.ndf_cells, ..NdfOptions::default() };
+
+    let t0 = Instant::now();
+    let hf = args.scan.load()?;
+    let t1 = Instant::now();
+    let ndf = empirical_ndf(&hf, &ndf_opts).map_err(|e| e.with_path(&args.scan.scan))?;
+    let t2 = Instant::now();
+    let result = match model {
+        Some(id) => fit_model(&ndf, id, &opts),
+        None => fit_auto(&ndf, &opts),
+    };
+    let mut report = result.map_err(|e| e.with_path(&args.scan.scan))?;
+    report.input = Some(InputInfo::new(&args.scan.scan, &hf));
+    report.timings.read_ms = Some((t1 - t0).as_secs_f64() * 1e3);
+    report.timings.ndf_ms = Some((t2 - t1).as_secs_f64() * 1e3);
+    for w in &report.warnings {
+        eprintln!("ndfit: {path}: warning: {w}");
+    }
+    if let Some(png) = &args.plot {
+        let m = report.to_model()?;
+        let title = format!("{path}: {} fit", report.model);
+        ndfit::fit::plot::plot_fit(png, &ndf, &m, &title)?;
+    }
+    let mut json = serde_json::to_string_pretty(&report).map_err(|e| anyhow!("{path}: cannot serialize the result ({e})"))?;
+    json.push('\n');
+    match &args.output {
+        Some(out) => ndfit::io::write_bytes_atomic(out, json.as_bytes())?,
+        None => {
+            let mut stdout = std::io::stdout().lock();
+            stdout.write_all(json.as_bytes()).and_then(|_| stdout.flush()).map_err(|e| anyhow!("<stdout>: {e}"))?;
+        }
+    }
+    Ok(ExitCode::SUCCESS)
 }

@@ -1,13 +1,109 @@
-//! `ndfit ndf`.
+//! `ndfit ndf SCAN -o NDF.csv|NDF.json [--exr D.exr] [--png PREFIX]`: the empirical NDF of a scan.
 
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+
+use anyhow::Context;
+use ndfit::ndf::{empirical_ndf, output, plot, EmpiricalNdf, NdfOptions, NormalScheme};
+
+use super::scan_args::ScanArgs;
+
+/// How the empirical NDF is built; `ndfit fit` flattens these too.
+#[derive(Debug, Clone, clap::Args)]
+pub struct NdfArgs {
+    /// Normals: central (central differences, default) or triangles (exact Gauss map of the
+    /// triangulated surface, two facets per grid cell).
+    #[arg(long, default_value = "central")]
+    pub normals: String,
+    /// Cells across the Lambert disk of the whitened hemisphere (odd, 3-1023). Default: chosen from the
+    /// number of samples so that bins hold about --target-count samples on average (15-255).
+    #[arg(long)]
+    pub ndf_cells: Option<usize>,
+    /// Mean samples per bin aimed at when --ndf-cells is not given.
+    #[arg(long, default_value_t = ndfit::ndf::DEFAULT_TARGET_COUNT)]
+    pub target_count: f64,
+}
+
+impl NdfArgs {
+    /// The library options these flags ask for.
+    pub fn options(&self) -> anyhow::Result<NdfOptions> {
+        let scheme: NormalScheme = self.normals.parse()?;
+        if let Some(c) = self.ndf_cells {
+            anyhow::ensure!((3..=ndfit::ndf::grid::MAX_CELLS_ACROSS).contains(&c), "--ndf-cells {c} must be between 3 and {}", ndfit::ndf::grid::MAX_CELLS_ACROSS);
+        }
+        anyhow::ensure!(self.target_count.is_finite() && self.target_count >= 1.0, "--target-count {} must be at least 1", self.target_count);
+        Ok(NdfOptions { scheme, cells_across: self.ndf_cells, target_count: self.target_count, frame: None })
+    }
+}
 
 /// Arguments of `ndfit ndf`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    #[command(flatten)]
+    scan: ScanArgs,
+    #[command(flatten)]
+    ndf: NdfArgs,
+    /// Output file: `.csv` (one row per bin) or `.json` (`ndfit.ndf/1`); see data_formats/ndf_csv.md.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Also write an OpenEXR image of D over the orthographically projected hemisphere.
+    #[arg(long)]
+    exr: Option<PathBuf>,
+    /// Size of the EXR image in pixels.
+    #[arg(long, default_value_t = 512)]
+    exr_size: usize,
+    /// Also write PNG plots: PREFIX.map.png (false-colour log D) and PREFIX.slices.png.
+    #[arg(long)]
+    png: Option<PathBuf>,
+}
+
+/// The `input` block of the JSON output.
+fn input_json(path: &Path, hf: &ndfit::Heightfield) -> serde_json::Value {
+    serde_json::json!({
+        "path": path.display().to_string(), "format": hf.meta.format,
+        "nx": hf.nx, "ny": hf.ny, "dx": hf.dx, "dy": hf.dy, "invalid": hf.invalid_count(),
+    })
+}
+
+/// Write the NDF to `out` by extension.
+pub fn write_ndf(out: &Path, ndf: &EmpiricalNdf, input: serde_json::Value) -> anyhow::Result<()> {
+    let ext = out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("csv") => output::write_csv(out, ndf)?,
+        Some("json") => output::write_json(out, ndf, input)?,
+        _ => anyhow::bail!("{}: output must end in .csv or .json", out.display()),
+    }
+    Ok(())
+}
 
 /// Run `ndfit ndf`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let _ = args;
-    anyhow::bail!("'ndfit ndf' is not implemented yet")
+    let opts = args.ndf.options()?;
+    // Check the output names before the work, so a typo fails fast and nothing is half-written.
+    let ext = args.output.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
+    anyhow::ensure!(matches!(ext.as_deref(), Some("csv" | "json")), "{}: output must end in .csv or .json", args.output.display());
+    let hf = args.scan.load()?;
+    let ndf = empirical_ndf(&hf, &opts).map_err(|e| e.with_path(&args.scan.scan))?;
+    write_ndf(&args.output, &ndf, input_json(&args.scan.scan, &hf))?;
+    if let Some(exr) = &args.exr {
+        output::write_exr(exr, &ndf, args.exr_size)?;
+    }
+    if let Some(prefix) = &args.png {
+        let name = args.scan.scan.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let p = |suffix: &str| PathBuf::from(format!("{}.{suffix}.png", prefix.display()));
+        plot::plot_map(&p("map"), &ndf, &format!("empirical NDF of {name} ({} normals)", ndf.scheme.as_str()))
+            .with_context(|| format!("{}", p("map").display()))?;
+        plot::plot_slices(&p("slices"), &ndf, &format!("{name}: D through the peak"))
+            .with_context(|| format!("{}", p("slices").display()))?;
+    }
+    eprintln!(
+        "ndfit ndf: {} samples ({} skipped) in {} bins ({} x {} Lambert cells, {} normals)",
+        ndf.n_samples,
+        ndf.n_skipped,
+        ndf.bins.len(),
+        ndf.grid.n,
+        ndf.grid.n,
+        ndf.scheme.as_str()
+    );
+    Ok(ExitCode::SUCCESS)
 }

@@ -51,7 +51,6 @@ impl ScanArgs {
         Ok(ndfit::io::read_scan(&self.scan, &self.read_options())?)
     }
 
-    #[allow(dead_code)] // called by the scan-reading subcommands (fit, ndf, batch ...)
     /// Read the scan AND preprocess it (crop, subsample, form removal), the way every command wants it.
     pub fn load(&self) -> anyhow::Result<ndfit::Heightfield> {
         let hf = self.load_raw()?;

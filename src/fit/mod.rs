@@ -70,6 +70,8 @@ struct Fitted {
     start_objectives: Vec<f64>,
     best_start: usize,
     warnings: Vec<String>,
+    /// All samples in one bin: a delta NDF, reported at the alpha floor with no standard errors.
+    delta: bool,
 }
 
 /// The data of one fit session: the bins and their slope summary.
@@ -119,7 +121,26 @@ fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) ->
         warnings.push(format!("{id}: canonical form changed the objective ({} -> {fc}); kept the solver's parameters", local.f));
         (local.x.clone(), local.f)
     };
-    Ok(Fitted { id, x, f, local, evaluations, start_objectives, best_start, warnings })
+    Ok(Fitted { id, x, f, local, evaluations, start_objectives, best_start, warnings, delta: false })
+}
+
+/// The fit of a delta NDF (every sample in one bin, e.g. a plane after form removal): no lobe width can
+/// be measured, so the alphas are the models' floor [`crate::models::ALPHA_MIN`] and the lobe points at
+/// the bin (for the ellipsoid through its skew; the other models are centred on n by definition).
+fn delta_fit(s: &Session, id: ModelId) -> Fitted {
+    let (tx, ty) = start::skew_start(&s.summary, 0.0);
+    let a = crate::models::ALPHA_MIN;
+    let p = match id {
+        ModelId::Ggx | ModelId::Beckmann => vec![a],
+        ModelId::GgxAniso | ModelId::BeckmannAniso => vec![a, a, 0.0],
+        ModelId::Ellipsoid => vec![a, a, tx, ty, 0.0],
+    };
+    let x = params::to_internal(id, &p);
+    let mut r = vec![0.0; s.data.bins.len()];
+    let f = problem::residuals_into(&s.data, id, &x, &mut r);
+    let termination = "delta NDF: every sample in one bin; alpha set to the model floor".to_string();
+    let local = solve::Local { x: x.clone(), f, termination, converged: true, evaluations: 0 };
+    Fitted { id, x, f, local, evaluations: 0, start_objectives: vec![f], best_start: 0, warnings: Vec::new(), delta: true }
 }
 
 /// Public parameters of a fit.
@@ -157,6 +178,9 @@ fn fit_ellipsoid(s: &Session, aniso: &Fitted, opts: &FitOptions) -> Result<Fitte
 
 /// Fit `id` with the chain of simpler fits it starts from.
 fn fit_chain(s: &Session, id: ModelId, opts: &FitOptions) -> Result<Fitted> {
+    if s.data.k_nonzero == 1 {
+        return Ok(delta_fit(s, id));
+    }
     match id {
         ModelId::Ggx | ModelId::Beckmann => fit_iso(s, id, opts),
         ModelId::GgxAniso => fit_aniso(s, id, Some(&fit_iso(s, ModelId::Ggx, opts)?), opts),
@@ -190,13 +214,13 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     let cov = covariance::covariance(&j, s2);
     let g = params::public_derivative(id, &fit.x);
     let se: Vec<Option<f64>> = (0..p)
-        .map(|a| (!cov.undetermined[a]).then(|| g[a].abs() * cov.cov[(a, a)].max(0.0).sqrt()))
+        .map(|a| (!cov.undetermined[a] && !fit.delta).then(|| g[a].abs() * cov.cov[(a, a)].max(0.0).sqrt()))
         .collect();
     let correlation: Vec<Vec<Option<f64>>> = (0..p)
         .map(|a| {
             (0..p)
                 .map(|b| {
-                    let ok = !cov.undetermined[a] && !cov.undetermined[b];
+                    let ok = !cov.undetermined[a] && !cov.undetermined[b] && !fit.delta;
                     let den = (cov.cov[(a, a)] * cov.cov[(b, b)]).sqrt();
                     // The sign of g (always positive) does not change correlations.
                     (ok && den > 0.0).then(|| (cov.cov[(a, b)] / den).clamp(-1.0, 1.0))
@@ -290,14 +314,22 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
             None
         }
     };
-    let ggx = keep(fit_iso(&s, ModelId::Ggx, opts));
-    let ggx_a = keep(fit_aniso(&s, ModelId::GgxAniso, ggx.as_ref(), opts));
-    let ell = match &ggx_a {
-        Some(a) => keep(fit_ellipsoid(&s, a, opts)),
-        None => None,
+    let delta = s.data.k_nonzero == 1;
+    let (ggx, ggx_a, ell, beck, beck_a) = if delta {
+        // A delta NDF: every model is at its floor; the simplest wins below.
+        let d = |id| Some(delta_fit(&s, id));
+        (d(ModelId::Ggx), d(ModelId::GgxAniso), d(ModelId::Ellipsoid), d(ModelId::Beckmann), d(ModelId::BeckmannAniso))
+    } else {
+        let ggx = keep(fit_iso(&s, ModelId::Ggx, opts));
+        let ggx_a = keep(fit_aniso(&s, ModelId::GgxAniso, ggx.as_ref(), opts));
+        let ell = match &ggx_a {
+            Some(a) => keep(fit_ellipsoid(&s, a, opts)),
+            None => None,
+        };
+        let beck = keep(fit_iso(&s, ModelId::Beckmann, opts));
+        let beck_a = keep(fit_aniso(&s, ModelId::BeckmannAniso, beck.as_ref(), opts));
+        (ggx, ggx_a, ell, beck, beck_a)
     };
-    let beck = keep(fit_iso(&s, ModelId::Beckmann, opts));
-    let beck_a = keep(fit_aniso(&s, ModelId::BeckmannAniso, beck.as_ref(), opts));
     let fits: Vec<Fitted> = [ggx, beck, ggx_a, beck_a, ell].into_iter().flatten().collect();
     if fits.is_empty() {
         return Err(Error::new(ErrorKind::Numerical, format!("no model could be fitted ({})", warnings.join("; "))));

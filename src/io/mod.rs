@@ -196,10 +196,6 @@ fn looks_like_text(head: &[u8]) -> bool {
         && head.iter().find(|b| !b.is_ascii_whitespace()).is_some_and(|&b| b.is_ascii_digit() || b"+-.#%nN".contains(&b))
 }
 
-/// Files at least this large are memory-mapped instead of read into a buffer (smaller ones are not
-/// worth the mapping's set-up cost).
-const MMAP_MIN: u64 = 1 << 20;
-
 /// Read any supported scan file. Errors name `path` and the problem in one line.
 pub fn read_scan(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
     read_scan_inner(path, opts).map_err(|e| e.with_path(path))
@@ -210,20 +206,8 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
     if md.is_dir() {
         return Err(Error::new(ErrorKind::InvalidInput, "is a directory, not a scan file"));
     }
-    let file = std::fs::File::open(path)?;
-    let len = file.metadata()?.len();
-    let (map, owned);
-    let bytes: &[u8] = if len >= MMAP_MIN {
-        // Large scans are mapped rather than copied into a buffer: every reader takes `&[u8]`, so the
-        // bytes are read once, straight from the page cache (measured in docs/PERFORMANCE.md).
-        // SAFETY: the map is read-only and lives only for this call. If another process truncates the
-        // file meanwhile, reads past the new end fault; every mmap-based reader shares this caveat.
-        map = unsafe { memmap2::Mmap::map(&file)? };
-        &map
-    } else {
-        owned = std::fs::read(path)?;
-        &owned
-    };
+    let bytes = FileBytes::open(path, md.len())?;
+    let bytes: &[u8] = &bytes;
     if bytes.is_empty() {
         return Err(Error::new(ErrorKind::BadData, "file is empty"));
     }
@@ -241,6 +225,40 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
     let hf = read_bytes(format, bytes, opts)?;
     check_usable(&hf)?;
     Ok(hf)
+}
+
+/// A file's bytes: read into memory when small, memory-mapped when large (no copy; the readers
+/// decode straight from the page cache).
+enum FileBytes {
+    Owned(Vec<u8>),
+    Mapped(memmap2::Mmap),
+}
+
+/// Files at least this large are mapped rather than read.
+const MMAP_THRESHOLD: u64 = 4 << 20;
+
+impl FileBytes {
+    fn open(path: &Path, len: u64) -> Result<Self> {
+        if len < MMAP_THRESHOLD {
+            return Ok(FileBytes::Owned(std::fs::read(path)?));
+        }
+        let file = std::fs::File::open(path)?;
+        // SAFETY: the map is only read, and only while the caller holds it. Known limit: a file
+        // truncated by another process during the read faults (SIGBUS) instead of failing
+        // cleanly; scans are read at rest, and the zero-copy read is what keeps large files fast.
+        let map = unsafe { memmap2::MmapOptions::new().populate().map(&file)? };
+        Ok(FileBytes::Mapped(map))
+    }
+}
+
+impl std::ops::Deref for FileBytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            FileBytes::Owned(v) => v,
+            FileBytes::Mapped(m) => m,
+        }
+    }
 }
 
 /// Parse `bytes` as `format`.
@@ -266,7 +284,8 @@ pub fn read_bytes(format: Format, bytes: &[u8], opts: &ReadOptions) -> Result<He
 
 /// Reject scans nothing can be computed from: every point invalid.
 fn check_usable(hf: &Heightfield) -> Result<()> {
-    if hf.valid_count() == 0 {
+    // `any` stops at the first valid point: free on real scans.
+    if !hf.z.iter().any(|h| !h.is_nan()) {
         return Err(Error::new(
             ErrorKind::BadData,
             format!("all {} points of the {} x {} grid are invalid (or non-finite)", hf.z.len(), hf.nx, hf.ny),

@@ -161,12 +161,16 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
             .text_at(&["PointDataLink"])
             .ok_or_else(|| Error::corrupt(format!("{main_name}: DataLink has no PointDataLink")))?;
         let data_path = format!("{prefix}{data_name}");
-        let raw = read_entry_exact(&mut zip, bytes, &data_path, n, ztype.size(), nx, ny)?;
-        z = decode(&raw, ztype, z_inc, z_off);
+        let (raw, crc) = read_entry_exact(&mut zip, bytes, &data_path, n, ztype.size(), nx, ny)?;
+        z = decode(&raw, ztype, z_inc, z_off, crc)
+            .map_err(|e| Error::corrupt(format!("{data_path}: {}", e.message())))?;
         if let Some(valid_name) = link.text_at(&["ValidPointsLink"]) {
             let vpath = format!("{prefix}{valid_name}");
             let vbytes = n.div_ceil(8);
-            let valid = read_entry_exact(&mut zip, bytes, &vpath, vbytes, 1, vbytes, 1)?;
+            let (valid, crc) = read_entry_exact(&mut zip, bytes, &vpath, vbytes, 1, vbytes, 1)?;
+            if crc.is_some_and(|c| c != crc32fast::hash(&valid)) {
+                return Err(Error::corrupt(format!("{vpath}: CRC-32 mismatch, the validity bits are corrupt")));
+            }
             apply_valid_bits(&mut z, &valid);
         }
     } else if let Some(list) = r3.child("DataList") {
@@ -184,13 +188,8 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
         );
     }
 
-    // Heights of a valid file are finite; infinities become invalid points in Heightfield::new.
-    for h in z.iter_mut() {
-        if !h.is_finite() {
-            *h = f64::NAN;
-        }
-    }
-    let mut hf = Heightfield::new(nx, ny, dx, dy, z)?;
+    // `decode` and the DataList parser already turned infinities into NaN.
+    let mut hf = Heightfield::new_finite_or_nan(nx, ny, dx, dy, z)?;
     hf.x0 = x0;
     hf.y0 = y0;
     hf.meta = meta;
@@ -236,7 +235,8 @@ fn read_entry_text<R: std::io::Read + std::io::Seek>(zip: &mut zip::ZipArchive<R
 }
 
 /// The bytes of entry `name`, which must hold exactly `n * size` bytes. Stored entries are sliced out
-/// of `file` directly (with their CRC-32 checked) so a large float64 file is copied only once.
+/// of `file` directly, with the CRC-32 the caller must check (fused with decoding, so a large float64
+/// file is traversed once); deflated entries are checked by the zip reader (`None`).
 fn read_entry_exact<'a, R: std::io::Read + std::io::Seek>(
     zip: &mut zip::ZipArchive<R>,
     file: &'a [u8],
@@ -245,7 +245,7 @@ fn read_entry_exact<'a, R: std::io::Read + std::io::Seek>(
     size: usize,
     nx: usize,
     ny: usize,
-) -> Result<std::borrow::Cow<'a, [u8]>> {
+) -> Result<(std::borrow::Cow<'a, [u8]>, Option<u32>)> {
     let need = checked_size(&[n, size], "X3P point data")?;
     let mut entry = zip
         .by_name(name)
@@ -263,11 +263,7 @@ fn read_entry_exact<'a, R: std::io::Read + std::io::Seek>(
             let slice = start.checked_add(need).and_then(|end| file.get(start..end)).ok_or_else(|| {
                 Error::corrupt(format!("{name}: truncated, {need} bytes of point data are not all in the file"))
             })?;
-            let crc = crc32fast::hash(slice);
-            if crc != entry.crc32() {
-                return Err(Error::corrupt(format!("{name}: CRC-32 mismatch, the point data are corrupt")));
-            }
-            Ok(std::borrow::Cow::Borrowed(slice))
+            Ok((std::borrow::Cow::Borrowed(slice), Some(entry.crc32())))
         }
         _ => {
             if declared > entry.compressed_size().saturating_mul(MAX_DEFLATE_RATIO) {
@@ -285,27 +281,41 @@ fn read_entry_exact<'a, R: std::io::Read + std::io::Seek>(
             if buf.len() != need {
                 return Err(Error::corrupt(format!("{name}: holds {} bytes, {need} expected", buf.len())));
             }
-            Ok(std::borrow::Cow::Owned(buf))
+            Ok((std::borrow::Cow::Owned(buf), None))
         }
     }
 }
 
-/// Decode little-endian stored values to metres: `off + inc * v` (identity skipped for exactness).
-pub fn decode(raw: &[u8], t: ZType, inc: f64, off: f64) -> Vec<f64> {
+/// Decode little-endian stored values to metres: `off + inc * v` (identity skipped for exactness),
+/// non-finite results as NaN. With `crc`, the CRC-32 of `raw` is computed block by block in the same
+/// pass and must match.
+pub fn decode(raw: &[u8], t: ZType, inc: f64, off: f64, crc: Option<u32>) -> Result<Vec<f64>> {
     let identity = inc == 1.0 && off == 0.0;
-    let map = |v: f64| if identity { v } else { off + inc * v };
-    match t {
-        ZType::D => raw.chunks_exact(8).map(|c| map(f64::from_le_bytes(c.try_into().expect("chunk of 8")))).collect(),
-        ZType::F => {
-            raw.chunks_exact(4).map(|c| map(f32::from_le_bytes(c.try_into().expect("chunk of 4")) as f64)).collect()
+    let finish = |v: f64| {
+        let v = if identity { v } else { off + inc * v };
+        if v.is_finite() { v } else { f64::NAN }
+    };
+    let size = t.size();
+    let mut out = Vec::with_capacity(raw.len() / size);
+    let mut hasher = crc.map(|_| crc32fast::Hasher::new());
+    // 64 KiB blocks: hashed and decoded while in cache.
+    for block in raw.chunks(1 << 16) {
+        if let Some(h) = hasher.as_mut() {
+            h.update(block);
         }
-        ZType::L => {
-            raw.chunks_exact(4).map(|c| map(i32::from_le_bytes(c.try_into().expect("chunk of 4")) as f64)).collect()
-        }
-        ZType::I => {
-            raw.chunks_exact(2).map(|c| map(i16::from_le_bytes(c.try_into().expect("chunk of 2")) as f64)).collect()
+        match t {
+            ZType::D => out.extend(block.chunks_exact(8).map(|c| finish(f64::from_le_bytes(c.try_into().expect("8 bytes"))))),
+            ZType::F => out.extend(block.chunks_exact(4).map(|c| finish(f32::from_le_bytes(c.try_into().expect("4 bytes")) as f64))),
+            ZType::L => out.extend(block.chunks_exact(4).map(|c| finish(i32::from_le_bytes(c.try_into().expect("4 bytes")) as f64))),
+            ZType::I => out.extend(block.chunks_exact(2).map(|c| finish(i16::from_le_bytes(c.try_into().expect("2 bytes")) as f64))),
         }
     }
+    if let (Some(h), Some(want)) = (hasher, crc) {
+        if h.finalize() != want {
+            return Err(Error::corrupt("CRC-32 mismatch, the point data are corrupt"));
+        }
+    }
+    Ok(out)
 }
 
 fn apply_valid_bits(z: &mut [f64], valid: &[u8]) {
@@ -338,7 +348,8 @@ fn parse_data_list(list: &Element, n: usize, t: ZType, inc: f64, off: f64, main:
                 ZType::F => v as f32 as f64,
                 _ => v,
             };
-            Ok(if identity { v } else { off + inc * v })
+            let v = if identity { v } else { off + inc * v };
+            Ok(if v.is_finite() { v } else { f64::NAN })
         })
         .collect()
 }

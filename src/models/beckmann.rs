@@ -56,8 +56,9 @@ impl Ndf for Beckmann {
         // exp(-e) / z^4 in the log domain: for m.z ~ 1e-100, z^4 underflows to 0 and exp(-e) to 0 (0/0);
         // the exponent -e - 4 ln z is finite and correctly very negative.
         let expo = -e - 4.0 * l.z.ln();
+        // NaN only for a non-finite m (0 * inf in the slope); such an m has no density.
         if expo.is_nan() {
-            return 0.0; // e = inf with ln z finite cannot give NaN; only a non-finite m gets here
+            return 0.0;
         }
         expo.exp() / (std::f64::consts::PI * self.alpha_x * self.alpha_y)
     }
@@ -86,6 +87,7 @@ impl Masking for Beckmann {
         if !l.is_finite() {
             return f64::MAX; // a so small that 1/a overflowed: the grazing limit
         }
+        // The two terms nearly cancel for large a; rounding may leave an ulp below 0.
         l.max(0.0)
     }
 

@@ -61,6 +61,7 @@ impl MicrofacetBrdf {
         let hn = h.norm();
         let h = h / hn;
         let g = self.g2(psi, omega, h);
+        // Nothing visible: 0 whatever D and F are (and no work for them).
         if g == 0.0 {
             return 0.0;
         }

@@ -64,7 +64,26 @@ pub fn canonical_aniso(ax: f64, ay: f64, tz: f64) -> (f64, f64, f64) {
 
 /// The canonical `[alpha_x, alpha_y, theta_x, theta_y, theta_z]` of any invertible A (module docs).
 /// Refuses a matrix that is not finite or whose smallest singular value is below `1e-12` times its largest.
+///
+/// Accuracy: an SVD gives each singular vector to `eps sigma_max / gap`, poor for the two small singular
+/// values of a smooth ellipsoid (alpha ~ 1e-4: gaps of 1e-4 against sigma_max = 1). So the axis of the largest
+/// singular value comes from the SVD of A, the axis of the smallest from the SVD of `A^-T` (where it is the
+/// largest), and the middle one is their cross product: every axis to `eps / (relative gap)`.
 pub fn decompose(a: &Matrix3<f64>) -> Result<[f64; 5]> {
+    let (v, s) = principal_axes(a)?;
+    label(v, s)
+}
+
+/// The canonical parameters of `A = S R` from its known principal axes (the rows of R) and singular values
+/// `(alpha_x, alpha_y, 1)`, without any decomposition: exact to rounding.
+pub fn relabel(r: &Matrix3<f64>, alpha_x: f64, alpha_y: f64) -> Result<[f64; 5]> {
+    let v = [0, 1, 2].map(|i| r.row(i).transpose().into_owned());
+    label(v, Vector3::new(alpha_x, alpha_y, 1.0))
+}
+
+/// Principal axes (unit right singular vectors) and singular values of A, each axis accurate to the
+/// relative gap of its singular value (see [`decompose`]).
+fn principal_axes(a: &Matrix3<f64>) -> Result<([Vector3<f64>; 3], Vector3<f64>)> {
     if a.iter().any(|v| !v.is_finite()) {
         return Err(Error::invalid("ellipsoid matrix A has a non-finite entry"));
     }
@@ -76,7 +95,30 @@ pub fn decompose(a: &Matrix3<f64>) -> Result<[f64; 5]> {
     if !(smax > 0.0) || s.min() < 1e-12 * smax {
         return Err(singular_error());
     }
-    let v: [Vector3<f64>; 3] = [0, 1, 2].map(|i| vt.row(i).transpose().into_owned());
+    let inv_t = a.try_inverse().ok_or_else(singular_error)?.transpose();
+    let svd_b = inv_t.svd(false, true);
+    let vt_b = svd_b.v_t.ok_or_else(singular_error)?;
+    let imax = s.imax();
+    let jmax = svd_b.singular_values.imax();
+    let v_max = vt.row(imax).transpose().normalize();
+    let v_min = vt_b.row(jmax).transpose();
+    // Orthogonal to v_max already to rounding; make it exact.
+    let v_min = (v_min - v_max * v_min.dot(&v_max)).normalize();
+    let v_mid = v_min.cross(&v_max).normalize();
+    let s_max = (a * v_max).norm();
+    let s_min = 1.0 / (inv_t * v_min).norm();
+    // ||A v|| is accurate to eps s_max / s_mid, 1 / ||A^-T v|| to eps s_mid / s_min: take the better one.
+    let (sa, sb) = ((a * v_mid).norm(), 1.0 / (inv_t * v_mid).norm());
+    let s_mid = if sa * sa >= s_max * s_min { sa } else { sb };
+    // Cannot happen after the condition check above; kept so that no NaN alpha can ever leave.
+    if !(s_max.is_finite() && s_min > 0.0 && s_mid.is_finite() && s_mid > 0.0) {
+        return Err(singular_error());
+    }
+    Ok(([v_max, v_mid, v_min], Vector3::new(s_max, s_mid, s_min)))
+}
+
+/// The labeling rules of the module docs applied to principal axes `v` with singular values `s`.
+fn label(v: [Vector3<f64>; 3], s: Vector3<f64>) -> Result<[f64; 5]> {
     let z = Vector3::z();
 
     // Pick r3 and the two remaining (axis, singular value) pairs.

@@ -35,21 +35,27 @@ impl Ellipsoid {
         let tx = checked_angle("theta_x", theta_x)?;
         let ty = checked_angle("theta_y", theta_y)?;
         let tz = checked_angle("theta_z", theta_z)?;
+        Ok(Ellipsoid::build([ax, ay, tx, ty, tz]))
+    }
+
+    /// `A = S R` from parameters already known to be finite with positive alphas.
+    fn build(p: [f64; 5]) -> Self {
+        let [ax, ay, tx, ty, tz] = p;
         let r = rotation_xyz(tx, ty, tz);
         let s = Matrix3::from_diagonal(&Vector3::new(ax, ay, 1.0));
         let s_inv = Matrix3::from_diagonal(&Vector3::new(1.0 / ax, 1.0 / ay, 1.0));
         let a = s * r;
         let an = a.column(2).into_owned();
-        Ok(Ellipsoid { a, a_inv_t: s_inv * r, det_a: ax * ay, an, an_norm: an.norm(), params: [ax, ay, tx, ty, tz] })
+        Ellipsoid { a, a_inv_t: s_inv * r, det_a: ax * ay, an, an_norm: an.norm(), params: p }
     }
 
     /// An ellipsoid from any invertible A (eq. 1 depends on A only through `A^T A` up to scale). The result
-    /// is the canonical equivalent (see [`canonical::decompose`]): [`Ellipsoid::a`] then returns `S R` of
-    /// the canonical parameters, not the matrix given. A matrix whose smallest singular value is below
-    /// `1e-12` times its largest (numerically singular), or that is not finite, is refused.
+    /// is the canonical equivalent (see [`canonical::decompose`]) with exactly the same D: [`Ellipsoid::a`]
+    /// then returns `S R` of the canonical parameters, not the matrix given, and the alphas are not floored
+    /// at [`super::ALPHA_MIN`] (they lie within `[1e-12, 1e12]`). A matrix whose smallest singular value is
+    /// below `1e-12` times its largest (numerically singular), or that is not finite, is refused.
     pub fn from_matrix(a: Matrix3<f64>) -> Result<Self> {
-        let p = canonical::decompose(&a)?;
-        Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4])
+        Ok(Ellipsoid::build(canonical::decompose(&a)?))
     }
 
     /// The shape matrix `A = S R`.
@@ -65,10 +71,14 @@ impl Ellipsoid {
     /// The same distribution with the canonical parameters (see [`canonical::decompose`]): the ellipsoid axis
     /// nearest `n` is the third axis, `alpha_x >= alpha_y`, `theta_z` in `(-pi/2, pi/2]`, `theta_z = 0` when
     /// the alphas tie. Idempotent.
+    /// The canonical alphas keep D exactly: they are ratios of singular values and are not floored (an
+    /// ellipsoid relabeled from `alpha = (1e-4, 10)` with a large tilt can have a canonical alpha of `1e-5`).
     pub fn canonical(&self) -> Ellipsoid {
-        match canonical::decompose(&self.a) {
-            Ok(p) => Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4]).unwrap_or(*self),
-            // A = S R with alpha in [ALPHA_MIN, ALPHA_MAX] is never singular; keep self if it somehow were.
+        // The principal axes are the rows of R with singular values (alpha_x, alpha_y, 1): no SVD needed.
+        let [ax, ay, tx, ty, tz] = self.params;
+        match canonical::relabel(&rotation_xyz(tx, ty, tz), ax, ay) {
+            Ok(p) => Ellipsoid::build(p),
+            // A = S R with alphas in [ALPHA_MIN, ALPHA_MAX] has condition number <= 1e10 and is never refused.
             Err(_) => *self,
         }
     }
@@ -86,6 +96,8 @@ impl Ellipsoid {
     /// The projected area along `u` of the ellipsoidal lune cut by the planes of `u` and `v` (eq. 28, `C_e = 1`):
     /// `pi (||Au|| ||Av|| + Au.Av) / (2 |A| ||Av||)`, evaluated as `pi ||Au|| |Au^ + Av^|^2 / (4 |A|)` with
     /// unit `Au^`, `Av^` (identical algebra, no cancellation when `Au` and `Av` are nearly opposite).
+    /// (The text of eq. 28 prints `||A||` where the determinant `|A|` is meant, as eq. 26 and the check
+    /// `A_l(u, u) = A_e(u)` show; `|A|` is used.)
     pub fn projected_area_lune(&self, u: Vector3<f64>, v: Vector3<f64>) -> f64 {
         let au = self.a * u;
         let av = self.a * v;
@@ -110,6 +122,7 @@ impl Ellipsoid {
     /// `G1(u, m) = min(1, 2 ||An||^2 |u.n| / (||Au|| ||An|| + Au.An)) X+(u.m)`. In `[0, 1]`; 0 on the horizon.
     /// It is the Smith G1 of GGX when `theta_x = theta_y = 0` (sec. 4.2).
     pub fn g1(&self, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
+        // X+(u.m); written negated so that a NaN input gives 0 rather than NaN.
         if !(u.dot(&m) >= 0.0) {
             return 0.0;
         }
@@ -137,7 +150,8 @@ impl Ellipsoid {
             let first = if beta > 0.0 { tau2 / (nu + beta) } else { nu - beta };
             let p = (self.a * Vector3::new(u.x, u.y, 0.0)).dot(&c);
             let l = (first + 2.0 * p) / (2.0 * self.an_norm * u.z);
-            // Overflow for uz ~ 1e-308: the horizon limit.
+            // Overflow for uz ~ 1e-308: the horizon limit. Negative (skewed A) means eq. 32's min(1, .) is
+            // active and G1 = 1, i.e. Lambda = 0.
             return if l.is_finite() { l.max(0.0) } else { f64::MAX };
         }
         let g = self.visible_ratio(u);
@@ -146,6 +160,7 @@ impl Ellipsoid {
         if !l.is_finite() {
             return f64::MAX;
         }
+        // Negative: the min(1, .) of eq. 32 is active (G1 = 1), Lambda = 0.
         l.max(0.0)
     }
 
@@ -153,6 +168,7 @@ impl Ellipsoid {
     /// `p_h(m) = A_e(n) / A_l(u, n) X+(m.u) D(m) |m.u|`. Integrates to 1 over `m` for any `u` except `-n`.
     pub fn pdf_visible_normal(&self, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
         let mu = m.dot(&u);
+        // X+(m.u) of eq. 33 (a NaN input also lands here).
         if !(mu > 0.0) {
             return 0.0;
         }
@@ -185,6 +201,7 @@ impl Ellipsoid {
             return 0.0;
         }
         let m = h / hn;
+        // X+(m.psi) of eq. 48.
         if !(m.dot(&psi) > 0.0) {
             return 0.0;
         }
@@ -204,6 +221,7 @@ impl Ellipsoid {
         let r = self.visible_ratio(psi);
         // G1(psi) / r = min(1, r) / r = min(1/r, 1); r = 0 on the horizon has the limit 1, r NaN only for u = 0.
         let f = if r.is_nan() { 0.0 } else if r > 1.0 { 1.0 / r } else { 1.0 };
+        // F is a reflectance: a caller's rounding outside [0, 1] must not lift the weight past 1 (eq. 52).
         self.g1(omega, m) * fresnel.clamp(0.0, 1.0) * f
     }
 }

@@ -35,5 +35,6 @@ pub fn fresnel_conductor(cos_theta_i: f64, eta: Complex<f64>) -> f64 {
     }
     let r_par = (eta * ci_c - cos_t) / den_par;
     let r_perp = (ci_c - eta * cos_t) / den_perp;
+    // |r|^2 <= 1 exactly; rounding near grazing incidence can exceed it by an ulp.
     (0.5 * (r_par.norm_sqr() + r_perp.norm_sqr())).clamp(0.0, 1.0)
 }

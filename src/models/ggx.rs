@@ -49,15 +49,15 @@ impl Ggx {
         let l = rotate_z(self.theta_z, Vector3::new(slope.x, slope.y, 0.0));
         let r2 = (l.x / self.alpha_x).powi(2) + (l.y / self.alpha_y).powi(2);
         let q = 1.0 + r2;
-        // Beyond ~1e77 the square overflows; the true value is 0 there to f64 precision anyway.
+        // q^2 overflows past 1e154; P22 < 1e-290 from q = 1e150 on, so 0 is exact to f64 precision.
         if !q.is_finite() || q > 1e150 {
             return 0.0;
         }
         1.0 / (std::f64::consts::PI * self.alpha_x * self.alpha_y * q * q)
     }
 
-    /// The projected roughness `alpha_o` in the azimuth of `u` (Heitz eq. 80), for `u` off the normal;
-    /// `sqrt(alpha_x alpha_y)`-free form `sqrt(ax^2 ux'^2 + ay^2 uy'^2) / sqrt(ux^2 + uy^2)`.
+    /// The projected roughness `alpha_o` in the azimuth of `u` (Heitz eq. 80), for `u` off the normal,
+    /// computed without angles as `sqrt(ax^2 ux'^2 + ay^2 uy'^2) / sqrt(ux^2 + uy^2)` with `u' = Rz u`.
     /// For `u` exactly along the normal the azimuth is undefined and `alpha_x` is returned.
     pub fn alpha_o(&self, u: Vector3<f64>) -> f64 {
         projected_roughness(self.alpha_x, self.alpha_y, self.theta_z, u)

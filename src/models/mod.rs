@@ -11,6 +11,15 @@
 //!
 //! Every model is a small `Copy` value type whose methods read like the formulas. All directions are unit
 //! vectors in the scan frame of CONTRACT.md (macro normal `n = +z`).
+//!
+//! Files, one job each: [`ellipsoid`] (D, G1, projected areas, pdf), [`sampling`] (Walter sec. 4.1),
+//! [`canonical`] (one labeling per distribution), [`ggx`] and [`beckmann`] (Heitz's slope-space forms and
+//! Smith Lambda), [`roughness_matrix`] (Tokuyoshi's 2x2 form), [`fresnel`], [`brdf`] (Walter eq. 4 with
+//! separable or height-correlated G2), [`sel`] (Tokuyoshi-Harada lobe), [`spec`] (JSON <-> [`Model`]).
+//!
+//! Conventions shared by every model: `D = 0` below the horizon; `G1` in `[0, 1]`; `Lambda >= 0`, saturated at
+//! `f64::MAX` exactly on the horizon (its true value is `+inf`), so no public function returns NaN or an
+//! infinity for finite inputs; alphas in `[ALPHA_MIN, ALPHA_MAX]` (below raised, above refused).
 
 // The `!(x > 0.0)` guards are deliberate: they also catch NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -129,8 +138,9 @@ pub trait Ndf {
 /// Masking of the models with a Smith-type masking function (Heitz eq. 43): `G1 = X+(u.m) / (1 + Lambda(u))`.
 pub trait Masking {
     /// The Smith `Lambda(u)` (Heitz eq. 43, 69-86), `>= 0`, finite. Exactly on the horizon the true value is
-    /// `+inf`; it saturates at `f64::MAX` there so callers never see an infinity. Below the horizon it is
-    /// `Lambda` of the mirrored direction `(ux, uy, -uz)` (Tokuyoshi eq. 16 uses `|o_z|`).
+    /// `+inf`; it saturates at `f64::MAX` there so callers never see an infinity. Below the horizon GGX and
+    /// Beckmann give `Lambda` of the mirrored direction `(ux, uy, -uz)` (Tokuyoshi eq. 16 uses `|o_z|`); the
+    /// ellipsoid follows Walter et al. eq. 32 with `|u.n|` as printed.
     fn lambda(&self, u: Vector3<f64>) -> f64;
 
     /// The masking function `G1(u, m)` in `[0, 1]`.

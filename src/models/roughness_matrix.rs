@@ -72,6 +72,7 @@ impl GgxMatrix {
         let (l1, l2, v1) = sym2_eigen(&self.a);
         // Local x axis in the scan frame is (cos tz, -sin tz) (row 1 of Rz), so tz = atan2(-v1.y, v1.x).
         let tz = (-v1.y).atan2(v1.x);
+        // A is positive definite (checked in `new`); max(0) only absorbs rounding of a tiny l2.
         let (ax, ay, tz) = canonical::canonical_aniso(l1.sqrt(), l2.max(0.0).sqrt(), tz);
         Ggx { alpha_x: ax.max(ALPHA_MIN), alpha_y: ay.max(ALPHA_MIN), theta_z: tz }
     }
@@ -108,6 +109,7 @@ impl Masking for GgxMatrix {
     /// `s / (2 |oz| (sqrt(s + oz^2) + |oz|))` with `s = [ox, oy] A [ox, oy]^T` (no cancellation).
     fn lambda(&self, o: Vector3<f64>) -> f64 {
         let t = Vector2::new(o.x, o.y);
+        // A positive definite gives s >= 0; max(0) absorbs rounding for o along the normal.
         let s = (t.transpose() * self.a * t)[(0, 0)].max(0.0);
         let z = o.z.abs();
         let l = s / (2.0 * z * ((s + z * z).sqrt() + z));

@@ -46,6 +46,7 @@ impl Ellipsoid {
         let au = a * u;
         let an = a * Vector3::z();
         let (nu, nn) = (au.norm(), an.norm());
+        // A zero or non-finite u has no direction to sample for.
         if !(nu > 0.0 && nu.is_finite()) {
             return None;
         }

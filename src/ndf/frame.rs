@@ -17,9 +17,11 @@ use nalgebra::Vector3;
 pub const SLOPE_SCALE_FLOOR: f64 = 1e-7;
 
 /// Largest ratio of the two principal slope scales the whitening keeps. Scans whose slopes vary along one
-/// axis only (a 1D grating) have a singular covariance; the floor keeps the map invertible and well
-/// conditioned (cond <= 1e6 in slope units) while leaving any physical anisotropy (< 1e3) untouched.
-pub const MAX_ANISOTROPY: f64 = 1e6;
+/// axis only (a 1D grating) have a singular covariance; the floor keeps the map invertible. It also
+/// bounds how narrowly the hemisphere outside the data is squeezed around the small axis at the rim
+/// (angular width `1 / MAX_ANISOTROPY`), which the bin quadrature resolves. A stronger anisotropy is
+/// still binned correctly, with the small axis resolved at most 100 times finer than the large one.
+pub const MAX_ANISOTROPY: f64 = 100.0;
 
 /// Gaussian-consistent factor: IQR of a standard normal (`2 * 0.6744897501960817`).
 const IQR_NORMAL: f64 = 1.348_979_500_392_163_5;
@@ -177,6 +179,28 @@ impl SlopeFrame {
         let v = self.scan_vector(Self::stretched_at(p));
         let q = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
         if q > 0.0 { self.det_unwhiten / (q * q.sqrt()) } else { 0.0 }
+    }
+
+    /// The rim zone of this frame for the bin quadrature ([`super::grid::RimShape`]).
+    pub fn rim_shape(&self) -> super::grid::RimShape {
+        let (a, b, c) = (self.cov[0][0], self.cov[0][1], self.cov[1][1]);
+        let half = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+        let (lmax, lmin) = (0.5 * (a + c) + half, (0.5 * (a + c) - half).max(0.0));
+        // Eigenvector of the small eigenvalue: angle of the major axis plus 90 degrees. The whitening is
+        // symmetric, so the axis is the same in whitened and Lambert coordinates.
+        let axis = 0.5 * (2.0 * b).atan2(a - c) + std::f64::consts::FRAC_PI_2;
+        super::grid::RimShape { ring: self.ring_scale(), axis, width: (lmin / lmax).sqrt(), core: 1.0 / lmax.sqrt() }
+    }
+
+    /// Width, in `u = m'_z`, of the rim zone of the Lambert disk where [`SlopeFrame::proj_density`] and
+    /// [`SlopeFrame::solid_density`] change fast: the whole hemisphere outside the data's few whitened
+    /// standard deviations is squeezed into `u < ring`. From `q = u^2 + |c u + U m'_xy|^2`, the
+    /// transition sits at `u ~ |U m'_xy| / (1 + |c|) >= sqrt(lambda_min(Sigma)) / (1 + |c|)`.
+    pub fn ring_scale(&self) -> f64 {
+        let (a, b, c) = (self.cov[0][0], self.cov[0][1], self.cov[1][1]);
+        let lmin = 0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt();
+        let lmin = lmin.max(SLOPE_SCALE_FLOOR * SLOPE_SCALE_FLOOR);
+        lmin.sqrt() / (1.0 + self.center[0].hypot(self.center[1]))
     }
 
     /// The slope (`grad h`) of a scan-frame normal with `m_z > 0`.

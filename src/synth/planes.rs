@@ -81,6 +81,7 @@ pub fn tilted_planes(s: &SynthSettings, facets: &[PlaneFacet]) -> Result<(Height
         settings: json!({"grid": s, "facets": facets}),
         derived: json!({}),
         facets: Some(facet_truth),
+        input: None,
     };
     Ok((hf, truth))
 }

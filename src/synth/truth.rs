@@ -41,6 +41,10 @@ pub struct Truth {
     /// The facets of a `planes` surface.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub facets: Option<Vec<FacetTruth>>,
+    /// The scan file it describes (`path`, `format`, `nx`, `ny`, `dx`, `dy`), as in `ndfit.fit/1`;
+    /// filled in by `ndfit synth`.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub input: Option<serde_json::Value>,
 }
 
 impl Truth {
@@ -71,6 +75,7 @@ impl Truth {
             settings,
             derived,
             facets: None,
+            input: None,
         }
     }
 

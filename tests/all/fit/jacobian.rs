@@ -76,7 +76,8 @@ fn residual_jacobian_matches_central_differences() {
             (ModelId::BeckmannAniso, vec![0.2, 0.1, 0.3], vec![0.18, 0.12, 0.2]),
             (ModelId::Ggx, vec![0.1], vec![0.13]),
         ] {
-            let ndf = ndf_of(&model(id, &truth), 2e4, 3);
+            let t = model(id, &truth);
+            let ndf = ndfit::fit::synthetic::binned_ndf(&t, &ndfit::fit::synthetic::Grid::for_model(&t, 48), 2e4, 3);
             let data = FitData::new(&ndf, objective).expect("data");
             let x = to_internal(id, &at);
             let k = data.bins.len();

@@ -7,4 +7,6 @@ mod fixtures;
 mod canonical;
 mod covariance;
 mod jacobian;
+mod end_to_end;
 mod recovery;
+mod schema;

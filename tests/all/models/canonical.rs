@@ -31,9 +31,14 @@ fn assert_canonical_rules(p: &[f64]) {
 #[test]
 fn canonical_ellipsoid_keeps_d_follows_the_rules_and_is_idempotent() {
     let mut rng = Rng(12);
+    // A relabeling with a canonical alpha below ALPHA_MIN must still keep D (no floor in the canonical form).
+    let e = Ellipsoid::from_params(1e-4, 10.0, 1.2, 0.0, 0.3).unwrap();
+    assert_same_d(&e, &e.canonical(), "(1e-4, 10) tilted by 1.2");
+    assert!(e.canonical().params()[1] < 1e-4, "{:?}", e.canonical().params());
     for _ in 0..300 {
-        let ax = 10f64.powf(-3.0 + 4.0 * rng.uniform());
-        let ay = 10f64.powf(-3.0 + 4.0 * rng.uniform());
+        // alpha in [1e-4, 10] (the range the issue names), tilts up to +-1.5.
+        let ax = 10f64.powf(-4.0 + 5.0 * rng.uniform());
+        let ay = 10f64.powf(-4.0 + 5.0 * rng.uniform());
         let (tx, ty, tz) = (3.0 * rng.uniform() - 1.5, 3.0 * rng.uniform() - 1.5, 12.0 * rng.uniform() - 6.0);
         let e = Ellipsoid::from_params(ax, ay, tx, ty, tz).unwrap();
         let c = e.canonical();
@@ -130,6 +135,45 @@ fn canonical_aniso_models_swap_and_fold() {
                 let e = m.ellipsoid().unwrap().canonical().params();
                 assert!((e[0] - q[0]).abs() < 1e-9 && (e[1] - q[1]).abs() < 1e-9 && (e[4] - q[2]).abs() < 1e-9);
                 assert!(e[2].abs() < 1e-12 && e[3].abs() < 1e-12);
+            }
+        }
+    }
+}
+
+#[test]
+fn json_fields_are_canonical_and_round_trip() {
+    let mut rng = Rng(14);
+    for id in ModelId::ALL {
+        for _ in 0..50 {
+            let p: Vec<f64> = id
+                .param_names()
+                .iter()
+                .map(|n| if n.starts_with("alpha") { 0.02 + 2.0 * rng.uniform() } else { 4.0 * rng.uniform() - 2.0 })
+                .collect();
+            let model = Model::from_params(id, &p).unwrap();
+            let fields = model.to_json_fields();
+            let json = serde_json::Value::Object(fields.clone());
+            let back = Model::from_json(&json).unwrap();
+            assert_eq!(back.id(), id);
+            assert_same_d(&model, &back, &format!("{id} {p:?} via JSON"));
+            // The printed parameters are the canonical ones.
+            let canon = model.canonical().params();
+            for (name, v) in id.param_names().iter().zip(&canon) {
+                let got = fields["params"][*name].as_f64().unwrap();
+                assert!((got - v).abs() < 1e-12, "{id}: params.{name} = {got}, canonical {v}");
+            }
+            // matrix_a, when present, describes the same D by Walter et al. eq. 1 evaluated here.
+            if let Some(rows) = fields.get("matrix_a") {
+                let a = nalgebra::Matrix3::from_fn(|r, c| rows[r][c].as_f64().unwrap());
+                let a_inv_t = a.try_inverse().unwrap().transpose();
+                let an = (a * nalgebra::Vector3::z()).norm();
+                for _ in 0..50 {
+                    let m = rng.hemisphere();
+                    let d1 = 1.0 / (PI * a.determinant().abs() * an * (a_inv_t * m).norm().powi(4));
+                    assert!((d1 - model.d(m)).abs() < 1e-9 * d1, "{id}: matrix_a's eq. 1 {d1} vs D {}", model.d(m));
+                }
+            } else {
+                assert!(!id.has_matrix_a());
             }
         }
     }

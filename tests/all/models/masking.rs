@@ -4,46 +4,48 @@
 //!
 //! Eq. 36 with the half-vector Jacobian `d omega_i = 4 |o.h| dh` is `G1(o) / cos(theta_o) * integral of
 //! <o, m> D(m) dm` (Heitz eq. 40-43); in slope space `<o,m> D dm = max(0, o_z - w.o_xy) P22(w) dw`
-//! (Heitz eq. 109). The kink line `w.o_xy = o_z` is put on the edge of the domain: with `p` the slope along
-//! the azimuth of `o` and `q` across it, `p = c - s t1/(1 - t1)` (t1 in [0, 1)), `q = q0 + s g(t2)`.
+//! (Heitz eq. 109). The integral is taken in the lobe's own frame (where it is round) with the kink line
+//! `w.o_xy = o_z` rotated onto the edge of the domain (see `projected_visible`).
 
 
-use nalgebra::{Vector2, Vector3};
+use nalgebra::{Matrix2, Vector2, Vector3};
 use ndfit::models::{Ellipsoid, Model, ModelId, Ndf};
 
 use super::equivalence::Rng;
-use super::quad::{dg, g, integrate_2d, normal_of_slope};
+use super::quad::{dg, g, integrate_2d, normal_of_slope, slope_frame};
 
-/// `integral of <o, m> D(m) dm` over the hemisphere, for `o` above the horizon; `centre` is the lobe's
-/// slope-space centre and `s` its scale (any reasonable values: they only help the adaptive rule).
-fn projected_visible(d: &dyn Fn(Vector3<f64>) -> f64, o: Vector3<f64>, centre: Vector2<f64>, s: f64) -> (f64, f64) {
+/// `integral of <o, m> D(m) dm` over the hemisphere, for `o` above the horizon. `(w0, l)` is the lobe's
+/// slope-space frame `w = w0 + l xi` (from `quad::slope_frame`, in which the lobe is round); in `xi` the kink
+/// `w.o_xy = o_z` is the line `xi.k = c0` with `k = l^T o_xy`, `c0 = o_z - w0.o_xy`, so `xi` is rotated to put
+/// it on the edge `p = c0/|k|` of the domain: `p = g(t1)`, `t1` in `(-1, t_c)`; `q = g(t2)`.
+fn projected_visible(d: &dyn Fn(Vector3<f64>) -> f64, o: Vector3<f64>, w0: Vector2<f64>, l: Matrix2<f64>) -> (f64, f64) {
     let oxy = Vector2::new(o.x, o.y);
-    let r = oxy.norm();
+    let det = l.determinant().abs();
     let integrand_at = |w: Vector2<f64>| {
         let r2 = w.norm_squared();
         let m = normal_of_slope(w);
         let p22 = d(m) / (1.0 + r2).powi(2);
         p22 * (o.z - w.dot(&oxy)).max(0.0)
     };
-    if r < 1e-12 {
+    let k = l.transpose() * oxy;
+    let kn = k.norm();
+    if kn < 1e-12 {
         // Normal incidence: no kink, the integral is o_z (Heitz eq. 9) -- integrate it anyway.
         let f = |t1: f64, t2: f64| {
-            let w = centre + Vector2::new(s * g(t1), s * g(t2));
-            let v = integrand_at(w) * s * s * dg(t1) * dg(t2);
+            let w = w0 + l * Vector2::new(g(t1), g(t2));
+            let v = integrand_at(w) * det * dg(t1) * dg(t2);
             if v.is_finite() { v } else { 0.0 }
         };
         return integrate_2d(f, (-1.0, 1.0), (-1.0, 1.0), 4, 1e-300, 1e-9, 40_000);
     }
-    let e = oxy / r; // along the azimuth of o
+    let e = k / kn;
     let e_perp = Vector2::new(-e.y, e.x);
-    let c = o.z / r; // the kink: w.e = cot(theta_o)
-    let (p0, q0) = (centre.dot(&e), centre.dot(&e_perp));
-    // p = p0 + s g(t1) for t1 in (-1, t_c) with g(t_c) = (c - p0)/s: the lobe sits at t1 = 0, the kink on the edge.
-    let y = (c - p0) / s;
+    let y = (o.z - w0.dot(&oxy)) / kn;
+    // g(t_c) = y.
     let t_c = 2.0 * y / (1.0 + (1.0 + 4.0 * y * y).sqrt());
     let f = |t1: f64, t2: f64| {
-        let w = e * (p0 + s * g(t1)) + e_perp * (q0 + s * g(t2));
-        let v = integrand_at(w) * s * s * dg(t1) * dg(t2);
+        let xi = e * g(t1) + e_perp * g(t2);
+        let v = integrand_at(w0 + l * xi) * det * dg(t1) * dg(t2);
         if v.is_finite() { v } else { 0.0 }
     };
     integrate_2d(f, (-1.0, t_c), (-1.0, 1.0), 4, 1e-300, 1e-9, 60_000)
@@ -67,11 +69,14 @@ fn weak_white_furnace_ggx_and_beckmann() {
             };
             let model = Model::from_params(id, p).unwrap();
             let d = |m: Vector3<f64>| model.d(m);
-            let s = p[0].min(*p.get(1).unwrap_or(&p[0])).max(0.05);
+            let (ax, ay, tz) = if p.len() == 3 { (p[0], p[1], p[2]) } else { (p[0], p[0], 0.0) };
+            let (w0, l) = slope_frame(ax, ay, 0.0, 0.0, tz);
             for theta in [0.0, 30.0, 60.0, 80.0, 89.0, 89.9] {
-                for phi in [0.0, 1.0, 2.5] {
+                // phi matters only for the anisotropic models.
+                let phis: &[f64] = if p.len() == 3 { &[0.0, 1.0, 2.5] } else { &[1.0] };
+                for &phi in phis {
                     let o = dir(theta, phi);
-                    let (j, err) = projected_visible(&d, o, Vector2::zeros(), s);
+                    let (j, err) = projected_visible(&d, o, w0, l);
                     assert!(err < 1e-7 * j, "{id} {p:?} at {theta}: quadrature err {err:e}");
                     // Any facet facing o: G1 carries no other m dependence (Heitz eq. 38).
                     let g1 = model.g1(o, Vector3::z());
@@ -93,12 +98,12 @@ fn ellipsoid_g1_meets_the_projected_area_constraint() {
         let e = Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4]).unwrap();
         let d = |m: Vector3<f64>| e.d(m);
         let tilted = p[2] != 0.0 || p[3] != 0.0;
-        // Slope-space centre of the lobe from the test's own algebra (only a hint for the integrator).
-        let (w0, _) = super::quad::slope_frame(p[0], p[1], p[2], p[3], p[4]);
+        // The lobe's slope-space frame from the test's own algebra.
+        let (w0, l) = slope_frame(p[0], p[1], p[2], p[3], p[4]);
         for theta in [0.0, 20.0, 45.0, 70.0, 85.0] {
             for phi in [0.0, 0.8, 2.0, 3.5, 5.0] {
                 let u = dir(theta, phi);
-                let (j, err) = projected_visible(&d, u, w0, 0.2);
+                let (j, err) = projected_visible(&d, u, w0, l);
                 assert!(err < 1e-8 * j, "quadrature err {err:e}");
                 // Eq. 27 with eq. 9: A_l(u, n) / A_e(n) = integral of <u, m> D(m) dm; check eq. 26 and 28.
                 let ratio = e.projected_area_lune(u, Vector3::z()) / e.projected_area(Vector3::z());

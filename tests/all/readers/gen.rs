@@ -363,7 +363,11 @@ pub fn binary_files() -> Vec<(&'static str, Vec<u8>)> {
 /// Write the seed corpora of the cargo-fuzz targets (one directory per target) under `root`.
 pub fn write_seed_corpus(root: &std::path::Path) {
     for (name, bytes) in binary_files() {
-        let target = name.rsplit('.').next().expect("extension");
+        let target = match name.rsplit('.').next().expect("extension") {
+            "dat" => "metropro",
+            "tif" => "tiff",
+            other => other,
+        };
         let dir = root.join(target);
         std::fs::create_dir_all(&dir).expect("corpus dir");
         std::fs::write(dir.join(name), bytes).expect("seed");

@@ -1,0 +1,85 @@
+"""A minimal ISO 25178-72 (X3P) height-map reader for the notebooks' pictures (stdlib zipfile/xml + numpy).
+
+Reads the main.xml grid description and the binary point data (Z data types I, L, F, D, little-endian, x varying
+fastest); NaN marks invalid points. Enough for `ndfit synth` output and the shared X3P scans; ndfit's own
+reader is the reference for anything else.
+"""
+
+from __future__ import annotations
+
+import posixpath
+import xml.etree.ElementTree as ET
+import zipfile
+from dataclasses import dataclass
+
+import numpy as np
+
+_DTYPES = {"I": "<i2", "L": "<i4", "F": "<f4", "D": "<f8"}
+
+
+@dataclass
+class HeightMap:
+    """Heights z[row, col] (metres as stored), row along y, column along x, with spacings in metres."""
+
+    z: np.ndarray
+    dx: float
+    dy: float
+
+
+def _local(tag: str) -> str:
+    return tag.rsplit("}", 1)[-1]
+
+
+def _find(root, *path):
+    node = root
+    for name in path:
+        nxt = None
+        for child in node:
+            if _local(child.tag) == name:
+                nxt = child
+                break
+        if nxt is None:
+            return None
+        node = nxt
+    return node
+
+
+def _text(root, *path, default=None):
+    node = _find(root, *path)
+    return node.text.strip() if node is not None and node.text and node.text.strip() else default
+
+
+def read_x3p(path: str) -> HeightMap:
+    """Read an X3P file; ValueError('<path>: <problem>') when it is not one this reader handles."""
+    try:
+        zf = zipfile.ZipFile(path)
+    except (OSError, zipfile.BadZipFile) as e:
+        raise ValueError(f"{path}: not an X3P (zip) file: {e}") from None
+    with zf:
+        mains = [n for n in zf.namelist() if posixpath.basename(n) == "main.xml" and not n.startswith("__MACOSX")]
+        if not mains:
+            raise ValueError(f"{path}: no main.xml in the archive")
+        base = posixpath.dirname(mains[0])
+        root = ET.fromstring(zf.read(mains[0]))
+        nx = int(_text(root, "Record3", "MatrixDimension", "SizeX", default="0"))
+        ny = int(_text(root, "Record3", "MatrixDimension", "SizeY", default="0"))
+        if nx <= 0 or ny <= 0 or nx * ny > 1 << 28:
+            raise ValueError(f"{path}: implausible grid {nx} x {ny}")
+        dt = _text(root, "Record1", "Axes", "CZ", "DataType", default="D")
+        if dt not in _DTYPES:
+            raise ValueError(f"{path}: Z data type {dt!r} not handled")
+        inc = float(_text(root, "Record1", "Axes", "CZ", "Increment", default="1") or 1)
+        off = float(_text(root, "Record1", "Axes", "CZ", "Offset", default="0") or 0)
+        dx = float(_text(root, "Record1", "Axes", "CX", "Increment", default="nan"))
+        dy = float(_text(root, "Record1", "Axes", "CY", "Increment", default="nan"))
+        link = _text(root, "Record3", "DataLink", "PointDataLink")
+        if link is None:
+            raise ValueError(f"{path}: no PointDataLink (inline data lists are not handled here)")
+        raw = zf.read(posixpath.join(base, link))
+    need = nx * ny * np.dtype(_DTYPES[dt]).itemsize
+    if len(raw) < need:
+        raise ValueError(f"{path}: point data has {len(raw)} bytes, the grid needs {need}")
+    z = np.frombuffer(raw[:need], dtype=_DTYPES[dt]).astype(float).reshape(ny, nx)
+    if dt in ("I", "L"):
+        z = z * inc + off
+    return HeightMap(z=z, dx=dx, dy=dy)

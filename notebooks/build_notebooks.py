@@ -1,0 +1,364 @@
+#!/usr/bin/env python3
+"""Write the notebooks of this folder from the cell sources below (outputs empty).
+
+    fits/.venv/bin/python notebooks/build_notebooks.py
+
+Edit the cells here, not in the .ipynb files, so the notebooks stay reviewable as Python and free of outputs.
+"""
+
+import os
+
+import nbformat
+from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+COMMON = r'''
+import json, math, os, shutil, subprocess, sys, tempfile, time
+import numpy as np
+import matplotlib.pyplot as plt
+
+def find_root():
+    d = os.getcwd()
+    while d != os.path.dirname(d):
+        if os.path.exists(os.path.join(d, "Cargo.toml")) and os.path.isdir(os.path.join(d, "fits")):
+            return d
+        d = os.path.dirname(d)
+    raise RuntimeError("run this notebook inside the ndfit repository")
+
+ROOT = find_root()
+sys.path.insert(0, os.path.join(ROOT, "fits"))  # ndfitpy, even without pip install -e
+from ndfitpy import canonical, fitjson, models, objective as obj
+from ndfitpy.bins import read_ndf_csv
+from ndfitpy.fit import fit as nlopt_fit
+from ndfitpy.x3p import read_x3p
+
+NDFIT = os.environ.get("NDFIT", "target/release/ndfit")
+NDFIT = NDFIT if os.path.isabs(NDFIT) else os.path.join(ROOT, NDFIT)
+if not os.access(NDFIT, os.X_OK):
+    raise RuntimeError(f"no ndfit binary at {NDFIT}: run `cargo build --release` or set NDFIT")
+SCANS = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "scans"))
+WORK = tempfile.mkdtemp(prefix="ndfit-notebook-")
+
+def ndfit(*args, check=True):
+    """Run the ndfit binary; returns its standard output (raises with ndfit's one-line error)."""
+    p = subprocess.run([NDFIT, *map(str, args)], capture_output=True, text=True)
+    if check and p.returncode != 0:
+        raise RuntimeError(f"ndfit {' '.join(map(str, args))}: {p.stderr.strip()}")
+    return p.stdout
+
+def has_command(name):
+    return subprocess.run([NDFIT, name, "--help"], capture_output=True).returncode == 0
+
+print("ndfit:", ndfit("--version").strip(), "| work folder:", WORK)
+'''
+
+SYNTH = r'''
+# A synthetic scan with known truth: the upper half of a tilted, anisotropic ellipsoid (its NDF is exactly
+# Walter et al.'s ellipsoid NDF, eq. 1), 384 x 384 pixels.
+SYNTH_ARGS = ["--surface", "ellipsoid", "--alpha-x", "0.2", "--alpha-y", "0.35", "--theta-x", "0.15",
+              "--theta-y", "-0.1", "--theta-z", "0.6", "--nx", "384", "--ny", "384"]
+synth_scan = os.path.join(WORK, "synth.x3p")
+print(ndfit("synth", synth_scan, *SYNTH_ARGS))
+# ndfit removes a least-squares plane by default (right for real scans); here it would take the ellipsoid's
+# tilt out of the NDF, so the synthetic scan is read with --form none.
+SYNTH_OPTS = ["--form", "none"]
+truth_path = next((p for p in (synth_scan + ".truth.json", synth_scan[:-4] + ".truth.json") if os.path.exists(p)), None)
+truth = json.load(open(truth_path)) if truth_path else None
+print("truth:", truth and {"model": truth["model"], "params": truth["params"]})
+'''
+
+TOUR_FUNCS = r'''
+def show_heights(scan, title):
+    info = json.loads(ndfit("info", scan, "--json"))
+    print(json.dumps({k: info[k] for k in ("format", "nx", "ny", "dx", "dy", "invalid", "sq") if k in info}))
+    try:
+        hm = read_x3p(scan)
+    except ValueError as e:
+        print("no height picture:", e)
+        return info
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ny, nx = hm.z.shape
+    im = ax.imshow(hm.z * 1e6, extent=[0, nx * hm.dx * 1e6, ny * hm.dy * 1e6, 0], cmap="viridis")
+    ax.set_xlabel("x (um)"); ax.set_ylabel("y (um)"); ax.set_title(f"{title}: heights (um)")
+    fig.colorbar(im, ax=ax, shrink=0.8)
+    plt.show()
+    return info
+
+def disk_plot(ax, bins, values, title, cmap="magma", vmin=None, vmax=None, label=""):
+    """Bins drawn at (mx, my): the hemisphere seen from above (orthographic), n = +z at the centre."""
+    sc = ax.scatter(bins.m[:, 0], bins.m[:, 1], c=values, s=7, cmap=cmap, vmin=vmin, vmax=vmax, linewidths=0)
+    ax.set_aspect("equal"); ax.set_title(title, fontsize=9); ax.set_xlabel("mx"); ax.set_ylabel("my")
+    plt.colorbar(sc, ax=ax, shrink=0.75, label=label)
+
+def empirical(scan, name, opts=()):
+    csv = os.path.join(WORK, f"{name}.ndf.csv")
+    ndfit("ndf", scan, "-o", csv, *opts)
+    b = read_ndf_csv(csv).used()
+    occ = b.count > 0
+    print(f"{len(b)} bins, {int(b.n_samples)} samples, {occ.sum()} occupied; sum d W = {np.sum(b.d * b.proj_solid_angle):.6f}")
+    fig, ax = plt.subplots(figsize=(5, 4.2))
+    sub = type(b)(m=b.m[occ], count=b.count[occ], proj_solid_angle=b.proj_solid_angle[occ], d=b.d[occ])
+    disk_plot(ax, sub, np.log10(sub.d), f"{name}: empirical NDF", label="log10 D (1/sr)")
+    plt.show()
+    return csv, b
+
+def fit_all(scan, name, bins, opts=()):
+    rows, fits = [], {}
+    for m in models.MODELS:
+        out = os.path.join(WORK, f"{name}.{m}.json")
+        t0 = time.perf_counter(); ndfit("fit", scan, "--model", m, "-o", out, *opts); t = time.perf_counter() - t0
+        doc = fitjson.read_fit(out)
+        fits[m] = doc
+        f = obj.poisson_deviance(m, doc["params"], bins)
+        k = obj.dof(m, bins)
+        py = nlopt_fit(bins, m)
+        d_py = obj.model_delta(m, doc["params"], m, py.params, bins)
+        rows.append((m, canonical.canonical(m, doc["params"]), f, f / k, d_py, t))
+    print(f"{'model':15s} {'deviance':>12s} {'F/(K-p)':>9s} {'delta(rust,nlopt)':>18s} {'t_fit':>6s}  canonical parameters")
+    for m, p, f, rc, d, t in rows:
+        ps = " ".join(f"{k}={v:.4g}" for k, v in p.items())
+        print(f"{m:15s} {f:12.2f} {rc:9.3f} {d:18.2e} {t:5.2f}s  {ps}")
+    return fits
+
+def residual_maps(bins, fits, name):
+    nrow = math.ceil(len(fits) / 3)
+    fig, axes = plt.subplots(nrow, 3, figsize=(14, 4.3 * nrow))
+    axes = axes.ravel()
+    for ax in axes[len(fits):]:
+        ax.axis("off")
+    for ax, (m, doc) in zip(axes, fits.items()):
+        r = obj.poisson_residuals(m, doc["params"], bins)
+        lim = max(3.0, np.percentile(np.abs(r), 99))
+        disk_plot(ax, bins, r, f"{name}: {m}\nF = {np.sum(r * r):.0f}", cmap="RdBu_r", vmin=-lim, vmax=lim,
+                  label="signed deviance residual")
+    fig.tight_layout(); plt.show()
+
+def auto_choice(scan, name, opts=()):
+    out = os.path.join(WORK, f"{name}.auto.json")
+    ndfit("fit", scan, "--model", "auto", "-o", out, *opts)
+    doc = json.load(open(out))
+    print(f"--model auto chose: {doc['model']}  params: {doc['params']}")
+    sel = doc.get("selection")
+    if isinstance(sel, dict):
+        print(f"criterion: {sel.get('criterion')}")
+        for c in sel.get("candidates", []):
+            print(f"  {c.get('model', '?'):15s} criterion {c.get('criterion', float('nan')):14.2f}  "
+                  f"reduced chi2 {c.get('reduced_chi2', float('nan')):9.3f}  delta_data {c.get('delta_data', float('nan')):.3f}")
+    return doc
+'''
+
+
+def tour():
+    cells = [
+        new_markdown_cell(
+            "# ndfit tour: height map, empirical NDF, fits of every model, residuals, `--model auto`\n\n"
+            "Runs the `ndfit` binary (path from the environment variable `NDFIT`, default `target/release/ndfit`; "
+            "build it with `cargo build --release`) on a synthetic scan with known truth and on a real scan from "
+            "`../shared/data/scans`. The numbers it prints are computed in numpy by `fits/ndfitpy` (written from "
+            "the papers, independently of the Rust code): deviance `F` and the NDF difference `delta` of "
+            "`data_formats/objective.md`, and an nlopt fit of the same NDF for comparison."
+        ),
+        new_code_cell(COMMON.strip()),
+        new_code_cell(TOUR_FUNCS.strip()),
+        new_markdown_cell("## 1. A synthetic scan with known truth"),
+        new_code_cell(SYNTH.strip()),
+        new_code_cell('info = show_heights(synth_scan, "synthetic ellipsoid")'),
+        new_markdown_cell(
+            "The empirical NDF: bins of the hemisphere seen from above, coloured by log D. Its normalization "
+            "(Heitz eq. 9) makes `sum d W` one."
+        ),
+        new_code_cell('csv, bins = empirical(synth_scan, "synth", SYNTH_OPTS)'),
+        new_markdown_cell(
+            "Every model fitted by `ndfit fit`, scored in numpy on the same bins. `F/(K-p)` is the reduced "
+            "deviance; `delta(rust,nlopt)` the NDF difference between the Rust fit and an independent nlopt fit."
+        ),
+        new_code_cell(
+            'fits = fit_all(synth_scan, "synth", bins, SYNTH_OPTS)\n'
+            "if truth:\n"
+            '    d_truth = obj.model_delta("ellipsoid", fits["ellipsoid"]["params"], truth["model"], truth["params"], bins)\n'
+            '    print(f"ellipsoid fit vs truth: delta = {d_truth:.2e}")\n'
+            '    print("truth (canonical):", canonical.canonical(truth["model"], truth["params"]))'
+        ),
+        new_markdown_cell(
+            "Residual maps: the signed deviance residual per bin (`objective.md`). Structure (rings, "
+            "lobes) means the model misses a feature of the data; noise means it explains it."
+        ),
+        new_code_cell('residual_maps(bins, fits, "synth")'),
+        new_code_cell('auto = auto_choice(synth_scan, "synth", SYNTH_OPTS)'),
+        new_markdown_cell("## 2. A real scan"),
+        new_code_cell(
+            'real = os.path.join(SCANS, "hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p")\n'
+            "HAVE_REAL = os.path.exists(real)\n"
+            'print("real scan:", real if HAVE_REAL else f"SKIP ({SCANS} absent)")'
+        ),
+        new_code_cell(
+            "if HAVE_REAL:\n"
+            '    show_heights(real, "bullet land (Hamby 44)")\n'
+            '    real_csv, real_bins = empirical(real, "real")\n'
+            '    real_fits = fit_all(real, "real", real_bins)\n'
+            '    residual_maps(real_bins, real_fits, "real")\n'
+            '    auto_choice(real, "real")'
+        ),
+        new_code_cell("shutil.rmtree(WORK, ignore_errors=True)"),
+    ]
+    return cells
+
+
+BENCH = r"""
+# Accuracy is measured on one fixed, fine set of directions for every point, so that points with different
+# NDF bins are comparable: delta(D_fit; D_truth) of objective.md with the quadrature of a 160 x 128 grid.
+from ndfitpy.synthetic import grid_for
+QUAD = grid_for(0.3, 160, 128).bins()
+
+def synth(n, extra=()):
+    scan = os.path.join(WORK, f"s{n}.x3p")
+    if not os.path.exists(scan):
+        ndfit("synth", scan, *SYNTH_ARGS_BASE, "--nx", n, "--ny", n, *extra)
+    truth = json.load(open(scan[:-4] + ".truth.json"))
+    return scan, truth
+
+def point(scan, truth, label, fit_opts=(), model="ellipsoid"):
+    out = os.path.join(WORK, "point.json")
+    t0 = time.perf_counter()
+    ndfit("fit", scan, "--model", model, "-o", out, "--form", "none", *fit_opts)
+    wall = time.perf_counter() - t0
+    doc = json.load(open(out))
+    tm = doc.get("timings", {})
+    d = obj.delta(models.log_d(doc["model"], doc["params"], QUAD.m),
+                  models.log_d(truth["model"], truth["params"], QUAD.m), QUAD.proj_solid_angle)
+    return dict(label=label, wall=wall, read_ms=tm.get("read_ms", float("nan")), ndf_ms=tm.get("ndf_ms", float("nan")),
+                fit_ms=tm.get("fit_ms", float("nan")), delta=d, bins=doc.get("quality", {}).get("n_bins"))
+"""
+
+SIZES = r"""
+sizes = [128, 256, 512, 1024]
+size_rows = []
+for n in sizes:
+    scan, truth = synth(n)
+    size_rows.append(dict(point(scan, truth, f"{n}^2"), n=n))
+for r in size_rows:
+    print(f"{r['label']:>7s}  bins {r['bins']!s:>6s}  read {r['read_ms']:7.1f} ms  ndf {r['ndf_ms']:7.1f} ms  "
+          f"fit {r['fit_ms']:7.1f} ms  (process {r['wall']:.2f} s)  delta vs truth {r['delta']:.2e}")
+"""
+
+SIZE_PLOT = r"""
+px = np.array([r["n"] ** 2 for r in size_rows], dtype=float)
+fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+for key, mk in (("read_ms", "v-"), ("ndf_ms", "o-"), ("fit_ms", "s-")):
+    y = np.array([r[key] for r in size_rows])
+    k = np.polyfit(np.log(px), np.log(y), 1)[0]
+    a1.loglog(px, y, mk, label=f"{key[:-3]} (log-log slope {k:.2f})")
+a1.set_xlabel("pixels"); a1.set_ylabel("ms"); a1.legend(); a1.set_title("stage times (fit JSON timings)")
+a2.loglog(px, [r["delta"] for r in size_rows], "o-")
+a2.set_xlabel("pixels"); a2.set_ylabel("delta(fit; truth)"); a2.set_title("accuracy against truth")
+fig.tight_layout(); plt.show()
+"""
+
+KNOBS = r"""
+scan, truth = synth(512)
+knob_rows = [point(scan, truth, "defaults")]
+for cells in (15, 31, 63, 127):
+    knob_rows.append(point(scan, truth, f"--ndf-cells {cells}", ["--ndf-cells", cells]))
+for sub in (2, 4):
+    knob_rows.append(point(scan, truth, f"--subsample {sub}", ["--subsample", sub]))
+for label, opts in (("--ndf-scheme triangles", ["--ndf-scheme", "triangles"]),
+                    ("--solver nelder-mead", ["--solver", "nelder-mead"]), ("--solver lbfgs", ["--solver", "lbfgs"])):
+    try:
+        knob_rows.append(point(scan, truth, label, opts))
+    except RuntimeError as e:
+        print("skipped:", str(e).splitlines()[0])
+for r in knob_rows:
+    r["total_ms"] = r["read_ms"] + r["ndf_ms"] + r["fit_ms"]
+    print(f"{r['label']:24s} bins {r['bins']!s:>6s}  total {r['total_ms']:8.1f} ms  "
+          f"(ndf {r['ndf_ms']:6.1f}, fit {r['fit_ms']:6.1f})  delta {r['delta']:.2e}")
+"""
+
+KNOB_PLOT = r"""
+t = np.array([r["total_ms"] for r in knob_rows]); e = np.array([r["delta"] for r in knob_rows])
+order = np.argsort(t)
+front = np.minimum.accumulate(e[order])
+fig, ax = plt.subplots(figsize=(7, 4.5))
+ax.loglog(t, e, "o")
+for r in knob_rows:
+    ax.annotate(r["label"], (r["total_ms"], r["delta"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+ax.step(t[order], front, where="post", color="k", lw=0.8, label="Pareto front")
+ax.set_xlabel("read + NDF + fit (ms)"); ax.set_ylabel("delta(fit; truth)"); ax.legend()
+ax.set_title("knobs at 512^2: time against error"); plt.show()
+"""
+
+BENCH_RUN = r"""
+import csv as _csv
+bench_dir = os.path.join(WORK, "bench")
+help_text = subprocess.run([NDFIT, "bench", "--help"], capture_output=True, text=True).stdout
+bench_rows = []
+if "--quick" in help_text:
+    try:
+        ndfit("bench", "--quick", "-o", bench_dir)
+        bench_rows = list(_csv.DictReader(open(os.path.join(bench_dir, "bench.csv"))))
+    except (RuntimeError, OSError) as e:
+        print("ndfit bench failed:", str(e).splitlines()[0])
+else:
+    print("this ndfit has no `bench --quick` yet; the sweeps above are the measurement")
+print(f"{len(bench_rows)} rows", list(bench_rows[0]) if bench_rows else "")
+"""
+
+BENCH_SHOW = r"""
+png = os.path.join(bench_dir, "pareto.png")
+if os.path.exists(png):
+    fig, ax = plt.subplots(figsize=(9, 6)); ax.imshow(plt.imread(png)); ax.axis("off"); plt.show()
+if bench_rows:
+    cols = list(bench_rows[0])
+    show = [c for c in cols if any(k in c for k in ("knob", "label", "size", "total", "delta", "peak"))][:8]
+    print("  ".join(f"{c:>14s}" for c in show))
+    for r in bench_rows[:40]:
+        print("  ".join(f"{str(r[c])[:14]:>14s}" for c in show))
+"""
+
+
+def speed():
+    cells = [
+        new_markdown_cell(
+            "# Speed and accuracy\n\n"
+            "What each knob costs and buys, measured with the `ndfit` binary on synthetic ellipsoid scans with "
+            "known truth. Stage times come from the fit JSON's `timings` (read, NDF, fit, in ms); accuracy is the "
+            "NDF difference `delta(D_fit; D_truth)` of `data_formats/objective.md`, computed in numpy on one fixed "
+            "fine set of directions. If the binary has `ndfit bench --quick`, its sweep and Pareto plot are shown "
+            "too (the full sweep is in docs/PERFORMANCE.md once the bench engineer lands it). Timings on a shared "
+            "2-core machine are noisy: read them as orders of magnitude."
+        ),
+        new_code_cell(COMMON.strip()),
+        new_code_cell(
+            'SYNTH_ARGS_BASE = ["--surface", "ellipsoid", "--alpha-x", "0.2", "--alpha-y", "0.35", "--theta-x", "0.15",\n'
+            '                   "--theta-y", "-0.1", "--theta-z", "0.6"]\n' + BENCH.strip()
+        ),
+        new_markdown_cell("## Scan size: how time grows, what accuracy it buys"),
+        new_code_cell(SIZES.strip()),
+        new_code_cell(SIZE_PLOT.strip()),
+        new_markdown_cell(
+            "## Knobs at 512^2: NDF bins, subsampling, normal scheme, solver\n\n"
+            "Each knob moved alone from the defaults; time is read + NDF + fit from the JSON."
+        ),
+        new_code_cell(KNOBS.strip()),
+        new_code_cell(KNOB_PLOT.strip()),
+        new_markdown_cell("## `ndfit bench --quick` (when the binary has it)"),
+        new_code_cell(BENCH_RUN.strip()),
+        new_code_cell(BENCH_SHOW.strip()),
+        new_code_cell("shutil.rmtree(WORK, ignore_errors=True)"),
+    ]
+    return cells
+
+
+def write(name, cells):
+    nb = new_notebook(cells=cells)
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nb.metadata["language_info"] = {"name": "python"}
+    path = os.path.join(HERE, name)
+    with open(path, "w", encoding="utf-8") as fh:
+        nbformat.write(nb, fh)
+    print("wrote", path)
+
+
+if __name__ == "__main__":
+    write("01_tour.ipynb", tour())
+    write("02_speed_accuracy.ipynb", speed())

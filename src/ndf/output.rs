@@ -1,0 +1,95 @@
+//! Writing an empirical NDF: CSV and JSON (`data_formats/ndf_csv.md`) and an OpenEXR image of D over
+//! the orthographically projected hemisphere. Every file is written atomically.
+
+use std::path::Path;
+
+use nalgebra::Vector3;
+use serde_json::json;
+
+use super::EmpiricalNdf;
+use crate::error::{Error, ErrorKind, Result};
+use crate::io::{write_atomic, write_bytes_atomic};
+
+/// The CSV header (the contract's `mx,my,mz,d` first).
+pub const CSV_HEADER: &str = "mx,my,mz,d,stderr,count,solid_angle,proj_solid_angle,slope_x,slope_y";
+
+/// Write the NDF as CSV, one row per bin, empty bins included.
+pub fn write_csv(path: &Path, ndf: &EmpiricalNdf) -> Result<()> {
+    write_atomic(path, |w| {
+        writeln!(w, "{CSV_HEADER}")?;
+        for b in &ndf.bins {
+            let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
+            writeln!(
+                w,
+                "{},{},{},{},{},{},{},{},{},{}",
+                b.m.x, b.m.y, b.m.z, b.d, b.stderr, b.count, b.solid_angle, b.proj_solid_angle, sx, sy
+            )?;
+        }
+        Ok(())
+    })
+}
+
+/// The NDF as a JSON value (`ndfit.ndf/1`); `input` describes the scan (path, format, grid).
+pub fn to_json(ndf: &EmpiricalNdf, input: serde_json::Value) -> serde_json::Value {
+    let bins: Vec<serde_json::Value> = ndf
+        .bins
+        .iter()
+        .map(|b| {
+            json!({
+                "m": [b.m.x, b.m.y, b.m.z], "d": b.d, "stderr": b.stderr, "count": b.count,
+                "solid_angle": b.solid_angle, "proj_solid_angle": b.proj_solid_angle,
+            })
+        })
+        .collect();
+    json!({
+        "schema": "ndfit.ndf/1",
+        "input": input,
+        "options": {"normals": ndf.scheme.as_str(), "cells_across": ndf.grid.n, "domain": "lambert-whitened"},
+        "n_samples": ndf.n_samples,
+        "n_skipped": ndf.n_skipped,
+        "sample_area": ndf.sample_area,
+        "slope_mean": ndf.slope_mean,
+        "slope_cov": ndf.slope_cov,
+        "frame": ndf.frame,
+        "bins": bins,
+    })
+}
+
+/// Write [`to_json`] to `path`.
+pub fn write_json(path: &Path, ndf: &EmpiricalNdf, input: serde_json::Value) -> Result<()> {
+    let v = to_json(ndf, input);
+    write_atomic(path, |w| serde_json::to_writer(w, &v).map_err(|e| Error::new(ErrorKind::Io, e.to_string())))
+}
+
+/// D on a `res x res` raster of the orthographic projection of the hemisphere: pixel `(row, col)` is
+/// `m = (mx, my, sqrt(1 - mx^2 - my^2))` with `mx = -1 + (col + 0.5) 2 / res`, `my = 1 - (row + 0.5) 2 / res`
+/// (+y up); 0 outside the unit disk. The window can be narrowed to `center +- half` in `(mx, my)`.
+pub fn raster(ndf: &EmpiricalNdf, res: usize, center: [f64; 2], half: f64) -> Vec<f64> {
+    let mut out = vec![0.0; res * res];
+    for (row, line) in out.chunks_mut(res).enumerate() {
+        let my = center[1] + half * (1.0 - (row as f64 + 0.5) * 2.0 / res as f64);
+        for (col, v) in line.iter_mut().enumerate() {
+            let mx = center[0] + half * (-1.0 + (col as f64 + 0.5) * 2.0 / res as f64);
+            let r2 = mx * mx + my * my;
+            if r2 < 1.0 {
+                *v = ndf.d_at(Vector3::new(mx, my, (1.0 - r2).sqrt()));
+            }
+        }
+    }
+    out
+}
+
+/// Write an OpenEXR image (one float channel `D`, `res x res`) of [`raster`] over the whole hemisphere.
+pub fn write_exr(path: &Path, ndf: &EmpiricalNdf, res: usize) -> Result<()> {
+    use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec, WritableImage};
+    if res == 0 || res > 8192 {
+        return Err(Error::invalid(format!("EXR size {res} must be between 1 and 8192")).with_path(path));
+    }
+    let data: Vec<f32> = raster(ndf, res, [0.0, 0.0], 1.0).into_iter().map(|v| v as f32).collect();
+    let channel = AnyChannel::new("D", FlatSamples::F32(data));
+    let layer = Layer::new((res, res), LayerAttributes::named("ndf"), Encoding::SMALL_LOSSLESS, AnyChannels::sort(SmallVec::from_vec(vec![channel])));
+    let image = Image::from_layer(layer);
+    let mut buf = std::io::Cursor::new(Vec::new());
+    image.write().to_buffered(&mut buf).map_err(|e| Error::new(ErrorKind::Io, format!("EXR encoding failed: {e}")).with_path(path))?;
+    write_bytes_atomic(path, buf.get_ref())
+}
