@@ -22,12 +22,13 @@ impl RefNodes {
     pub fn new(frame: &SlopeFrame, cells: usize) -> RefNodes {
         let grid = BinGrid::new(cells);
         let mut nodes = Vec::with_capacity(grid.cells());
+        let rim = frame.rim_shape();
         for c in 0..grid.cells() {
             if !grid.meets_disk(c) {
                 continue;
             }
             let (mut w, mut px, mut py) = (0.0, 0.0, 0.0);
-            grid.quadrature(c, QuadOrder::Standard, |p, wt| {
+            grid.quadrature(c, QuadOrder::Standard, &rim, |p, wt| {
                 let dw = frame.proj_density(p) * wt;
                 w += dw;
                 px += p[0] * dw;
