@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::anyhow;
 use ndfit::fit::{fit_auto, fit_model, FitOptions, InputInfo, Objective, Solver};
 use ndfit::models::ModelId;
-use ndfit::ndf::{empirical_ndf, NdfOptions, NormalScheme};
+use ndfit::ndf::empirical_ndf;
 
 use super::scan_args::ScanArgs;
 
@@ -37,14 +37,10 @@ pub struct Args {
     /// Plot of the data against the fit, with residuals (PNG).
     #[arg(long)]
     plot: Option<PathBuf>,
-    /// NDF bins across the Lambert disk (odd); chosen from the sample count when absent.
-    #[arg(long)]
-    ndf_cells: Option<usize>,
-    /// Normal scheme of the NDF: `central` or `triangles`.
-    #[arg(long, default_value = "central")]
-    ndf_scheme: String,
+    #[command(flatten)]
+    ndf: super::ndf::NdfArgs,
     /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` is the knee). Sets the
-    /// subsampling stride, the NDF's scheme and bins (unless --ndf-cells), the tolerance and the starts.
+    /// subsampling stride, the NDF's normals and bins (unless --ndf-cells), the tolerance and the starts.
     #[arg(long, value_enum)]
     preset: Option<ndfit::bench::Preset>,
 }
@@ -62,8 +58,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         "auto" => None,
         m => Some(m.parse::<ModelId>().map_err(|e| anyhow!("--model: {}", e.message()))?),
     };
-    let scheme = args.ndf_scheme.parse::<NormalScheme>().map_err(|e| anyhow!("--ndf-scheme: {}", e.message()))?;
-    let mut ndf_opts = NdfOptions { scheme, cells_across: args.ndf_cells, ..NdfOptions::default() };
+    let mut ndf_opts = args.ndf.options()?;
     let mut opts = opts;
 
     let t0 = Instant::now();
@@ -74,7 +69,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             hf = ndfit::preprocess::subsample(&hf, p.stride()).map_err(|e| e.with_path(&args.scan.scan))?;
         }
         let po = p.ndf_options(hf.valid_count() as u64);
-        ndf_opts = NdfOptions { cells_across: args.ndf_cells.or(po.cells_across), ..po };
+        ndf_opts = ndfit::ndf::NdfOptions { cells_across: args.ndf.ndf_cells.or(po.cells_across), ..po };
         let pf = p.fit_options();
         opts.tolerances = pf.tolerances;
         opts.extra_starts = opts.extra_starts.max(pf.extra_starts);

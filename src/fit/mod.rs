@@ -115,8 +115,23 @@ fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) ->
         .unwrap_or_else(|_| local.x.clone());
     let mut r = vec![0.0; s.data.bins.len()];
     let fc = problem::residuals_into(&s.data, id, &xc, &mut r);
-    let (x, f) = if fc.is_finite() && (fc - local.f).abs() <= 1e-8 * local.f.abs().max(1.0) {
+    let same = |f: f64| f.is_finite() && (f - local.f).abs() <= 1e-8 * local.f.abs().max(1.0);
+    // An undetermined angle (theta_z of a nearly isotropic lobe) can drift to huge values where its
+    // float reduction mod pi is inexact, so the canonical point differs slightly: polish from there with
+    // the same solver and canonicalize again.
+    let polished = if same(fc) {
+        None
+    } else {
+        solve::minimize(&s.data, id, &xc, opts.solver, opts.tolerances).ok().and_then(|pl| {
+            let x2 = Model::from_params(id, &params::to_public(id, &pl.x)).ok().map(|m| params::to_internal(id, &m.canonical().params()))?;
+            let f2 = problem::residuals_into(&s.data, id, &x2, &mut r);
+            (f2.is_finite() && f2 <= local.f + 1e-8 * local.f.abs().max(1.0)).then_some((x2, f2))
+        })
+    };
+    let (x, f) = if same(fc) {
         (xc, fc)
+    } else if let Some((x2, f2)) = polished {
+        (x2, f2)
     } else {
         warnings.push(format!("{id}: canonical form changed the objective ({} -> {fc}); kept the solver's parameters", local.f));
         (local.x.clone(), local.f)
@@ -169,7 +184,11 @@ fn fit_ellipsoid(s: &Session, aniso: &Fitted, opts: &FitOptions) -> Result<Fitte
     let p = public(aniso);
     let (ax, ay, tz) = (p[0], p[1], p[2]);
     let (tx, ty) = start::skew_start(&s.summary, tz);
-    let mut starts = vec![vec![ax, ay, 0.0, 0.0, tz], vec![ax, ay, tx, ty, tz]];
+    let mut starts = vec![vec![ax, ay, 0.0, 0.0, tz]];
+    // The mean-normal skew start is skipped when it is the zero-skew start to 0.01 rad.
+    if tx.hypot(ty) > 0.01 {
+        starts.push(vec![ax, ay, tx, ty, tz]);
+    }
     for (sx, sy) in [(0.3, 0.0), (-0.3, 0.0), (0.0, 0.3), (0.0, -0.3)].into_iter().take(opts.extra_starts) {
         starts.push(vec![ax, ay, sx, sy, tz]);
     }
@@ -186,7 +205,9 @@ fn fit_chain(s: &Session, id: ModelId, opts: &FitOptions) -> Result<Fitted> {
         ModelId::GgxAniso => fit_aniso(s, id, Some(&fit_iso(s, ModelId::Ggx, opts)?), opts),
         ModelId::BeckmannAniso => fit_aniso(s, id, Some(&fit_iso(s, ModelId::Beckmann, opts)?), opts),
         ModelId::Ellipsoid => {
-            let aniso = fit_aniso(s, ModelId::GgxAniso, Some(&fit_iso(s, ModelId::Ggx, opts)?), opts)?;
+            // The closed-form GTR2aniso start suffices here (the isotropic pre-fit only matters when the
+            // anisotropic start is poor, and the ellipsoid stage has its own starts).
+            let aniso = fit_aniso(s, ModelId::GgxAniso, None, opts)?;
             fit_ellipsoid(s, &aniso, opts)
         }
     }

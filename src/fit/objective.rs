@@ -53,6 +53,8 @@ pub struct Bin {
     pub w: f64,
     /// `ln(N W_k)`, so `ln E_k = ln_nw + ln D(m_k)`.
     pub ln_nw: f64,
+    /// `ln c_k` (0 for an empty bin, where it is not used).
+    pub ln_c: f64,
 }
 
 /// The bins a fit uses: `W_k > 0` and `m.z > 0` (objective.md), with `N = sum c_k`.
@@ -88,7 +90,10 @@ impl FitData {
             .iter()
             .filter(usable)
             .filter(|b| b.count as f64 >= min_c)
-            .map(|b| Bin { m: b.m.normalize(), c: b.count as f64, w: b.proj_solid_angle, ln_nw: (n * b.proj_solid_angle).ln() })
+            .map(|b| {
+                let c = b.count as f64;
+                Bin { m: b.m.normalize(), c, w: b.proj_solid_angle, ln_nw: (n * b.proj_solid_angle).ln(), ln_c: if c > 0.0 { c.ln() } else { 0.0 } }
+            })
             .collect();
         let k_nonzero = bins.iter().filter(|b| b.c > 0.0).count();
         if bins.is_empty() {
@@ -98,15 +103,16 @@ impl FitData {
     }
 }
 
-/// `x - 1 - ln x` for `x = 1 + t`, accurate near `t = 0` where the direct form cancels.
+/// `exp(l) - 1 - l` (with `l = ln(E/c)`, `h = c (exp(l) - 1 - l)`), accurate near `l = 0` where the direct
+/// form cancels.
 #[inline]
-fn t_minus_ln1p(t: f64) -> f64 {
-    if t.abs() < 1e-3 {
-        // Series; the first omitted term t^7/7 is below 1e-16 relative to t^2/2 here.
-        let t2 = t * t;
-        t2 * (0.5 - t / 3.0 + t2 / 4.0 - t2 * t / 5.0 + t2 * t2 / 6.0)
+fn expm1_minus(l: f64) -> f64 {
+    if l.abs() < 1e-3 {
+        // Series; the first omitted term l^6/720 is below 1e-16 relative to l^2/2 here.
+        let l2 = l * l;
+        l2 * (0.5 + l / 6.0 + l2 / 24.0 + l2 * l / 120.0)
     } else {
-        t - t.ln_1p()
+        l.exp_m1() - l
     }
 }
 
@@ -116,18 +122,17 @@ pub fn residual(objective: Objective, bin: &Bin, ln_d: f64) -> (f64, f64) {
     match objective {
         Objective::Poisson => {
             let ln_e = bin.ln_nw + ln_d;
-            let e = ln_e.exp();
             let c = bin.c;
-            // h = E - c + c ln(c/E) >= 0, in the form that is accurate in each regime.
-            let h = if c == 0.0 {
-                e
+            // h = E - c + c ln(c/E) = c (exp(l) - 1 - l) >= 0 with l = ln(E/c): one exponential per bin,
+            // accurate near l = 0 where E - c and c ln(c/E) cancel.
+            let (e, h) = if c == 0.0 {
+                let e = ln_e.exp();
+                (e, e)
             } else {
-                let ln_ratio = ln_e - c.ln();
-                if ln_ratio.abs() < 0.5 {
-                    c * t_minus_ln1p(ln_ratio.exp_m1())
-                } else {
-                    e - c - c * ln_ratio
-                }
+                let l = ln_e - bin.ln_c;
+                // Guard: far above the data (l > 700) exp overflows; h is then E to all digits anyway.
+                let h = if l < 700.0 { c * expm1_minus(l) } else { f64::INFINITY };
+                (c * l.exp(), h)
             };
             let r = if c > e { (2.0 * h).sqrt() } else { -(2.0 * h).sqrt() };
             // dr/dlnD = (E - c)/r; at r = 0 its limit is -sqrt(c) (r ~ -(E-c)/sqrt(c) near E = c).
@@ -137,7 +142,7 @@ pub fn residual(objective: Objective, bin: &Bin, ln_d: f64) -> (f64, f64) {
         Objective::Logd => {
             let sc = bin.c.sqrt();
             // ln d_k = ln(c_k / (N W_k)) = ln c_k - ln_nw.
-            (sc * (ln_d - (bin.c.ln() - bin.ln_nw)), sc)
+            (sc * (ln_d - (bin.ln_c - bin.ln_nw)), sc)
         }
     }
 }

@@ -114,12 +114,15 @@ fn lm(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Result<Local>
 struct Cost<'a> {
     data: &'a FitData,
     id: ModelId,
+    /// Residual evaluations (cost and gradient), counted here so every solver reports the same thing.
+    evals: std::cell::Cell<usize>,
 }
 
 impl CostFunction for Cost<'_> {
     type Param = Vec<f64>;
     type Output = f64;
     fn cost(&self, x: &Vec<f64>) -> std::result::Result<f64, argmin::core::Error> {
+        self.evals.set(self.evals.get() + 1);
         let mut r = vec![0.0; self.data.bins.len()];
         let f = residuals_into(self.data, self.id, x, &mut r);
         // A non-finite objective (never expected: the parameterization keeps D positive) becomes +inf
@@ -132,6 +135,7 @@ impl Gradient for Cost<'_> {
     type Param = Vec<f64>;
     type Gradient = Vec<f64>;
     fn gradient(&self, x: &Vec<f64>) -> std::result::Result<Vec<f64>, argmin::core::Error> {
+        self.evals.set(self.evals.get() + 1);
         let mut r = vec![0.0; self.data.bins.len()];
         let mut j = DMatrix::zeros(self.data.bins.len(), x.len());
         jacobian_into(self.data, self.id, x, &mut r, &mut j);
@@ -144,13 +148,12 @@ fn arg_err(e: argmin::core::Error) -> Error {
     Error::new(ErrorKind::Numerical, format!("argmin solver failed: {e}"))
 }
 
-fn finish<S: State<Param = Vec<f64>, Float = f64>>(data: &FitData, id: ModelId, state: &S) -> Result<Local> {
+fn finish<S: State<Param = Vec<f64>, Float = f64>>(data: &FitData, id: ModelId, state: &S, evaluations: usize) -> Result<Local> {
     let x = state.get_best_param().cloned().ok_or_else(|| Error::new(ErrorKind::Numerical, "argmin returned no parameters"))?;
     let mut r = vec![0.0; data.bins.len()];
     let f = residuals_into(data, id, &x, &mut r);
     let status = state.get_termination_status();
     let converged = matches!(status, TerminationStatus::Terminated(ArgReason::SolverConverged));
-    let evaluations = state.get_func_counts().get("cost_count").copied().unwrap_or(0) as usize;
     Ok(Local { x, f, termination: format!("{status:?}"), converged, evaluations })
 }
 
@@ -163,19 +166,21 @@ fn nelder_mead(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Resu
         simplex.push(v);
     }
     let solver = NelderMead::new(simplex).with_sd_tolerance(tol.rel).map_err(arg_err)?;
-    let res = Executor::new(Cost { data, id }, solver)
+    let res = Executor::new(Cost { data, id, evals: Default::default() }, solver)
         .configure(|s| s.max_iters(50 * tol.max_iter as u64))
         .run()
         .map_err(arg_err)?;
-    finish(data, id, &res.state)
+    let evals = res.problem.problem.as_ref().map_or(0, |c| c.evals.get());
+    finish(data, id, &res.state, evals)
 }
 
 fn lbfgs(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Result<Local> {
     let ls = MoreThuenteLineSearch::new();
     let solver = LBFGS::new(ls, 7).with_tolerance_cost(tol.rel).map_err(arg_err)?.with_tolerance_grad(1e-8).map_err(arg_err)?;
-    let res = Executor::new(Cost { data, id }, solver)
+    let res = Executor::new(Cost { data, id, evals: Default::default() }, solver)
         .configure(|s| s.param(x0.to_vec()).max_iters(5 * tol.max_iter as u64))
         .run()
         .map_err(arg_err)?;
-    finish(data, id, &res.state)
+    let evals = res.problem.problem.as_ref().map_or(0, |c| c.evals.get());
+    finish(data, id, &res.state, evals)
 }

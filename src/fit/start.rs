@@ -97,8 +97,11 @@ pub fn closed_form(id: ModelId, s: &SlopeSummary) -> Vec<f64> {
     // Radial median: GGX P(|s| < R) = 1 - 1/(1 + R^2/a^2) gives R = a; Beckmann 1 - exp(-R^2/a^2)
     // gives R = a sqrt(ln 2).
     let iso = if beck { s.median_radial / std::f64::consts::LN_2.sqrt() } else { s.median_radial };
-    let ax = (k * s.median_abs[0]).max(START_ALPHA_MIN);
-    let ay = (k * s.median_abs[1]).max(START_ALPHA_MIN);
+    // The floor scales both alphas together: flooring each one alone would turn a narrow anisotropic
+    // lobe into an isotropic start, from which theta_z is undetermined and LM stalls at alpha_x = alpha_y.
+    let (ax, ay) = (k * s.median_abs[0], k * s.median_abs[1]);
+    let lift = (START_ALPHA_MIN / ax.min(ay)).max(1.0);
+    let (ax, ay) = if lift.is_finite() { (ax * lift, ay * lift) } else { (START_ALPHA_MIN, START_ALPHA_MIN) };
     match id {
         ModelId::Ggx | ModelId::Beckmann => vec![iso.max(START_ALPHA_MIN)],
         ModelId::GgxAniso | ModelId::BeckmannAniso => vec![ax, ay, s.theta_z],

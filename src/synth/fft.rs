@@ -1,91 +1,101 @@
-//! A small in-place radix-2 complex FFT (iterative Cooley-Tukey), enough for spectral synthesis of
-//! Gaussian surfaces on power-of-two grids. No dependency is added for it: the crate needs one
-//! transform, once per synthetic scan.
+//! The 2D discrete Fourier transform for spectral synthesis of Gaussian surfaces, on rustfft (the
+//! well-kept FFT crate of the Rust ecosystem) with rayon over rows and columns.
+
+use rayon::prelude::*;
+use rustfft::num_complex::Complex;
+use rustfft::{FftDirection, FftPlanner};
 
 /// In-place forward (`inverse = false`, `exp(-i k n)`) or unnormalized inverse (`exp(+i k n)`) DFT of
-/// `re + i im`; the length must be a power of two.
+/// `re + i im` (any length).
 pub fn fft(re: &mut [f64], im: &mut [f64], inverse: bool) {
-    let n = re.len();
-    debug_assert!(n.is_power_of_two() && im.len() == n);
-    if n < 2 {
-        return;
-    }
-    // Bit-reversal permutation.
-    let bits = n.trailing_zeros();
-    for i in 0..n {
-        let j = i.reverse_bits() >> (usize::BITS - bits);
-        if j > i {
-            re.swap(i, j);
-            im.swap(i, j);
-        }
-    }
-    let sign = if inverse { 1.0 } else { -1.0 };
-    let mut len = 2;
-    while len <= n {
-        let ang = sign * 2.0 * std::f64::consts::PI / len as f64;
-        let half = len / 2;
-        // Twiddles computed directly per index (not by recurrence) to keep the error at O(eps log n).
-        let tw: Vec<(f64, f64)> = (0..half).map(|k| (ang * k as f64).sin_cos()).map(|(s, c)| (c, s)).collect();
-        for start in (0..n).step_by(len) {
-            for k in 0..half {
-                let (wr, wi) = tw[k];
-                let (a, b) = (start + k, start + k + half);
-                let (xr, xi) = (re[b] * wr - im[b] * wi, re[b] * wi + im[b] * wr);
-                re[b] = re[a] - xr;
-                im[b] = im[a] - xi;
-                re[a] += xr;
-                im[a] += xi;
-            }
-        }
-        len *= 2;
+    let mut buf: Vec<Complex<f64>> = re.iter().zip(im.iter()).map(|(&r, &i)| Complex::new(r, i)).collect();
+    planner_fft(buf.len(), inverse).process(&mut buf);
+    for ((r, i), c) in re.iter_mut().zip(im.iter_mut()).zip(&buf) {
+        *r = c.re;
+        *i = c.im;
     }
 }
 
-/// 2D transform of a row-major `ny x nx` array (both powers of two): rows, then columns.
+/// 2D transform of a row-major `ny x nx` array: rows, then columns (unnormalized both ways).
 pub fn fft2(re: &mut [f64], im: &mut [f64], nx: usize, ny: usize, inverse: bool) {
-    use rayon::prelude::*;
-    re.par_chunks_mut(nx).zip(im.par_chunks_mut(nx)).for_each(|(r, i)| fft(r, i, inverse));
-    // Columns: transpose through a buffer per column (simple and cache-tolerable at these sizes).
-    let cols: Vec<(Vec<f64>, Vec<f64>)> = (0..nx)
-        .into_par_iter()
-        .map(|j| {
-            let mut cr: Vec<f64> = (0..ny).map(|i| re[i * nx + j]).collect();
-            let mut ci: Vec<f64> = (0..ny).map(|i| im[i * nx + j]).collect();
-            fft(&mut cr, &mut ci, inverse);
-            (cr, ci)
-        })
-        .collect();
-    for (j, (cr, ci)) in cols.into_iter().enumerate() {
-        for i in 0..ny {
-            re[i * nx + j] = cr[i];
-            im[i * nx + j] = ci[i];
+    debug_assert!(re.len() == nx * ny && im.len() == nx * ny);
+    let mut data: Vec<Complex<f64>> = re.iter().zip(im.iter()).map(|(&r, &i)| Complex::new(r, i)).collect();
+    let row_fft = planner_fft(nx, inverse);
+    data.par_chunks_mut(nx).for_each(|row| row_fft.process(row));
+    // Columns: transpose into rows of length ny, transform, transpose back.
+    let mut cols = vec![Complex::new(0.0, 0.0); nx * ny];
+    cols.par_chunks_mut(ny).enumerate().for_each(|(j, col)| {
+        for (i, c) in col.iter_mut().enumerate() {
+            *c = data[i * nx + j];
         }
-    }
+    });
+    let col_fft = planner_fft(ny, inverse);
+    cols.par_chunks_mut(ny).for_each(|col| col_fft.process(col));
+    re.par_chunks_mut(nx).zip(im.par_chunks_mut(nx)).enumerate().for_each(|(i, (r, m))| {
+        for j in 0..nx {
+            let c = cols[j * ny + i];
+            r[j] = c.re;
+            m[j] = c.im;
+        }
+    });
+}
+
+/// A planned transform of length `n` in the requested direction.
+fn planner_fft(n: usize, inverse: bool) -> std::sync::Arc<dyn rustfft::Fft<f64>> {
+    let dir = if inverse { FftDirection::Inverse } else { FftDirection::Forward };
+    FftPlanner::new().plan_fft(n, dir)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// Against the O(n^2) definition of the DFT, and inverse(forward(x)) = n x.
+    /// The O(n^2) definition of the 2D DFT, the independent reference.
+    fn naive_dft2(x: &[f64], nx: usize, ny: usize) -> Vec<(f64, f64)> {
+        let mut out = vec![(0.0, 0.0); nx * ny];
+        for ky in 0..ny {
+            for kx in 0..nx {
+                let (mut sr, mut si) = (0.0, 0.0);
+                for y in 0..ny {
+                    for xx in 0..nx {
+                        let a = -2.0 * std::f64::consts::PI * ((kx * xx) as f64 / nx as f64 + (ky * y) as f64 / ny as f64);
+                        sr += x[y * nx + xx] * a.cos();
+                        si += x[y * nx + xx] * a.sin();
+                    }
+                }
+                out[ky * nx + kx] = (sr, si);
+            }
+        }
+        out
+    }
+
+    /// Against the definition of the DFT on a non-square grid, and inverse(forward(x)) = n x.
     #[test]
-    fn matches_naive_dft() {
-        let n = 64;
-        let x: Vec<f64> = (0..n).map(|i| ((i * 7 % 13) as f64).sin() + 0.1 * i as f64).collect();
+    fn fft2_matches_naive_dft_and_inverts() {
+        let (nx, ny) = (16, 8);
+        let x: Vec<f64> = (0..nx * ny).map(|i| ((i * 7 % 13) as f64).sin() + 0.01 * i as f64).collect();
+        let (mut re, mut im) = (x.clone(), vec![0.0; nx * ny]);
+        fft2(&mut re, &mut im, nx, ny, false);
+        for (k, (sr, si)) in naive_dft2(&x, nx, ny).into_iter().enumerate() {
+            assert!((re[k] - sr).abs() < 1e-10 && (im[k] - si).abs() < 1e-10, "bin {k}");
+        }
+        fft2(&mut re, &mut im, nx, ny, true);
+        let n = (nx * ny) as f64;
+        for t in 0..nx * ny {
+            assert!((re[t] / n - x[t]).abs() < 1e-12 && im[t].abs() < 1e-10);
+        }
+    }
+
+    /// The 1D transform against the definition.
+    #[test]
+    fn fft_matches_naive_dft() {
+        let n = 12;
+        let x: Vec<f64> = (0..n).map(|i| (i as f64 * 0.7).cos()).collect();
         let (mut re, mut im) = (x.clone(), vec![0.0; n]);
         fft(&mut re, &mut im, false);
+        let d = naive_dft2(&x, n, 1);
         for k in 0..n {
-            let (mut sr, mut si) = (0.0, 0.0);
-            for (t, v) in x.iter().enumerate() {
-                let a = -2.0 * std::f64::consts::PI * (k * t) as f64 / n as f64;
-                sr += v * a.cos();
-                si += v * a.sin();
-            }
-            assert!((re[k] - sr).abs() < 1e-10 && (im[k] - si).abs() < 1e-10);
-        }
-        fft(&mut re, &mut im, true);
-        for t in 0..n {
-            assert!((re[t] / n as f64 - x[t]).abs() < 1e-12 && im[t].abs() < 1e-10);
+            assert!((re[k] - d[k].0).abs() < 1e-12 && (im[k] - d[k].1).abs() < 1e-12);
         }
     }
 }

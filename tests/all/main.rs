@@ -8,4 +8,5 @@ mod fit;
 mod models;
 mod ndf;
 mod readers;
+mod scale;
 mod synth;

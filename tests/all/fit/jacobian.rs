@@ -12,7 +12,7 @@ use ndfit::fit::problem::{jacobian_into, residuals_into};
 use ndfit::models::{ModelId, Ndf};
 use rand::{RngExt, SeedableRng};
 
-use super::fixtures::{model, ndf_of};
+use super::fixtures::model;
 
 const H: f64 = 1e-5;
 

@@ -4,9 +4,10 @@
 
 mod fixtures;
 
-mod canonical;
-mod covariance;
+mod cli;
 mod jacobian;
+mod compare;
+mod covariance;
 mod end_to_end;
 mod recovery;
 mod schema;

@@ -4,7 +4,7 @@
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
 
-use super::fixtures::{angle_diff, delta_to_truth, model, ndf_of, N_1024};
+use super::fixtures::{angle_diff, delta_to_truth, model, ndf_of, ndf_on, N_1024};
 
 /// The ellipsoid cases of the issue: alpha 0.02-1.5, anisotropy up to 10:1, skew up to +-0.5, any theta_z.
 pub const ELLIPSOID_CASES: [[f64; 5]; 8] = [
@@ -65,7 +65,7 @@ fn standard_errors_cover_the_truth() {
     let canon = truth.canonical().params();
     let (mut in1, mut in2, mut total) = (0usize, 0usize, 0usize);
     for seed in 0..30 {
-        let ndf = ndf_of(&truth, N_1024, 1000 + seed);
+        let ndf = ndf_on(&truth, 96, N_1024, 1000 + seed);
         let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions::default()).expect("fit");
         let p = rep.param_vec();
         let se = rep.std_error_vec();
