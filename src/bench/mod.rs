@@ -1,1 +1,25 @@
-//! Speed and accuracy measurements of every knob.
+//! Speed and accuracy measurements of every knob (`ndfit bench`, issue #8).
+//!
+//! The pipeline scan -> empirical NDF -> fit runs on synthetic scans with known truth ([`scene`]: the
+//! visible half of a skewed ellipsoid, whose NDF is exactly Walter et al.'s eq. 1) at several sizes; one
+//! knob at a time is moved from the defaults ([`sweep`]). Each point records the median time of every
+//! stage ([`pipeline`]), the peak resident memory ([`mem`]: `VmHWM` reset per stage), and the accuracy
+//! against the truth ([`accuracy`]: the NDF difference metric of `data_formats/objective.md` and the
+//! parameter errors). [`analysis`] extracts the Pareto front of time against error and the cost model
+//! (log-log exponents), [`plot`] draws the front, [`presets`] holds the presets picked from it, and
+//! [`numpy`] runs the reference numpy + nlopt pipeline in the same run for the speed-up ratios.
+
+pub mod accuracy;
+pub mod analysis;
+pub mod knobs;
+pub mod mem;
+pub mod numpy;
+pub mod pipeline;
+pub mod plot;
+pub mod presets;
+pub mod scene;
+pub mod sweep;
+
+pub use knobs::{Binning, Knobs};
+pub use presets::Preset;
+pub use sweep::{Plan, Row};

@@ -1,13 +1,256 @@
-//! `ndfit bench`.
+//! `ndfit bench`: the speed/accuracy sweep, its CSV, the Pareto plot, the cost model and the same-run
+//! comparison with the numpy + nlopt pipeline.
 
+use std::io::Write;
+use std::path::PathBuf;
 use std::process::ExitCode;
+
+use anyhow::Context;
+use ndfit::bench::accuracy::RefNodes;
+use ndfit::bench::analysis::{cost_model, pareto_front};
+use ndfit::bench::numpy::{compare, default_script, Comparison};
+use ndfit::bench::plot::{label_of, plot_pareto};
+use ndfit::bench::scene::Scene;
+use ndfit::bench::sweep::{self, Isolation, Plan, Row, REF_CELLS};
+use ndfit::bench::{pipeline, Knobs};
 
 /// Arguments of `ndfit bench`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Small scans, one repetition: seconds (the sanity run the tests use). Without it, the full sweep
+    /// of docs/PERFORMANCE.md (512^2 to 8192^2, three repetitions; tens of minutes on 2 cores).
+    #[arg(long)]
+    pub quick: bool,
+    /// Output folder: bench.csv, pareto.png, summary.json.
+    #[arg(short, long, default_value = "bench_out")]
+    pub out: PathBuf,
+    /// Scan sides of the size sweep (comma-separated), instead of the plan's.
+    #[arg(long, value_delimiter = ',')]
+    pub sizes: Option<Vec<usize>>,
+    /// Scan side of the knob sweep, instead of the plan's.
+    #[arg(long)]
+    pub knob_size: Option<usize>,
+    /// Repetitions per point (median reported), instead of the plan's.
+    #[arg(long)]
+    pub repeats: Option<usize>,
+    /// Python with numpy and nlopt: also run fits/numpy_pipeline.py on the same scans for the ratios.
+    #[arg(long, value_name = "PYTHON")]
+    pub numpy: Option<PathBuf>,
+    /// The numpy pipeline script (default: fits/numpy_pipeline.py).
+    #[arg(long)]
+    pub numpy_script: Option<PathBuf>,
+    /// Scan side of the scan -> NDF comparison (default 4096, quick 256).
+    #[arg(long)]
+    pub numpy_ndf_size: Option<usize>,
+    /// Scan side of the scan -> ellipsoid fit comparison (default 1024, quick 128).
+    #[arg(long)]
+    pub numpy_fit_size: Option<usize>,
+    /// Folder for the scans, kept there after the run (default: a temporary folder inside --out,
+    /// removed).
+    #[arg(long)]
+    pub work_dir: Option<PathBuf>,
+    /// Measure every point in this process instead of a fresh child process per point (faster to
+    /// start; peak memory then undercounts what the allocator kept from earlier points).
+    #[arg(long)]
+    pub in_process: bool,
+    /// Measure nothing: read an earlier run's bench.csv and redo the front, plot and cost model from it
+    /// (writes pareto.png and front.json into --out).
+    #[arg(long, value_name = "CSV")]
+    pub from_csv: Option<PathBuf>,
+    /// Internal: measure one point (JSON) and print its row as JSON (how the isolated sweep runs).
+    #[arg(long, hide = true)]
+    pub child_point: Option<String>,
+}
+
+/// Everything `summary.json` holds besides the CSV.
+#[derive(Debug, serde::Serialize)]
+struct Summary {
+    schema: &'static str,
+    quick: bool,
+    machine: Machine,
+    plan_sizes: Vec<usize>,
+    knob_size: usize,
+    repeats: usize,
+    pareto_front: Vec<Row>,
+    presets: Vec<Row>,
+    balanced_vs_accurate_fit_delta: Option<f64>,
+    cost_model: Vec<ndfit::bench::analysis::Exponent>,
+    numpy: Vec<Comparison>,
+}
+
+#[derive(Debug, serde::Serialize)]
+struct Machine {
+    cpu: String,
+    threads: usize,
+    os: String,
+    ndfit: &'static str,
+    profile: &'static str,
+}
+
+fn machine() -> Machine {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).map(|s| s.trim().to_string()))
+        .unwrap_or_else(|| "unknown".into());
+    Machine {
+        cpu,
+        threads: rayon::current_num_threads(),
+        os: std::env::consts::OS.into(),
+        ndfit: env!("CARGO_PKG_VERSION"),
+        profile: if cfg!(debug_assertions) { "debug" } else { "release" },
+    }
+}
 
 /// Run `ndfit bench`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let _ = args;
-    anyhow::bail!("'ndfit bench' is not implemented yet")
+    if let Some(json) = &args.child_point {
+        let p: sweep::ChildPoint = serde_json::from_str(json).context("--child-point: unreadable point")?;
+        let row = sweep::run_child_point(&p)?;
+        println!("{}", serde_json::to_string(&row).context("row JSON")?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    if let Some(csv_in) = &args.from_csv {
+        return replot(csv_in, &args.out);
+    }
+    let mut plan = if args.quick { Plan::quick() } else { Plan::full() };
+    if let Some(s) = &args.sizes {
+        anyhow::ensure!(!s.is_empty() && s.iter().all(|&v| (16..=32768).contains(&v)), "--sizes: each side must be 16 to 32768");
+        plan.sizes = s.clone();
+    }
+    if let Some(k) = args.knob_size {
+        anyhow::ensure!((16..=32768).contains(&k), "--knob-size must be 16 to 32768");
+        plan.knob_size = k;
+    }
+    if let Some(r) = args.repeats {
+        anyhow::ensure!(r >= 1, "--repeats must be at least 1");
+        plan.repeats = r;
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create the output folder", args.out.display()))?;
+    let tmp;
+    let work = match &args.work_dir {
+        Some(d) => {
+            std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create the work folder", d.display()))?;
+            d.clone()
+        }
+        None => {
+            tmp = tempfile::Builder::new().prefix(".bench-scans.").tempdir_in(&args.out).context("cannot create a temporary folder")?;
+            tmp.path().to_path_buf()
+        }
+    };
+
+    let stderr = std::io::stderr();
+    let iso = if args.in_process {
+        Isolation::InProcess
+    } else {
+        Isolation::Child(std::env::current_exe().context("cannot find the ndfit executable to run points in")?)
+    };
+    let rows = sweep::run(&plan, &work, &iso, args.work_dir.is_some(), |r| {
+        let _ = writeln!(
+            stderr.lock(),
+            "{:>12} {:>5} {:<14} total {:>9.1} ms (read {:>7.1}, ndf {:>7.1}, fit {:>7.1})  {:>6.1} Mpts/s  ndf_delta {:<8} fit_delta {}",
+            r.group,
+            r.size,
+            label_of(r),
+            r.t_total_ms,
+            r.t_read_ms,
+            r.t_ndf_ms,
+            r.t_fit_ms,
+            r.ndf_mpts_per_s,
+            fmt_opt(r.ndf_delta),
+            fmt_opt(r.fit_delta)
+        );
+    })?;
+
+    let csv_path = args.out.join("bench.csv");
+    ndfit::io::write_atomic(&csv_path, |w| {
+        let mut wr = csv::Writer::from_writer(w);
+        for r in &rows {
+            wr.serialize(r).map_err(|e| ndfit::Error::invalid(format!("CSV: {e}")))?;
+        }
+        wr.flush().map_err(ndfit::Error::io)?;
+        Ok(())
+    })?;
+
+    // The front over the knob sweep at one size: every row of that size with a fit.
+    let knob_rows: Vec<Row> = rows.iter().filter(|r| r.size == plan.knob_size && !r.model.is_empty()).cloned().collect();
+    let front = pareto_front(&knob_rows, |r| r.t_total_ms, |r| r.fit_delta);
+    let png = args.out.join("pareto.png");
+    plot_pareto(&png, &knob_rows, &front, &format!("ndfit: time against fit error, {0}x{0} synthetic ellipsoid scan", plan.knob_size))?;
+    let presets: Vec<Row> = rows.iter().filter(|r| r.group.starts_with("preset_")).cloned().collect();
+    let get = |name: &str| presets.iter().find(|r| r.group == format!("preset_{name}")).and_then(|r| r.fit_delta);
+    let bal_vs_acc = match (get("balanced"), get("accurate")) {
+        (Some(b), Some(a)) if a > 0.0 => Some(b / a - 1.0),
+        _ => None,
+    };
+
+    let mut comparisons = Vec::new();
+    if let Some(py) = &args.numpy {
+        let script = args.numpy_script.clone().unwrap_or_else(default_script);
+        let ndf_size = args.numpy_ndf_size.unwrap_or(if args.quick { 256 } else { 4096 });
+        let fit_size = args.numpy_fit_size.unwrap_or(if args.quick { 128 } else { 1024 });
+        for (size, fit) in [(ndf_size, false), (fit_size, true)] {
+            let scene = Scene::create(&work, size)?;
+            let frame = pipeline::run(&scene.path, &scene.read_options(), &Knobs { size, model: None, ..Knobs::default() })?.ndf.frame;
+            let nodes = RefNodes::new(&frame, REF_CELLS);
+            let c = compare(py, &script, &scene, &nodes, fit, plan.repeats)?;
+            eprintln!(
+                "numpy {:>4} {:>5}: ndfit {:>9.1} ms, numpy {:>9.1} ms, ratio {:.1}x  fit_delta ndfit {} numpy {}",
+                c.task,
+                c.size,
+                if fit { c.ndfit.total() } else { c.ndfit.read + c.ndfit.ndf },
+                if fit { c.numpy.t_total_ms } else { c.numpy.t_ndf_ms },
+                c.ratio,
+                fmt_opt(c.ndfit_fit_delta),
+                fmt_opt(c.numpy_fit_delta)
+            );
+            comparisons.push(c);
+            if args.work_dir.is_none() {
+                let _ = std::fs::remove_file(&scene.path);
+            }
+        }
+    }
+
+    let summary = Summary {
+        schema: "ndfit.bench/1",
+        quick: args.quick,
+        machine: machine(),
+        plan_sizes: plan.sizes.clone(),
+        knob_size: plan.knob_size,
+        repeats: plan.repeats,
+        pareto_front: front.iter().map(|&i| knob_rows[i].clone()).collect(),
+        presets,
+        balanced_vs_accurate_fit_delta: bal_vs_acc,
+        cost_model: cost_model(&rows),
+        numpy: comparisons,
+    };
+    let json = serde_json::to_string_pretty(&summary).context("summary JSON")?;
+    ndfit::io::write_bytes_atomic(&args.out.join("summary.json"), json.as_bytes())?;
+    for e in &summary.cost_model {
+        eprintln!("cost model: {} ~ {}^{:.2} ({} points)", e.quantity, e.against, e.exponent, e.n);
+    }
+    eprintln!("wrote {}, {}, {}", csv_path.display(), png.display(), args.out.join("summary.json").display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--from-csv`: the front, plot and cost model of an earlier run.
+fn replot(csv_in: &std::path::Path, out: &std::path::Path) -> anyhow::Result<ExitCode> {
+    let mut rd = csv::Reader::from_path(csv_in).with_context(|| format!("{}: cannot open", csv_in.display()))?;
+    let rows: Vec<Row> = rd.deserialize().collect::<Result<_, _>>().with_context(|| format!("{}: not a bench.csv", csv_in.display()))?;
+    let knob_size = rows.iter().find(|r| r.group == "preset_balanced").map(|r| r.size).with_context(|| format!("{}: no preset_balanced row", csv_in.display()))?;
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the output folder", out.display()))?;
+    let knob_rows: Vec<Row> = rows.iter().filter(|r| r.size == knob_size && !r.model.is_empty()).cloned().collect();
+    let front = pareto_front(&knob_rows, |r| r.t_total_ms, |r| r.fit_delta);
+    let png = out.join("pareto.png");
+    plot_pareto(&png, &knob_rows, &front, &format!("ndfit: time against fit error, {knob_size}x{knob_size} synthetic ellipsoid scan"))?;
+    let json = serde_json::json!({
+        "pareto_front": front.iter().map(|&i| &knob_rows[i]).collect::<Vec<_>>(),
+        "cost_model": cost_model(&rows),
+    });
+    ndfit::io::write_bytes_atomic(&out.join("front.json"), serde_json::to_string_pretty(&json).context("JSON")?.as_bytes())?;
+    eprintln!("wrote {} and {}", png.display(), out.join("front.json").display());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map_or("-".into(), |v| format!("{v:.4}"))
 }

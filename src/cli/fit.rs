@@ -39,6 +39,10 @@ pub struct Args {
     plot: Option<PathBuf>,
     #[command(flatten)]
     ndf: super::ndf::NdfArgs,
+    /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` is the knee). Sets the
+    /// subsampling stride, the NDF's normals and bins (unless --ndf-cells), the tolerance and the starts.
+    #[arg(long, value_enum)]
+    preset: Option<ndfit::bench::Preset>,
 }
 
 /// Run `ndfit fit`.
@@ -54,10 +58,22 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         "auto" => None,
         m => Some(m.parse::<ModelId>().map_err(|e| anyhow!("--model: {}", e.message()))?),
     };
-    let ndf_opts = args.ndf.options()?;
+    let mut ndf_opts = args.ndf.options()?;
+    let mut opts = opts;
 
     let t0 = Instant::now();
-    let hf = args.scan.load()?;
+    let mut hf = args.scan.load()?;
+    if let Some(p) = args.preset {
+        // The preset's knobs (src/bench/presets.rs); an explicit --ndf-cells still wins.
+        if p.stride() > 1 {
+            hf = ndfit::preprocess::subsample(&hf, p.stride()).map_err(|e| e.with_path(&args.scan.scan))?;
+        }
+        let po = p.ndf_options(hf.valid_count() as u64);
+        ndf_opts = ndfit::ndf::NdfOptions { cells_across: args.ndf.ndf_cells.or(po.cells_across), ..po };
+        let pf = p.fit_options();
+        opts.tolerances = pf.tolerances;
+        opts.extra_starts = opts.extra_starts.max(pf.extra_starts);
+    }
     let t1 = Instant::now();
     let ndf = empirical_ndf(&hf, &ndf_opts).map_err(|e| e.with_path(&args.scan.scan))?;
     let t2 = Instant::now();

@@ -66,7 +66,12 @@ pub fn read_npy(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
             _ => f64::NAN,
         }
     };
-    let vals: Vec<f64> = raw.chunks_exact(size).map(|b| value(b) * zs).collect();
+    let vals: Vec<f64> = if (endian, kind, size) == ('<', 'f', 8) {
+        // The common case (numpy's default float64) without the per-element dispatch of `value`.
+        raw.chunks_exact(8).map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * zs).collect()
+    } else {
+        raw.chunks_exact(size).map(|b| value(b) * zs).collect()
+    };
     let z = if fortran {
         // Column-major: element (i, j) is at j * ny + i.
         let mut z = vec![0.0; n];

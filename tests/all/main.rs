@@ -3,6 +3,7 @@
 mod common;
 
 mod batch;
+mod bench;
 mod cli;
 mod fit;
 mod models;

@@ -1,0 +1,127 @@
+//! The same-run comparison with what a user would otherwise write: `fits/numpy_pipeline.py` (numpy
+//! gradient + histogram + nlopt fit) run as a child process on the same NPY file, reported as ratios.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use super::accuracy::RefNodes;
+use super::knobs::Knobs;
+use super::presets::Preset;
+use super::pipeline::{self, StageTimes};
+use super::scene::{Scene, DX};
+use super::sweep::median_times;
+use crate::error::{Error, ErrorKind, Result};
+use crate::models::{Model, ModelId};
+
+/// What the numpy pipeline printed (times are medians over its repeats, in ms).
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+pub struct NumpyRun {
+    /// `np.load`.
+    pub t_load_ms: f64,
+    /// `np.gradient` and the validity mask.
+    pub t_gradient_ms: f64,
+    /// Normals and `np.histogram2d`.
+    pub t_histogram_ms: f64,
+    /// The nlopt fit (0 without `--fit`).
+    pub t_fit_ms: f64,
+    /// Load + gradient + histogram.
+    pub t_ndf_ms: f64,
+    /// Everything.
+    pub t_total_ms: f64,
+    /// Normals binned.
+    pub samples: u64,
+    /// Bins inside the disk.
+    pub bins: u64,
+    /// Fitted ellipsoid parameters (with `--fit`).
+    #[serde(default)]
+    pub params: Option<std::collections::BTreeMap<String, f64>>,
+    /// Objective evaluations of nlopt.
+    #[serde(default)]
+    pub evaluations: Option<u64>,
+    /// numpy version.
+    pub numpy: String,
+    /// nlopt version.
+    #[serde(default)]
+    pub nlopt: Option<String>,
+}
+
+/// One same-run comparison.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Comparison {
+    /// `ndf` (scan -> empirical NDF) or `fit` (scan -> ellipsoid fit).
+    pub task: String,
+    /// Scan side.
+    pub size: usize,
+    /// ndfit's median stage times (ms).
+    pub ndfit: StageTimes,
+    /// The numpy pipeline's.
+    pub numpy: NumpyRun,
+    /// numpy time / ndfit time for the task (the speed-up).
+    pub ratio: f64,
+    /// ndfit's fit error `delta(D_fit; D_truth)` (task `fit`).
+    pub ndfit_fit_delta: Option<f64>,
+    /// The numpy pipeline's fit error on the same nodes (task `fit`).
+    pub numpy_fit_delta: Option<f64>,
+}
+
+/// The script: `fits/numpy_pipeline.py` under the current directory, else beside the crate's sources.
+pub fn default_script() -> PathBuf {
+    let local = PathBuf::from("fits/numpy_pipeline.py");
+    if local.is_file() {
+        local
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fits/numpy_pipeline.py")
+    }
+}
+
+/// Run the numpy pipeline on `npy`.
+pub fn run_numpy(python: &Path, script: &Path, npy: &Path, fit: bool, repeats: usize) -> Result<NumpyRun> {
+    let mut cmd = Command::new(python);
+    cmd.arg(script).arg(npy).arg("--dx").arg(DX.to_string()).arg("--repeat").arg(repeats.max(1).to_string());
+    if fit {
+        cmd.arg("--fit");
+    }
+    let out = cmd.output().map_err(|e| Error::new(ErrorKind::Io, format!("cannot run {}: {e}", python.display())))?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let last = err.lines().last().unwrap_or("no message");
+        return Err(Error::new(ErrorKind::Io, format!("{} failed ({}): {last}", script.display(), out.status)));
+    }
+    serde_json::from_slice(&out.stdout)
+        .map_err(|e| Error::new(ErrorKind::BadData, format!("{}: unreadable output: {e}", script.display())))
+}
+
+/// Compare on `scene`: task `ndf` times read + NDF with the NDF defaults (what `ndfit ndf` writes),
+/// task `fit` the whole pipeline to the ellipsoid with the `balanced` preset (what `ndfit fit` does).
+pub fn compare(python: &Path, script: &Path, scene: &Scene, nodes: &RefNodes, fit: bool, repeats: usize) -> Result<Comparison> {
+    let knobs = if fit {
+        Knobs { model: Some(ModelId::Ellipsoid), ..Preset::Balanced.bench_knobs(scene.size) }
+    } else {
+        Knobs { size: scene.size, model: None, ..Knobs::default() }
+    };
+    let ro = scene.read_options();
+    let mut runs = Vec::new();
+    let mut last = None;
+    for _ in 0..repeats.max(1) {
+        let o = pipeline::run(&scene.path, &ro, &knobs)?;
+        runs.push(o.times);
+        last = Some(o);
+    }
+    let t = median_times(&runs);
+    let np = run_numpy(python, script, &scene.path, fit, repeats)?;
+    let (ratio, ndfit_fit_delta, numpy_fit_delta) = if fit {
+        let mine = last.as_ref().and_then(|o| o.fit.as_ref()).and_then(|r| r.to_model().ok());
+        let theirs = np.params.as_ref().and_then(|p| {
+            let v: Option<Vec<f64>> = ModelId::Ellipsoid.param_names().iter().map(|k| p.get(*k).copied()).collect();
+            Model::from_params(ModelId::Ellipsoid, &v?).ok()
+        });
+        (
+            np.t_total_ms / t.total(),
+            mine.and_then(|m| nodes.delta_model(&m, &scene.truth)),
+            theirs.and_then(|m| nodes.delta_model(&m, &scene.truth)),
+        )
+    } else {
+        (np.t_ndf_ms / (t.read + t.ndf), None, None)
+    };
+    Ok(Comparison { task: if fit { "fit" } else { "ndf" }.into(), size: scene.size, ndfit: t, numpy: np, ratio, ndfit_fit_delta, numpy_fit_delta })
+}

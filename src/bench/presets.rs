@@ -1,0 +1,121 @@
+//! The presets `--preset fast|balanced|accurate`: points picked from the measured Pareto front of
+//! `ndfit bench` (time against error on the synthetic set; see `docs/PERFORMANCE.md` for the figures
+//! behind each choice).
+
+use super::knobs::{Binning, Knobs};
+use crate::fit::{FitOptions, Solver};
+use crate::ndf::{NdfOptions, NormalScheme};
+
+/// Mean count per bin of the NDF a fit sees. Measured (docs/PERFORMANCE.md, knobs `target_count` and
+/// `cells`): the fit error is smallest with a few thousand bins holding at least a few hundred normals
+/// each, and the fit time grows in proportion to the bin count (exponent ~1.05), so the fit's NDF is
+/// coarser than the NDF default of 64 per bin (the NDF written by `ndfit ndf` keeps that default).
+pub const FIT_TARGET_COUNT: f64 = 256.0;
+
+/// Most cells across the disk of the NDF a fit sees: 63 (about 3200 bins) measured as accurate as 127 and
+/// 255 on a 2048^2 scan at a quarter and a sixteenth of the fit time, so the fit's cost stops growing
+/// with the scan size.
+pub const FIT_MAX_CELLS: usize = 63;
+
+/// A named speed/accuracy trade.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Preset {
+    /// Every second point along both axes (4x fewer normals), looser solver tolerance.
+    Fast,
+    /// The knee of the front: every point, [`FIT_TARGET_COUNT`] samples per bin up to [`FIT_MAX_CELLS`]
+    /// cells across, the default solver.
+    #[default]
+    Balanced,
+    /// Triangle facets (twice the normals), a tighter tolerance and four extra ellipsoid starts (a
+    /// guard against local minima on real data; no gain on the synthetic set).
+    Accurate,
+}
+
+impl Preset {
+    /// Every preset, fastest first.
+    pub const ALL: [Preset; 3] = [Preset::Fast, Preset::Balanced, Preset::Accurate];
+
+    /// The name used on the command line and in the CSV.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Preset::Fast => "fast",
+            Preset::Balanced => "balanced",
+            Preset::Accurate => "accurate",
+        }
+    }
+
+    /// The knobs of this preset (scan size and model are the caller's: they are not speed knobs of
+    /// the pipeline but properties of the job).
+    pub fn knobs(self) -> PresetKnobs {
+        match self {
+            Preset::Fast => PresetKnobs { stride: 2, scheme: NormalScheme::Central, target_count: FIT_TARGET_COUNT, max_cells: FIT_MAX_CELLS, tol: 1e-6, extra_starts: 0 },
+            Preset::Balanced => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: FIT_TARGET_COUNT, max_cells: FIT_MAX_CELLS, tol: 1e-10, extra_starts: 0 },
+            Preset::Accurate => PresetKnobs { stride: 1, scheme: NormalScheme::Triangles, target_count: FIT_TARGET_COUNT, max_cells: FIT_MAX_CELLS, tol: 1e-12, extra_starts: 4 },
+        }
+    }
+
+    /// The NDF options of this preset for a scan with about `samples` valid normals (the bin count is
+    /// the automatic one for [`PresetKnobs::target_count`], capped at [`PresetKnobs::max_cells`]).
+    pub fn ndf_options(self, samples: u64) -> NdfOptions {
+        let k = self.knobs();
+        let auto = NdfOptions { scheme: k.scheme, cells_across: None, target_count: k.target_count, frame: None };
+        NdfOptions { cells_across: Some(auto.cells_for(samples).min(k.max_cells)), ..auto }
+    }
+
+    /// The fit options of this preset.
+    pub fn fit_options(self) -> FitOptions {
+        let mut f = FitOptions::default();
+        let k = self.knobs();
+        f.tolerances.rel = k.tol;
+        f.extra_starts = k.extra_starts;
+        f.solver = Solver::Lm;
+        f
+    }
+
+    /// Subsampling stride of this preset (1: every point).
+    pub fn stride(self) -> usize {
+        self.knobs().stride
+    }
+
+    /// The full benchmark knobs of this preset for a scan of `size` points per side.
+    pub fn bench_knobs(self, size: usize) -> Knobs {
+        let k = self.knobs();
+        Knobs {
+            size,
+            stride: k.stride,
+            scheme: k.scheme,
+            binning: Binning::Whitened,
+            cells: None,
+            max_cells: Some(k.max_cells),
+            target_count: k.target_count,
+            tol: k.tol,
+            extra_starts: k.extra_starts,
+            solver: Solver::Lm,
+            ..Knobs::default()
+        }
+    }
+}
+
+impl std::fmt::Display for Preset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// The knob values a preset sets.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PresetKnobs {
+    /// Subsampling stride.
+    pub stride: usize,
+    /// Normal scheme.
+    pub scheme: NormalScheme,
+    /// Mean count per bin (automatic bin count).
+    pub target_count: f64,
+    /// Cap on the cells across the disk.
+    pub max_cells: usize,
+    /// Relative solver tolerance.
+    pub tol: f64,
+    /// Extra ellipsoid starts.
+    pub extra_starts: usize,
+}

@@ -1,0 +1,164 @@
+//! Integration tests: `ndfit bench --quick` (never timing: the CSV's shape, and its accuracy and
+//! counts against independent truth), and the pieces of the bench library.
+
+use std::path::Path;
+use std::process::Command;
+
+use ndfit::bench::sweep::Plan;
+use ndfit::bench::Preset;
+use ndfit::ndf::NormalScheme;
+use ndfit::synth::{ellipsoid_surface, SynthSettings};
+
+use crate::common::ndfit_bin;
+
+fn run_quick(out: &Path) -> Vec<csv::StringRecord> {
+    let o = Command::new(ndfit_bin()).args(["bench", "--quick", "-o"]).arg(out).output().expect("ndfit runs");
+    assert!(o.status.success(), "ndfit bench --quick failed: {}", String::from_utf8_lossy(&o.stderr));
+    let mut rd = csv::Reader::from_path(out.join("bench.csv")).expect("bench.csv written");
+    let header = rd.headers().expect("header").clone();
+    for col in ["group", "size", "samples", "t_total_ms", "peak_mib", "ndf_delta", "fit_delta", "alpha_err", "angle_err"] {
+        assert!(header.iter().any(|h| h == col), "column {col} missing from {header:?}");
+    }
+    let mut rows = vec![header];
+    rows.extend(rd.records().map(|r| r.expect("well-formed CSV row")));
+    rows
+}
+
+fn col<'a>(rows: &'a [csv::StringRecord], r: &'a csv::StringRecord, name: &str) -> &'a str {
+    let i = rows[0].iter().position(|h| h == name).expect("known column");
+    &r[i]
+}
+
+fn num(rows: &[csv::StringRecord], r: &csv::StringRecord, name: &str) -> Option<f64> {
+    let s = col(rows, r, name);
+    (!s.is_empty()).then(|| s.parse().unwrap_or_else(|_| panic!("{name} = {s:?} is not a number")))
+}
+
+/// Valid central-difference stencils of the quick scene, counted here from the synthesized heights
+/// (an independent count of what the NDF must have binned).
+fn valid_central(size: usize, stride: usize) -> u64 {
+    let s = SynthSettings { nx: size, ny: size, dx: 1e-6, dy: 1e-6, seed: 1, ..SynthSettings::default() };
+    let (hf, _) = ellipsoid_surface(&s, &ndfit::bench::scene::truth_params()).expect("synth");
+    let hf = ndfit::preprocess::subsample(&hf, stride).expect("subsample");
+    let mut n = 0;
+    for i in 1..hf.ny - 1 {
+        for j in 1..hf.nx - 1 {
+            if [hf.at(i, j), hf.at(i, j - 1), hf.at(i, j + 1), hf.at(i - 1, j), hf.at(i + 1, j)].iter().all(|v| v.is_finite()) {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+#[test]
+fn quick_bench_csv_is_sane_against_truth() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let rows = run_quick(dir.path());
+    let plan = Plan::quick();
+    assert_eq!(rows.len() - 1, plan.points().len(), "one row per planned point");
+    for r in &rows[1..] {
+        let group = col(&rows, r, "group");
+        // Stage times are positive and add up to the total (up to the CSV's float printing).
+        let parts: f64 = ["t_read_ms", "t_subsample_ms", "t_ndf_ms", "t_fit_ms"].iter().map(|c| num(&rows, r, c).expect("time")).sum();
+        let total = num(&rows, r, "t_total_ms").expect("total");
+        assert!(total > 0.0 && (parts - total).abs() <= 1e-9 * total.max(1.0), "{group}: {parts} vs {total}");
+        // The samples are the valid stencils of the (subsampled) scan, counted independently.
+        let (size, stride) = (num(&rows, r, "size").expect("size") as usize, num(&rows, r, "stride").expect("stride") as usize);
+        let samples = num(&rows, r, "samples").expect("samples") as u64;
+        if col(&rows, r, "scheme") == NormalScheme::Central.as_str() {
+            assert_eq!(samples, valid_central(size, stride), "{group} {size} stride {stride}");
+        }
+        // Peak memory holds at least the heightfield (8 bytes per point after subsampling).
+        if let Some(peak) = num(&rows, r, "peak_mib") {
+            let hf_mib = (size.div_ceil(stride)).pow(2) as f64 * 8.0 / (1024.0 * 1024.0);
+            assert!(peak >= hf_mib, "{group}: peak {peak} MiB below the {hf_mib} MiB heightfield");
+        }
+        // Accuracy is a finite, non-negative distance whenever the NDF exists.
+        let nd = num(&rows, r, "ndf_delta").expect("ndf_delta");
+        assert!(nd.is_finite() && nd >= 0.0);
+    }
+    let find = |g: &str, size: usize| {
+        rows[1..].iter().find(|r| col(&rows, r, "group") == g && num(&rows, r, "size") == Some(size as f64)).expect("row present")
+    };
+    // Defaults at 256^2 with the ellipsoid model: the truth is recovered. Tolerances: the empirical NDF
+    // itself differs from the truth by ndf_delta (counting noise of ~30k normals in ~500 bins, ~0.1);
+    // a 5-parameter fit averages that noise over all bins, so its error must be well below ndf_delta
+    // (we require half), and alphas within 5 % / angles within 0.02 rad (several standard errors of
+    // 30k normals, sigma_alpha/alpha ~ 1/sqrt(N) ~ 0.6 %).
+    let d = find("size", 256);
+    let (nd, fd) = (num(&rows, d, "ndf_delta").expect("ndf"), num(&rows, d, "fit_delta").expect("fit"));
+    assert!(fd < 0.5 * nd, "fit_delta {fd} vs ndf_delta {nd}");
+    assert!(num(&rows, d, "alpha_err").expect("alpha") < 0.05);
+    assert!(num(&rows, d, "angle_err").expect("angle") < 0.02);
+    // Model complexity: the skewed anisotropic truth is not a GGX; an isotropic GGX is far worse.
+    let ggx = rows[1..].iter().find(|r| col(&rows, r, "model") == "ggx").expect("ggx row");
+    assert!(num(&rows, ggx, "fit_delta").expect("ggx fit") > 5.0 * fd);
+    // More normals, better NDF: ndf_delta falls with size (counting noise ~ 1/sqrt(N)).
+    let small = find("size", 128);
+    assert!(num(&rows, small, "ndf_delta").expect("ndf") > nd);
+    // The plot is a PNG; the summary holds the front and the cost model.
+    let png = std::fs::read(dir.path().join("pareto.png")).expect("pareto.png");
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("summary.json")).expect("summary")).expect("JSON");
+    assert!(!s["pareto_front"].as_array().expect("front").is_empty());
+    assert!(s["cost_model"].as_array().expect("cost model").iter().any(|e| e["against"] == "bins"));
+    assert_eq!(s["presets"].as_array().expect("presets").len(), 3);
+}
+
+#[test]
+fn bench_bad_arguments_fail_cleanly() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = Command::new(ndfit_bin()).args(["bench", "--quick", "--sizes", "4", "-o"]).arg(dir.path()).output().expect("runs");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+    assert!(err.contains("--sizes"), "{err}");
+    assert!(!dir.path().join("bench.csv").exists());
+    let o = Command::new(ndfit_bin()).args(["bench", "--child-point", "{not json"]).output().expect("runs");
+    assert!(!o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("panicked"));
+}
+
+/// The presets map to the options they document, ordered fast -> accurate in work done.
+#[test]
+fn presets_are_ordered() {
+    let (f, b, a) = (Preset::Fast.knobs(), Preset::Balanced.knobs(), Preset::Accurate.knobs());
+    assert!(f.stride >= b.stride && b.stride >= a.stride);
+    assert!(f.tol >= b.tol && b.tol >= a.tol);
+    // Balanced is the library's fit default on a coarser NDF: FIT_TARGET_COUNT samples per bin, at
+    // most FIT_MAX_CELLS across. 2e5 samples at 256 per bin: sqrt(8e5 / (pi 256)) = 31.5 -> 32, made
+    // odd (33) by the grid; 1e8 samples would want 705, capped at 63.
+    use ndfit::bench::presets::{FIT_MAX_CELLS, FIT_TARGET_COUNT};
+    assert_eq!(FIT_TARGET_COUNT, 256.0);
+    assert_eq!(ndfit::ndf::BinGrid::new(Preset::Balanced.ndf_options(200_000).cells_across.expect("set")).n, 33);
+    assert_eq!(Preset::Balanced.ndf_options(100_000_000).cells_across, Some(FIT_MAX_CELLS));
+    assert_eq!(Preset::Balanced.ndf_options(1_000_000).scheme, NormalScheme::Central);
+    assert_eq!(Preset::Balanced.fit_options(), ndfit::fit::FitOptions::default());
+    assert_eq!(Preset::Accurate.ndf_options(1_000_000).scheme, NormalScheme::Triangles);
+}
+
+/// `ndfit fit --preset` recovers the truth of a synthetic ellipsoid scan: alphas within 5 %. A 512^2 scan
+/// has ~124k normals (~31k at the fast preset's stride 2), so the counting part of the error is ~1 %;
+/// the rest is the discretization bias of the slopes (O(dx) for the triangles' forward differences),
+/// which the sweep measures at 0.7 % (central) at this size.
+#[test]
+fn fit_cli_presets_recover_truth() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let s = SynthSettings { nx: 512, ny: 512, dx: 1e-6, dy: 1e-6, seed: 1, ..SynthSettings::default() };
+    let p = ndfit::bench::scene::truth_params();
+    let (hf, _) = ellipsoid_surface(&s, &p).expect("synth");
+    let scan = dir.path().join("e.npy");
+    ndfit::bench::scene::write_npy_f64(&scan, &hf).expect("npy");
+    for preset in ["fast", "balanced", "accurate"] {
+        let o = Command::new(ndfit_bin())
+            .args(["fit"])
+            .arg(&scan)
+            .args(["--dx", "1e-6", "--z-scale", "1", "--model", "ellipsoid", "--preset", preset])
+            .output()
+            .expect("runs");
+        assert!(o.status.success(), "{preset}: {}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("fit JSON");
+        let (ax, ay) = (v["params"]["alpha_x"].as_f64().expect("alpha_x"), v["params"]["alpha_y"].as_f64().expect("alpha_y"));
+        assert!((ax / p.alpha_x - 1.0).abs() < 0.05 && (ay / p.alpha_y - 1.0).abs() < 0.05, "{preset}: {ax} {ay}");
+    }
+}
