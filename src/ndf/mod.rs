@@ -342,7 +342,9 @@ fn cell_integrals(frame: &SlopeFrame, grid: &BinGrid, c: usize) -> (f64, f64, [f
     (w, o, centroid)
 }
 
-fn build_bins(frame: &SlopeFrame, grid: &BinGrid, counts: &[u64], n: u64) -> (Vec<NdfBin>, Vec<u32>) {
+/// Bins from per-cell counts: every cell that meets the disk or holds a count, with its exact `W`, solid
+/// angle and W-weighted centroid. Shared with `scale`, which bins sampled slopes on the same grid.
+pub(crate) fn build_bins(frame: &SlopeFrame, grid: &BinGrid, counts: &[u64], n: u64) -> (Vec<NdfBin>, Vec<u32>) {
     let nf = n as f64;
     let cells: Vec<usize> = (0..grid.cells()).filter(|&c| grid.meets_disk(c) || counts[c] > 0).collect();
     let bins: Vec<NdfBin> = cells

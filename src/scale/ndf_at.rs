@@ -5,14 +5,13 @@
 //! `src/ndf` bins a scan's slopes.
 
 use nalgebra::{Matrix2, Vector2};
-use rayon::prelude::*;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 
 use super::footprint::FootprintField;
 use crate::error::{Error, ErrorKind, Result};
 use crate::ndf::grid::MAX_CELLS_ACROSS;
-use crate::ndf::{BinGrid, EmpiricalNdf, NdfBin, NdfOptions, QuadOrder, SlopeFrame};
+use crate::ndf::{BinGrid, EmpiricalNdf, NdfOptions, SlopeFrame};
 
 /// Which covariance blurs each footprint's resolved slope (data_formats/scale.md sec. 3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -163,38 +162,12 @@ fn bin_slopes_on(slopes: &[Vector2<f64>], cells_across: Option<usize>, frame: Op
         counts[grid.cell_of(frame.to_lambert(s[0], s[1]))] += 1;
     }
     let n = slopes.len() as u64;
-    let nf = n as f64;
     let m = slope_moments(slopes).ok();
-    let cells: Vec<usize> = (0..grid.cells()).filter(|&c| grid.meets_disk(c) || counts[c] > 0).collect();
-    let bins: Vec<NdfBin> = cells
-        .par_iter()
-        .map(|&c| {
-            let (mut w, mut o, mut px, mut py) = (0.0, 0.0, 0.0, 0.0);
-            grid.quadrature(c, QuadOrder::Standard, &frame.rim_shape(), |p, wt| {
-                let dw = frame.proj_density(p) * wt;
-                w += dw;
-                o += frame.solid_density(p) * wt;
-                px += p[0] * dw;
-                py += p[1] * dw;
-            });
-            let centroid = if w > 0.0 {
-                [px / w, py / w]
-            } else {
-                // A rim sliver with no projected solid angle takes its geometric centre.
-                let [x0, x1, y0, y1] = grid.bounds(c);
-                [0.5 * (x0 + x1), 0.5 * (y0 + y1)]
-            };
-            let count = counts[c];
-            // W = 0 only on a rim sliver: D there is 0, not 0/0.
-            let (d, stderr) =
-                if w > 0.0 { (count as f64 / (nf * w), (count.max(1) as f64).sqrt() / (nf * w)) } else { (0.0, 0.0) };
-            NdfBin { m: frame.normal_at(centroid), d, stderr, count, solid_angle: o, proj_solid_angle: w }
-        })
-        .collect();
+    let (bins, bin_cells) = crate::ndf::build_bins(&frame, &grid, &counts, n);
     let mut ndf = EmpiricalNdf::from_bins(bins, n);
     ndf.frame = frame;
     ndf.grid = grid;
-    ndf.bin_cells = cells.into_iter().map(|c| c as u32).collect();
+    ndf.bin_cells = bin_cells;
     if let Some(m) = m {
         ndf.slope_mean = [m.mean[0], m.mean[1]];
         ndf.slope_cov = [[m.cov[(0, 0)], m.cov[(0, 1)]], [m.cov[(1, 0)], m.cov[(1, 1)]]];
