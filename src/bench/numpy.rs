@@ -45,6 +45,24 @@ pub struct NumpyRun {
     pub nlopt: Option<String>,
 }
 
+/// The speed-up targets of issue #8 (numpy time / ndfit time, same run).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Target {
+    /// Scan side at which the target applies (a comparison at another size is reported, not judged).
+    pub size: usize,
+    /// The ratio that must be reached.
+    pub required: f64,
+    /// The ratio aimed at (`None`: the requirement is the aim).
+    pub aim: Option<f64>,
+}
+
+/// Scan -> empirical NDF at 4096^2: at least 10x numpy, 20x aimed at.
+pub const NDF_TARGET: Target = Target { size: 4096, required: 10.0, aim: Some(20.0) };
+/// Scan -> ellipsoid fit at 1024^2: at least 30x numpy + nlopt.
+pub const FIT_TARGET: Target = Target { size: 1024, required: 30.0, aim: None };
+/// Empirical NDF throughput: at least 150 million points per second (the NDF stage, scan grid points).
+pub const THROUGHPUT_TARGET_MPTS: f64 = 150.0;
+
 /// One same-run comparison.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Comparison {
@@ -58,6 +76,17 @@ pub struct Comparison {
     pub numpy: NumpyRun,
     /// numpy time / ndfit time for the task (the speed-up).
     pub ratio: f64,
+    /// The target of issue #8 for this task.
+    pub target: Target,
+    /// Whether `ratio >= target.required` (`None`: not at the target's scan size, so not judged).
+    pub met: Option<bool>,
+    /// ndfit's NDF stage throughput in scan grid points per second (millions; read excluded).
+    pub ndf_grid_mpts_per_s: f64,
+    /// ndfit's NDF stage throughput in binned normals per second (millions).
+    pub ndf_normals_mpts_per_s: f64,
+    /// Bins across of the square histogram the numpy side used (ndfit's cells across, so both
+    /// pipelines bin into about as many cells and their fits do the same work per evaluation).
+    pub numpy_bins_across: usize,
     /// ndfit's fit error `delta(D_fit; D_truth)` (task `fit`).
     pub ndfit_fit_delta: Option<f64>,
     /// The numpy pipeline's fit error on the same nodes (task `fit`).
@@ -75,9 +104,10 @@ pub fn default_script() -> PathBuf {
 }
 
 /// Run the numpy pipeline on `npy`.
-pub fn run_numpy(python: &Path, script: &Path, npy: &Path, fit: bool, repeats: usize) -> Result<NumpyRun> {
+pub fn run_numpy(python: &Path, script: &Path, npy: &Path, fit: bool, bins: usize, repeats: usize) -> Result<NumpyRun> {
     let mut cmd = Command::new(python);
     cmd.arg(script).arg(npy).arg("--dx").arg(DX.to_string()).arg("--repeat").arg(repeats.max(1).to_string());
+    cmd.arg("--bins").arg(bins.to_string());
     if fit {
         cmd.arg("--fit");
     }
@@ -108,7 +138,10 @@ pub fn compare(python: &Path, script: &Path, scene: &Scene, nodes: &RefNodes, fi
         last = Some(o);
     }
     let t = median_times(&runs);
-    let np = run_numpy(python, script, &scene.path, fit, repeats)?;
+    let o = last.as_ref().expect("at least one run was made");
+    // The numpy side bins into as many cells across the disk as ndfit did (at least 16, a sane histogram).
+    let bins_across = o.ndf.grid.n.max(16);
+    let np = run_numpy(python, script, &scene.path, fit, bins_across, repeats)?;
     let (ratio, ndfit_fit_delta, numpy_fit_delta) = if fit {
         let mine = last.as_ref().and_then(|o| o.fit.as_ref()).and_then(|r| r.to_model().ok());
         let theirs = np.params.as_ref().and_then(|p| {
@@ -123,5 +156,19 @@ pub fn compare(python: &Path, script: &Path, scene: &Scene, nodes: &RefNodes, fi
     } else {
         (np.t_ndf_ms / (t.read + t.ndf), None, None)
     };
-    Ok(Comparison { task: if fit { "fit" } else { "ndf" }.into(), size: scene.size, ndfit: t, numpy: np, ratio, ndfit_fit_delta, numpy_fit_delta })
+    let target = if fit { FIT_TARGET } else { NDF_TARGET };
+    Ok(Comparison {
+        task: if fit { "fit" } else { "ndf" }.into(),
+        size: scene.size,
+        ndfit: t,
+        numpy: np,
+        ratio,
+        target,
+        met: (scene.size == target.size).then_some(ratio >= target.required),
+        ndf_grid_mpts_per_s: (scene.size * scene.size) as f64 / (t.ndf * 1e3),
+        ndf_normals_mpts_per_s: o.ndf.n_samples as f64 / (t.ndf * 1e3),
+        numpy_bins_across: bins_across,
+        ndfit_fit_delta,
+        numpy_fit_delta,
+    })
 }

@@ -132,6 +132,9 @@ pub struct Row {
     pub converged: Option<bool>,
     /// Residual evaluations of the solver.
     pub evaluations: Option<usize>,
+    /// The fit's objective (Poisson deviance) at its optimum: solvers of one NDF compare on it.
+    #[serde(default)]
+    pub objective: Option<f64>,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -195,6 +198,7 @@ pub fn measure(group: &str, knobs: &Knobs, scene: &Scene, nodes: &RefNodes, repe
         angle_err: perr.map(|p| p.1),
         converged: o.fit.as_ref().map(|r| r.solver.converged),
         evaluations: o.fit.as_ref().map(|r| r.solver.evaluations),
+        objective: o.fit.as_ref().map(|r| r.quality.objective_value),
     })
 }
 

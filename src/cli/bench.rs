@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use ndfit::bench::accuracy::RefNodes;
 use ndfit::bench::analysis::{cost_model, pareto_front};
-use ndfit::bench::numpy::{compare, default_script, Comparison};
+use ndfit::bench::numpy::{compare, default_script, Comparison, THROUGHPUT_TARGET_MPTS};
 use ndfit::bench::plot::{label_of, plot_pareto};
 use ndfit::bench::scene::Scene;
 use ndfit::bench::sweep::{self, Isolation, Plan, Row, REF_CELLS};
@@ -57,6 +57,11 @@ pub struct Args {
     /// (writes pareto.png and front.json into --out).
     #[arg(long, value_name = "CSV")]
     pub from_csv: Option<PathBuf>,
+    /// After the run (or with --from-csv), copy bench.csv, pareto.png and summary.json beside this page
+    /// (as bench.csv, pareto.png, bench_summary.json) and regenerate its tables between the
+    /// `<!-- bench:NAME -->` markers (`docs/PERFORMANCE.md`; see `ndfit::bench::report`).
+    #[arg(long, value_name = "DOC")]
+    pub update_doc: Option<PathBuf>,
     /// Internal: measure one point (JSON) and print its row as JSON (how the isolated sweep runs).
     #[arg(long, hide = true)]
     pub child_point: Option<String>,
@@ -76,6 +81,8 @@ struct Summary {
     balanced_vs_accurate_fit_delta: Option<f64>,
     cost_model: Vec<ndfit::bench::analysis::Exponent>,
     numpy: Vec<Comparison>,
+    /// Wall time of the whole run (s).
+    wall_s: f64,
 }
 
 #[derive(Debug, serde::Serialize)]
@@ -85,9 +92,19 @@ struct Machine {
     os: String,
     ndfit: &'static str,
     profile: &'static str,
+    /// `/proc/loadavg` (1, 5, 15 minutes) when the run started and ended: the machine's other load.
+    loadavg_start: Option<[f64; 3]>,
+    loadavg_end: Option<[f64; 3]>,
 }
 
-fn machine() -> Machine {
+/// The 1, 5 and 15 minute load averages (`None` without /proc).
+fn loadavg() -> Option<[f64; 3]> {
+    let s = std::fs::read_to_string("/proc/loadavg").ok()?;
+    let mut it = s.split_whitespace().map(|v| v.parse::<f64>().ok());
+    Some([it.next()??, it.next()??, it.next()??])
+}
+
+fn machine(loadavg_start: Option<[f64; 3]>) -> Machine {
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
         .and_then(|s| s.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).map(|s| s.trim().to_string()))
@@ -98,6 +115,8 @@ fn machine() -> Machine {
         os: std::env::consts::OS.into(),
         ndfit: env!("CARGO_PKG_VERSION"),
         profile: if cfg!(debug_assertions) { "debug" } else { "release" },
+        loadavg_start,
+        loadavg_end: loadavg(),
     }
 }
 
@@ -110,8 +129,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     if let Some(csv_in) = &args.from_csv {
-        return replot(csv_in, &args.out);
+        return replot(csv_in, &args.out, args.update_doc.as_deref());
     }
+    let started = std::time::Instant::now();
+    let load0 = loadavg();
     let mut plan = if args.quick { Plan::quick() } else { Plan::full() };
     if let Some(s) = &args.sizes {
         anyhow::ensure!(!s.is_empty() && s.iter().all(|&v| (16..=32768).contains(&v)), "--sizes: each side must be 16 to 32768");
@@ -194,15 +215,37 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             let nodes = RefNodes::new(&frame, REF_CELLS);
             let c = compare(py, &script, &scene, &nodes, fit, plan.repeats)?;
             eprintln!(
-                "numpy {:>4} {:>5}: ndfit {:>9.1} ms, numpy {:>9.1} ms, ratio {:.1}x  fit_delta ndfit {} numpy {}",
+                "numpy {:>4} {:>5}: ndfit {:>9.1} ms, numpy {:>9.1} ms, ratio {:.1}x (target >= {}x{} at {}^2): {}  fit_delta ndfit {} numpy {}",
                 c.task,
                 c.size,
                 if fit { c.ndfit.total() } else { c.ndfit.read + c.ndfit.ndf },
                 if fit { c.numpy.t_total_ms } else { c.numpy.t_ndf_ms },
                 c.ratio,
+                c.target.required,
+                c.target.aim.map_or(String::new(), |a| format!(", aim {a}x")),
+                c.target.size,
+                match c.met {
+                    Some(true) => "MET",
+                    Some(false) => "NOT MET",
+                    None => "not judged at this size",
+                },
                 fmt_opt(c.ndfit_fit_delta),
                 fmt_opt(c.numpy_fit_delta)
             );
+            if !fit {
+                eprintln!(
+                    "ndf throughput {:>5}: {:.1} M grid points/s ({:.1} M normals/s) in the NDF stage (target >= {} M/s at 4096^2): {}",
+                    c.size,
+                    c.ndf_grid_mpts_per_s,
+                    c.ndf_normals_mpts_per_s,
+                    THROUGHPUT_TARGET_MPTS,
+                    match (c.met, c.ndf_grid_mpts_per_s >= THROUGHPUT_TARGET_MPTS) {
+                        (None, _) => "not judged at this size",
+                        (_, true) => "MET",
+                        (_, false) => "NOT MET",
+                    }
+                );
+            }
             comparisons.push(c);
             if args.work_dir.is_none() {
                 let _ = std::fs::remove_file(&scene.path);
@@ -213,7 +256,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let summary = Summary {
         schema: "ndfit.bench/1",
         quick: args.quick,
-        machine: machine(),
+        machine: machine(load0),
         plan_sizes: plan.sizes.clone(),
         knob_size: plan.knob_size,
         repeats: plan.repeats,
@@ -222,6 +265,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         balanced_vs_accurate_fit_delta: bal_vs_acc,
         cost_model: cost_model(&rows),
         numpy: comparisons,
+        wall_s: started.elapsed().as_secs_f64(),
     };
     let json = serde_json::to_string_pretty(&summary).context("summary JSON")?;
     ndfit::io::write_bytes_atomic(&args.out.join("summary.json"), json.as_bytes())?;
@@ -229,11 +273,33 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         eprintln!("cost model: {} ~ {}^{:.2} ({} points)", e.quantity, e.against, e.exponent, e.n);
     }
     eprintln!("wrote {}, {}, {}", csv_path.display(), png.display(), args.out.join("summary.json").display());
+    if let Some(doc) = &args.update_doc {
+        let value = serde_json::to_value(&summary).context("summary JSON")?;
+        update_doc(doc, &rows, &value, &csv_path, &png, &args.out.join("summary.json"))?;
+    }
     Ok(ExitCode::SUCCESS)
 }
 
-/// `--from-csv`: the front, plot and cost model of an earlier run.
-fn replot(csv_in: &std::path::Path, out: &std::path::Path) -> anyhow::Result<ExitCode> {
+/// `--update-doc`: copy the run's files beside `doc` and regenerate its tables.
+fn update_doc(doc: &std::path::Path, rows: &[Row], summary: &serde_json::Value, csv: &std::path::Path, png: &std::path::Path, json: &std::path::Path) -> anyhow::Result<()> {
+    let dir = doc.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+    for (from, name) in [(csv, "bench.csv"), (png, "pareto.png"), (json, "bench_summary.json")] {
+        let to = dir.join(name);
+        // Copying a file onto itself (re-rendering the page's own files) would truncate it: skip.
+        let same = std::fs::canonicalize(from).ok().zip(std::fs::canonicalize(&to).ok()).is_some_and(|(a, b)| a == b);
+        if !same && from.is_file() {
+            let bytes = std::fs::read(from).with_context(|| format!("{}: cannot read", from.display()))?;
+            ndfit::io::write_bytes_atomic(&to, &bytes)?;
+        }
+    }
+    let done = ndfit::bench::report::update_doc(doc, &ndfit::bench::report::render(rows, summary))?;
+    eprintln!("updated {} (sections: {})", doc.display(), done.join(", "));
+    Ok(())
+}
+
+/// `--from-csv`: the front, plot and cost model of an earlier run (and, with `--update-doc`, the page's
+/// tables from it and the `summary.json` beside the CSV, when there is one).
+fn replot(csv_in: &std::path::Path, out: &std::path::Path, doc: Option<&std::path::Path>) -> anyhow::Result<ExitCode> {
     let mut rd = csv::Reader::from_path(csv_in).with_context(|| format!("{}: cannot open", csv_in.display()))?;
     let rows: Vec<Row> = rd.deserialize().collect::<Result<_, _>>().with_context(|| format!("{}: not a bench.csv", csv_in.display()))?;
     let knob_size = rows.iter().find(|r| r.group == "preset_balanced").map(|r| r.size).with_context(|| format!("{}: no preset_balanced row", csv_in.display()))?;
@@ -248,6 +314,22 @@ fn replot(csv_in: &std::path::Path, out: &std::path::Path) -> anyhow::Result<Exi
     });
     ndfit::io::write_bytes_atomic(&out.join("front.json"), serde_json::to_string_pretty(&json).context("JSON")?.as_bytes())?;
     eprintln!("wrote {} and {}", png.display(), out.join("front.json").display());
+    if let Some(doc) = doc {
+        // The run's summary (machine, numpy comparison) sits beside its CSV: summary.json as written by
+        // a run, or bench_summary.json as copied into docs/.
+        let dir = csv_in.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+        let found = ["summary.json", "bench_summary.json"].iter().map(|n| dir.join(n)).find(|p| p.is_file());
+        let mut summary: serde_json::Value = match &found {
+            Some(p) => serde_json::from_slice(&std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))?)
+                .with_context(|| format!("{}: not JSON", p.display()))?,
+            None => serde_json::json!({}),
+        };
+        // The cost model is recomputed from the CSV (the summary may predate a change of the analysis).
+        summary["cost_model"] = serde_json::to_value(cost_model(&rows)).context("JSON")?;
+        // Without a summary nothing is copied as bench_summary.json (an empty path is no file).
+        let js = found.unwrap_or_default();
+        update_doc(doc, &rows, &summary, csv_in, &png, &js)?;
+    }
     Ok(ExitCode::SUCCESS)
 }
 
