@@ -26,6 +26,29 @@ impl Binning {
     }
 }
 
+/// How the heights are stored for the NDF pass (issue #8's "f32 versus f64 storage").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Storage {
+    /// The heightfield's own f64 heights (the library default).
+    #[default]
+    F64,
+    /// `f32(h - mean)`, the mean taken in f64 first (a stage offset would otherwise leave the detail in
+    /// the last bits), widened back to f64 before differencing: the NDF engineer's f32 storage. See
+    /// [`super::pipeline::store_heights`] for how the bench makes it.
+    F32,
+}
+
+impl Storage {
+    /// The name used in the CSV.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Storage::F64 => "f64",
+            Storage::F32 => "f32",
+        }
+    }
+}
+
 /// Every knob of one benchmark point.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Knobs {
@@ -52,6 +75,9 @@ pub struct Knobs {
     pub tol: f64,
     /// Extra ellipsoid starts beyond the default two.
     pub extra_starts: usize,
+    /// Storage of the heights for the NDF pass.
+    #[serde(default)]
+    pub storage: Storage,
 }
 
 impl Default for Knobs {
@@ -71,6 +97,7 @@ impl Default for Knobs {
             solver: f.solver,
             tol: f.tolerances.rel,
             extra_starts: f.extra_starts,
+            storage: Storage::F64,
         }
     }
 }

@@ -21,6 +21,6 @@ pub mod report;
 pub mod scene;
 pub mod sweep;
 
-pub use knobs::{Binning, Knobs};
+pub use knobs::{Binning, Knobs, Storage};
 pub use presets::Preset;
 pub use sweep::{Plan, Row};

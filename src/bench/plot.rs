@@ -85,6 +85,7 @@ pub fn label_of(r: &Row) -> String {
         "target_count" | "cells" => format!("bins {}", r.cells),
         "scheme" => r.scheme.clone(),
         "binning" => format!("{} bins", r.binning),
+        "storage" => format!("{} heights", r.storage),
         "solver" => r.solver.clone(),
         "tol" => format!("tol {:e}", r.tol),
         "starts" => format!("+{} starts", r.extra_starts),

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use super::accuracy::{delta_ndf, param_errors, RefNodes};
-use super::knobs::{Binning, Knobs};
+use super::knobs::{Binning, Knobs, Storage};
 use super::pipeline::{self, Outcome, StageTimes};
 use super::presets::Preset;
 use super::scene::Scene;
@@ -59,6 +59,7 @@ impl Plan {
         }
         out.push(("scheme".into(), Knobs { scheme: NormalScheme::Triangles, ..base.clone() }));
         out.push(("binning".into(), Knobs { binning: Binning::Plain, ..base.clone() }));
+        out.push(("storage".into(), Knobs { storage: Storage::F32, ..base.clone() }));
         for solver in [Solver::Lbfgs, Solver::NelderMead] {
             out.push(("solver".into(), Knobs { solver, ..base.clone() }));
         }
@@ -99,6 +100,9 @@ pub struct Row {
     pub tol: f64,
     /// Extra ellipsoid starts.
     pub extra_starts: usize,
+    /// Storage of the heights for the NDF pass (`f64`, `f32`).
+    #[serde(default = "default_storage")]
+    pub storage: String,
     /// Samples (normals) binned.
     pub samples: u64,
     /// Bins with `W > 0` (every bin the fit sees).
@@ -107,6 +111,9 @@ pub struct Row {
     pub t_read_ms: f64,
     /// Median subsample time (ms).
     pub t_subsample_ms: f64,
+    /// Median time of the conversion to the NDF's storage (ms; 0 for f64).
+    #[serde(default)]
+    pub t_convert_ms: f64,
     /// Median NDF time (ms).
     pub t_ndf_ms: f64,
     /// Median fit time (ms).
@@ -152,7 +159,11 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Median of each stage over runs.
 pub fn median_times(runs: &[StageTimes]) -> StageTimes {
     let m = |f: fn(&StageTimes) -> f64| median(runs.iter().map(f).collect());
-    StageTimes { read: m(|t| t.read), subsample: m(|t| t.subsample), ndf: m(|t| t.ndf), fit: m(|t| t.fit) }
+    StageTimes { read: m(|t| t.read), subsample: m(|t| t.subsample), convert: m(|t| t.convert), ndf: m(|t| t.ndf), fit: m(|t| t.fit) }
+}
+
+fn default_storage() -> String {
+    Storage::F64.as_str().into()
 }
 
 const MIB: f64 = 1024.0 * 1024.0;
@@ -182,10 +193,12 @@ pub fn measure(group: &str, knobs: &Knobs, scene: &Scene, nodes: &RefNodes, repe
         solver: knobs.solver.as_str().into(),
         tol: knobs.tol,
         extra_starts: knobs.extra_starts,
+        storage: knobs.storage.as_str().into(),
         samples: o.ndf.n_samples,
         bins: o.ndf.bins.iter().filter(|b| b.proj_solid_angle > 0.0).count(),
         t_read_ms: t.read,
         t_subsample_ms: t.subsample,
+        t_convert_ms: t.convert,
         t_ndf_ms: t.ndf,
         t_fit_ms: t.fit,
         t_total_ms: t.total(),

@@ -60,7 +60,7 @@ fn quick_bench_csv_is_sane_against_truth() {
     for r in &rows[1..] {
         let group = col(&rows, r, "group");
         // Stage times are positive and add up to the total (up to the CSV's float printing).
-        let parts: f64 = ["t_read_ms", "t_subsample_ms", "t_ndf_ms", "t_fit_ms"].iter().map(|c| num(&rows, r, c).expect("time")).sum();
+        let parts: f64 = ["t_read_ms", "t_subsample_ms", "t_convert_ms", "t_ndf_ms", "t_fit_ms"].iter().map(|c| num(&rows, r, c).expect("time")).sum();
         let total = num(&rows, r, "t_total_ms").expect("total");
         assert!(total > 0.0 && (parts - total).abs() <= 1e-9 * total.max(1.0), "{group}: {parts} vs {total}");
         // The samples are the valid stencils of the (subsampled) scan, counted independently.
