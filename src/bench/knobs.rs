@@ -34,8 +34,8 @@ pub enum Storage {
     #[default]
     F64,
     /// `f32(h - mean)`, the mean taken in f64 first (a stage offset would otherwise leave the detail in
-    /// the last bits), widened back to f64 before differencing: the NDF engineer's f32 storage. See
-    /// [`super::pipeline::store_heights`] for how the bench makes it.
+    /// the last bits), widened back to f64 before differencing: [`crate::ndf::HeightsF32`] and
+    /// [`crate::ndf::empirical_ndf_f32`]. The conversion is timed as its own stage (`t_convert_ms`).
     F32,
 }
 
