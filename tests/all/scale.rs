@@ -198,7 +198,37 @@ mod cli {
         assert_eq!(j["schema"], "ndfit.scale/1");
         let fps = j["footprints"].as_array().unwrap();
         assert_eq!(fps.len(), 5); // 2 given + 3 scene steps
-        assert!(j["recommendation"]["explanation"].as_str().unwrap().contains("simplest"));
+        // The explanation a new user reads: the choice first, what the error means, and for every simpler
+        // model the error it would cost at the scene's footprints (the numbers of `candidates`).
+        let rec = &j["recommendation"];
+        let expl = rec["explanation"].as_str().unwrap();
+        match rec["model"].as_str() {
+            Some(m) => assert!(expl.starts_with(&format!("Recommended model: {m}.")), "{expl}"),
+            None => assert!(expl.starts_with("No model meets the tolerance."), "{expl}"),
+        }
+        assert!(expl.contains("root-mean-square relative difference") && expl.contains("same recommendation"), "{expl}");
+        for c in rec["candidates"].as_array().unwrap() {
+            if c["model"] == rec["model"] {
+                break;
+            }
+            let name = c["model"].as_str().unwrap();
+            match c["worst_delta_model"].as_f64() {
+                Some(worst) => {
+                    let said = format!("{name} ({} parameter", c["n_params"]);
+                    assert!(expl.contains(&said) && expl.contains(&format!("{worst:.3}")), "{said} {worst}: {expl}");
+                }
+                // A failed fit (infinite error, JSON null) is named as such.
+                None => assert!(expl.contains(&format!("{name} was rejected: it could not be fitted")), "{expl}"),
+            }
+        }
+        // Every model says whether its analytic route can be trusted there, and why not.
+        for f in j["footprints"].as_array().unwrap() {
+            assert!(f["analytic_summary"].is_string());
+            for m in f["models"].as_array().unwrap() {
+                let caveats = m["analytic_caveats"].as_array().unwrap();
+                assert_eq!(m["analytic_trusted"].as_bool().unwrap(), caveats.is_empty());
+            }
+        }
         let csv = std::fs::read_to_string(dir.path().join("a/scale.csv")).unwrap();
         assert!(csv.starts_with(ndfit::scale::report::CSV_HEADER));
         // 5 footprints x 5 models x 2 routes + header.
