@@ -331,7 +331,7 @@ fn model_at_footprint(
     let base = match fitter.map(|f| f.fit(ndf_res, id)) {
         Some(Ok(f)) => Ok((f.model, if ggx_kernel.is_some() { "fit+ggx-kernel" } else { "fit+kernel" })),
         // The filtered surface can be too flat to fit (its NDF narrower than any model allows): fall back
-        // on the moment estimate A = 2 Cov(s_F), the Beckmann maximum-likelihood value (scale.md sec. 4c).
+        // on the moment estimate A = 2 Cov(s_F), the Beckmann maximum-likelihood value (scale.md sec. 4b).
         _ => model_from_slope_form(id, &SlopeForm { a2: 2.0 * resolved.cov, mu: resolved.mean })
             .map(|m| (m, if ggx_kernel.is_some() { "moments+ggx-kernel" } else { "moments+kernel" })),
     };
