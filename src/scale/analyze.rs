@@ -591,16 +591,16 @@ pub fn recommend(results: &[FootprintResult], tolerance: f64) -> Recommendation 
         }
     }
     if let Some(m) = chosen {
-        let richer: Vec<String> = cands
+        let later: Vec<String> = cands
             .iter()
             .skip_while(|c| c.model != m)
             .skip(1)
-            .map(|c| format!("{} ({:.3})", c.model, c.worst_delta_model))
+            .map(|c| format!("{} ({} parameter{}, worst error {:.3})", c.model, c.n_params, plural(c.n_params), c.worst_delta_model))
             .collect();
-        if !richer.is_empty() {
+        if !later.is_empty() {
             words.push(format!(
-                "The more general models would give worst errors of {}, but their extra parameters are not needed at these footprints.",
-                richer.join(", ")
+                "Also fitted, not needed: {}. A model with more parameters (or as many and a worse information criterion) is not chosen once a simpler one meets the tolerance.",
+                later.join(", ")
             ));
         }
     } else {
