@@ -275,7 +275,7 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
                 let kernel = if ggx_family(id) { ggx_kernel.map(|k| k.matrix) } else { None };
                 let ctx = RouteCtx { stats: &stats, resolved: &resolved, ndf_res: &ndf_res, ndf_at: &ndf_at, halves: (&halves.0, &halves.1) };
                 let mut m = model_at_footprint(id, &ctx, kernel, fitter);
-                m.0.analytic_caveats = caveats(&m.0, &viol, ggx_family(id), kernel.is_none() && stats.sigma_f.trace() > 0.0);
+                m.0.analytic_caveats = caveats(&m.0, &viol, ggx_family(id), kernel.is_none() && stats.sigma_f.trace() > crate::models::ALPHA_MIN.powi(2));
                 m
             })
             .collect();
