@@ -50,11 +50,20 @@ pub struct FitOptions {
     /// Extra skew starts for the ellipsoid beyond the two default ones (zero skew, and the skew of the
     /// mean normal), taken in order from `(+-0.3, 0), (0, +-0.3)`; at most 4.
     pub extra_starts: usize,
+    /// Largest polar angle (radians) of the bins the objective uses; the model is normalized over them
+    /// (objective.md). Default [`objective::DEFAULT_MAX_THETA_DEG`].
+    pub max_theta: f64,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        FitOptions { objective: Objective::Poisson, solver: Solver::Lm, tolerances: Tolerances::default(), extra_starts: 0 }
+        FitOptions {
+            objective: Objective::Poisson,
+            solver: Solver::Lm,
+            tolerances: Tolerances::default(),
+            extra_starts: 0,
+            max_theta: objective::DEFAULT_MAX_THETA_DEG.to_radians(),
+        }
     }
 }
 
@@ -81,8 +90,8 @@ struct Session {
 }
 
 impl Session {
-    fn new(ndf: &EmpiricalNdf, objective: Objective) -> Result<Session> {
-        let data = FitData::new(ndf, objective)?;
+    fn new(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<Session> {
+        let data = FitData::new(ndf, opts.objective, opts.max_theta)?;
         let summary = start::summarize(&data);
         Ok(Session { data, summary })
     }
@@ -225,7 +234,8 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     let model = Model::from_params(id, &pv)?;
     let mut warnings = fit.warnings.clone();
     let k = s.data.k_nonzero;
-    let dof = k as i64 - p as i64;
+    // The total count in the region is fixed (the normalization is profiled out): one dof fewer.
+    let dof = k as i64 - p as i64 - 1;
     let reduced = (dof > 0).then(|| fit.f / dof as f64);
     // Standard errors scale with the residual variance (objective.md); with no dof, unscaled.
     let s2 = reduced.unwrap_or(1.0);
@@ -255,7 +265,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
         }
     }
     let max_count = ndf.bins.iter().map(|b| b.count).max().unwrap_or(0) as f64;
-    let specular = max_count > 0.5 * s.data.n;
+    let specular = max_count > 0.5 * s.data.n_total;
     if specular {
         warnings.push("specular: over half of the normals fall in one NDF bin; alpha is bounded by the bin size, not measured".into());
     }
@@ -275,9 +285,11 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
             objective_value: fit.f,
             dof,
             reduced_chi2: reduced,
-            n_bins: s.data.bins.len(),
+            n_bins: s.data.n_residual_bins,
             n_bins_nonzero: k,
             n_samples: s.data.n,
+            n_samples_total: s.data.n_total,
+            max_theta_deg: s.data.max_theta.to_degrees(),
             delta_data: metric::delta_to_data(&model, ndf),
             rank: cov.rank,
             condition: cov.condition.is_finite().then_some(cov.condition),
@@ -301,7 +313,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
 /// (`solver.converged`, `warnings`), an error only when no usable fit exists.
 pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<FitReport> {
     let t0 = Instant::now();
-    let s = Session::new(ndf, opts.objective)?;
+    let s = Session::new(ndf, opts)?;
     let fit = fit_chain(&s, id, opts)?;
     build_report(ndf, &s, fit, opts, 0.0).map(|mut r| {
         r.timings.fit_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -321,7 +333,7 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 /// that correlation from buying parameters.
 pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
     let t0 = Instant::now();
-    let s = Session::new(ndf, opts.objective)?;
+    let s = Session::new(ndf, opts)?;
     // A candidate that cannot be fitted is left out (and said so); only when none is usable is it an error.
     let mut warnings = Vec::new();
     let mut keep = |r: Result<Fitted>| match r {
@@ -359,7 +371,7 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
     let c = fits
         .iter()
         .filter_map(|f| {
-            let dof = k - f.id.n_params() as f64;
+            let dof = k - f.id.n_params() as f64 - 1.0;
             (dof > 0.0).then(|| f.f / dof)
         })
         .fold(f64::INFINITY, f64::min)
@@ -388,7 +400,7 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
         .map(|(i, f)| {
             let par = parent(f.id);
             let pi = par.and_then(idx);
-            let dof = k - f.id.n_params() as f64;
+            let dof = k - f.id.n_params() as f64 - 1.0;
             Candidate {
                 model: f.id,
                 params: names(f.id, &public(f)),
