@@ -38,6 +38,14 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::models::{Model, ModelId};
 use crate::ndf::EmpiricalNdf;
 
+/// Largest standard error of `theta_z` (radians) reported as a number. The axes of a lobe are located by
+/// its anisotropy: with the anisotropy written as a 2-vector `e (cos 2 theta_z, sin 2 theta_z)` of
+/// per-component standard error `s_e`, `se(theta_z) = s_e / (2 e) = 1 / (2 r)` with `r = e / s_e` the
+/// anisotropy in standard errors. `theta_z` counts as identified when `r >= 3`, i.e. `se <= 1/6`: for an
+/// isotropic truth `r` is Rayleigh distributed, so a chance anisotropy passes with probability
+/// `exp(-9/2) = 1.1%` (at `pi/4`, `r = 0.64`, it would pass 81% of the time).
+pub const THETA_Z_SE_MAX: f64 = 1.0 / 6.0;
+
 /// How to fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FitOptions {
@@ -242,16 +250,31 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     let mut r = vec![0.0; s.data.bins.len()];
     let mut j = DMatrix::zeros(s.data.bins.len(), p);
     problem::jacobian_into(&s.data, id, &fit.x, &mut r, &mut j);
-    let cov = covariance::covariance(&j, s2);
+    let cov0 = covariance::covariance(&j, s2);
     let g = params::public_derivative(id, &fit.x);
-    let se: Vec<Option<f64>> = (0..p)
-        .map(|a| (!cov.undetermined[a] && !fit.delta).then(|| g[a].abs() * cov.cov[(a, a)].max(0.0).sqrt()))
-        .collect();
+    let se_of = |c: &covariance::Covariance, a: usize| g[a].abs() * c.cov[(a, a)].max(0.0).sqrt();
+    // theta_z of a nearly isotropic lobe: the anisotropy that locates the axes is below 3 of its
+    // standard errors (THETA_Z_SE_MAX), so the angle is noise, not a measurement with an uncertainty.
+    let tz_free: Vec<bool> =
+        (0..p).map(|a| id.param_names()[a] == "theta_z" && !cov0.undetermined[a] && !(se_of(&cov0, a) <= THETA_Z_SE_MAX)).collect();
+    let tz_se: Vec<f64> = (0..p).map(|a| se_of(&cov0, a)).collect();
+    // The other parameters' errors are then those at the reported theta_z (its column dropped): an
+    // unlocated theta_z trades off against the skew angles, which would otherwise inherit its spread.
+    let cov = if tz_free.iter().any(|t| *t) {
+        for (a, _) in tz_free.iter().enumerate().filter(|(_, t)| **t) {
+            j.column_mut(a).fill(0.0);
+        }
+        covariance::covariance(&j, s2)
+    } else {
+        cov0.clone()
+    };
+    let unident: Vec<bool> = (0..p).map(|a| !fit.delta && (cov0.undetermined[a] || tz_free[a])).collect();
+    let se: Vec<Option<f64>> = (0..p).map(|a| (!unident[a] && !fit.delta).then(|| se_of(&cov, a))).collect();
     let correlation: Vec<Vec<Option<f64>>> = (0..p)
         .map(|a| {
             (0..p)
                 .map(|b| {
-                    let ok = !cov.undetermined[a] && !cov.undetermined[b] && !fit.delta;
+                    let ok = !unident[a] && !unident[b] && !fit.delta;
                     let den = (cov.cov[(a, a)] * cov.cov[(b, b)]).sqrt();
                     // The sign of g (always positive) does not change correlations.
                     (ok && den > 0.0).then(|| (cov.cov[(a, b)] / den).clamp(-1.0, 1.0))
@@ -259,9 +282,19 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
                 .collect()
         })
         .collect();
-    for (a, u) in cov.undetermined.iter().enumerate() {
+    let mut unidentified = Vec::new();
+    for (a, u) in unident.iter().enumerate() {
+        let name = id.param_names()[a];
+        if cov0.undetermined[a] && !fit.delta {
+            warnings.push(format!("{id}: {name} is not determined by the data (a null direction of the Jacobian; its standard error is null)"));
+        } else if *u {
+            warnings.push(format!(
+                "{id}: {name} is not identified: its standard error {:.3} rad exceeds 1/6 (the anisotropy that locates the axes is below 3 standard errors: a nearly isotropic lobe); reported as null",
+                tz_se[a]
+            ));
+        }
         if *u {
-            warnings.push(format!("{id}: {} is not determined by the data (its standard error is null)", id.param_names()[a]));
+            unidentified.push(name.to_string());
         }
     }
     let max_count = ndf.bins.iter().map(|b| b.count).max().unwrap_or(0) as f64;
@@ -277,6 +310,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
         matrix_a,
         input: None,
         std_errors: id.param_names().iter().zip(&se).map(|(n, v)| (n.to_string(), *v)).collect(),
+        unidentified,
         param_order: id.param_names().iter().map(|n| n.to_string()).collect(),
         correlation,
         specular,

@@ -161,6 +161,12 @@ pub struct FitReport {
     pub input: Option<InputInfo>,
     /// Standard errors by parameter name; `null` for a parameter the data do not determine.
     pub std_errors: BTreeMap<String, Option<f64>>,
+    /// Parameters the data do not identify, with their standard errors `null`: a null direction of the
+    /// Jacobian, or `theta_z` of a nearly isotropic lobe (standard error above
+    /// [`super::THETA_Z_SE_MAX`]). Their value in `params` is a valid but arbitrary choice, and the other
+    /// parameters' errors are those at that value.
+    #[serde(default)]
+    pub unidentified: Vec<String>,
     /// Parameter names in the order of the rows and columns of `correlation`.
     pub param_order: Vec<String>,
     /// Correlation matrix of the parameters (`null` entries for undetermined parameters).
