@@ -12,12 +12,6 @@ use ndfit::ndf::empirical_ndf;
 
 use super::scan_args::ScanArgs;
 
-/// Most cells across the Lambert disk of the NDF `ndfit fit` builds unless `--ndf-cells` or `--preset`
-/// says otherwise: 127 is what the NDF's default 64 normals per bin gives at 1024^2 (about 12000 bins in
-/// use), where the midpoint rule meets the 0.5% target on the synthetic ellipsoid scans; coarser bins
-/// (the `balanced` preset's 256 per bin, at most 63 across) miss it (1.2-1.6%, objective.md).
-pub const FIT_MAX_CELLS: usize = 127;
-
 /// Arguments of `ndfit fit`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -86,12 +80,6 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let pf = p.fit_options();
         opts.tolerances = pf.tolerances;
         opts.extra_starts = opts.extra_starts.max(pf.extra_starts);
-    }
-    if args.preset.is_none() && args.ndf.ndf_cells.is_none() {
-        // The fit's binning (fit.md): the NDF's automatic bin count, capped so the fit's cost stops
-        // growing with the scan size past 1024^2.
-        let n = hf.valid_count() as u64;
-        ndf_opts.cells_across = Some(ndf_opts.cells_for(n).min(FIT_MAX_CELLS));
     }
     let t1 = Instant::now();
     let ndf = empirical_ndf(&hf, &ndf_opts).map_err(|e| e.with_path(&args.scan.scan))?;
