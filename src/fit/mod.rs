@@ -91,9 +91,15 @@ struct Fitted {
     delta: bool,
 }
 
+/// Fewest fine bins for which the solver first runs on the 2 x 2-merged bins
+/// ([`FitData::coarsened`]): below it a fine evaluation is already cheap.
+pub const COARSE_PASS_MIN_BINS: usize = 2000;
+
 /// The data of one fit session: the bins and their slope summary.
 struct Session {
     data: FitData,
+    /// The same region on bins merged 2 x 2, for the first pass of the solver (large NDFs only).
+    coarse: Option<FitData>,
     summary: start::SlopeSummary,
 }
 
@@ -101,27 +107,65 @@ impl Session {
     fn new(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<Session> {
         let data = FitData::new(ndf, opts.objective, opts.max_theta)?;
         let summary = start::summarize(&data);
-        Ok(Session { data, summary })
+        let coarse = if data.bins.len() >= COARSE_PASS_MIN_BINS { data.coarsened(ndf, 50) } else { None };
+        Ok(Session { data, coarse, summary })
     }
 }
 
-/// Run the solver from every start (contract parameters) and keep the best, canonicalized.
-fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) -> Result<Fitted> {
+/// Run the solver on `data` from every start (contract parameters): the index and result of the best
+/// finite one, and every start's objective; evaluations are added to `evaluations`.
+fn best_of_starts(
+    data: &FitData,
+    id: ModelId,
+    starts: &[Vec<f64>],
+    opts: &FitOptions,
+    evaluations: &mut usize,
+) -> Result<(usize, Option<solve::Local>, Vec<f64>)> {
     let mut best: Option<(usize, solve::Local)> = None;
-    let mut evaluations = 0;
-    let mut start_objectives = Vec::with_capacity(starts.len());
+    let mut objs = Vec::with_capacity(starts.len());
     for (i, p0) in starts.iter().enumerate() {
         let x0 = params::to_internal(id, p0);
-        let local = solve::minimize(&s.data, id, &x0, opts.solver, opts.tolerances)?;
-        evaluations += local.evaluations;
-        start_objectives.push(local.f);
+        let local = solve::minimize(data, id, &x0, opts.solver, opts.tolerances)?;
+        *evaluations += local.evaluations;
+        objs.push(local.f);
         if local.f.is_finite() && local.x.iter().all(|v| v.is_finite()) && best.as_ref().is_none_or(|(_, b)| local.f < b.f) {
             best = Some((i, local));
         }
     }
-    let (best_start, local) = best.ok_or_else(|| {
-        Error::new(ErrorKind::Numerical, format!("no usable {id} fit: the objective was not finite from any start"))
-    })?;
+    Ok(match best {
+        Some((i, l)) => (i, Some(l), objs),
+        None => (0, None, objs),
+    })
+}
+
+/// Run the solver from every start (contract parameters) and keep the best, canonicalized.
+fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) -> Result<Fitted> {
+    // Large NDFs: every start runs on the merged bins (a quarter of the cost per evaluation), and only
+    // the best is polished on the fine bins, from close to its optimum. Should that polish end outside
+    // the model's domain or not finite (a coarse pass that ran off), the starts are rerun on the fine bins.
+    let usable = |l: &solve::Local| {
+        l.f.is_finite() && l.x.iter().all(|v| v.is_finite()) && Model::from_params(id, &params::to_public(id, &l.x)).is_ok()
+    };
+    let mut evaluations = 0;
+    let mut polished = None;
+    if let Some(coarse) = &s.coarse {
+        let (i, l, objs) = best_of_starts(coarse, id, starts, opts, &mut evaluations)?;
+        if let Some(l) = l {
+            let fine = solve::minimize(&s.data, id, &l.x, opts.solver, opts.tolerances)?;
+            evaluations += fine.evaluations;
+            if usable(&fine) {
+                polished = Some((i, fine, objs));
+            }
+        }
+    }
+    let (best_start, local, start_objectives) = match polished {
+        Some(p) => p,
+        None => {
+            let (i, l, objs) = best_of_starts(&s.data, id, starts, opts, &mut evaluations)?;
+            let l = l.ok_or_else(|| Error::new(ErrorKind::Numerical, format!("no usable {id} fit: the objective was not finite from any start")))?;
+            (i, l, objs)
+        }
+    };
     let mut warnings = Vec::new();
     if !local.converged {
         warnings.push(format!("{id}: the {} solver stopped without converging ({})", opts.solver.as_str(), local.termination));

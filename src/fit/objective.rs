@@ -131,6 +131,43 @@ impl FitData {
         Ok(FitData { bins, n, n_total, k_nonzero, n_residual_bins, max_theta, objective })
     }
 
+    /// The same region on a grid twice as coarse: the fine bins of `ndf` in the region merged 2 x 2 by
+    /// their cell (counts and `W` summed, direction the `W`-weighted mean), for a cheap first pass of
+    /// the solver (the optimum is then polished on the fine bins). `None` when the NDF has no grid or
+    /// merging would leave fewer than `min_bins` bins.
+    pub fn coarsened(&self, ndf: &EmpiricalNdf, min_bins: usize) -> Option<FitData> {
+        let n = ndf.grid.n;
+        if n == 0 || ndf.bin_cells.len() != ndf.bins.len() {
+            return None;
+        }
+        let nc = n / 2 + 1;
+        let mut acc: Vec<(f64, f64, Vector3<f64>)> = vec![(0.0, 0.0, Vector3::zeros()); nc * nc];
+        let cos_max = self.max_theta.cos();
+        for (b, &cell) in ndf.bins.iter().zip(&ndf.bin_cells) {
+            let ok = b.proj_solid_angle > 0.0 && b.proj_solid_angle.is_finite() && b.m.z > 0.0 && b.m.iter().all(|v| v.is_finite());
+            if !ok || b.m.z < cos_max * b.m.norm() {
+                continue;
+            }
+            let (ix, iy) = (cell as usize % n, cell as usize / n);
+            let a = &mut acc[(iy / 2) * nc + ix / 2];
+            a.0 += b.count as f64;
+            a.1 += b.proj_solid_angle;
+            a.2 += b.proj_solid_angle * b.m.normalize();
+        }
+        let bins: Vec<Bin> = acc
+            .into_iter()
+            .filter(|a| a.1 > 0.0)
+            .map(|(c, w, m)| Bin { m: m.normalize(), c, w, ln_nw: (self.n * w).ln(), ln_c: if c > 0.0 { c.ln() } else { 0.0 } })
+            .collect();
+        if bins.len() < min_bins {
+            return None;
+        }
+        let carries = |b: &&Bin| self.objective == Objective::Poisson || b.c >= LOGD_MIN_COUNT;
+        let k_nonzero = bins.iter().filter(carries).filter(|b| b.c > 0.0).count();
+        let n_residual_bins = bins.iter().filter(carries).count();
+        (n_residual_bins > 0).then_some(FitData { bins, k_nonzero, n_residual_bins, ..self.clone() })
+    }
+
     /// `ln S = ln sum_k D(m_k) W_k` over the region from `ln D(m_k)` (one per bin; log-sum-exp, so that
     /// no extreme lobe overflows or underflows the sum).
     pub fn ln_norm(&self, ln_d: &[f64]) -> f64 {
