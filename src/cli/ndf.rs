@@ -84,6 +84,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(matches!(ext.as_deref(), Some("csv" | "json")), "{}: output must end in .csv or .json", args.output.display());
     let hf = args.scan.load()?;
     let ndf = empirical_ndf(&hf, &opts).map_err(|e| e.with_path(&args.scan.scan))?;
+    for w in &ndf.warnings {
+        eprintln!("ndfit: {}: warning: {w}", args.scan.scan.display());
+    }
     write_ndf(&args.output, &ndf, input_json(&args.scan.scan, &hf))?;
     if let Some(exr) = &args.exr {
         output::write_exr(exr, &ndf, args.exr_size)?;

@@ -181,6 +181,17 @@ impl SlopeFrame {
         if q > 0.0 { self.det_unwhiten / (q * q.sqrt()) } else { 0.0 }
     }
 
+    /// Both densities at once, `(dW/d^2p, dw/d^2p)` ([`SlopeFrame::proj_density`],
+    /// [`SlopeFrame::solid_density`]), sharing the normal's computation.
+    #[inline]
+    pub fn densities(&self, p: [f64; 2]) -> (f64, f64) {
+        let ms = Self::stretched_at(p);
+        let v = self.scan_vector(ms);
+        let q = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+        // Guard: q = 0 cannot happen for |m'| = 1 but rounding at the rim; the densities vanish there.
+        if q > 0.0 { (self.det_unwhiten * ms[2] / (q * q), self.det_unwhiten / (q * q.sqrt())) } else { (0.0, 0.0) }
+    }
+
     /// The rim zone of this frame for the bin quadrature ([`super::grid::RimShape`]).
     pub fn rim_shape(&self) -> super::grid::RimShape {
         let (a, b, c) = (self.cov[0][0], self.cov[0][1], self.cov[1][1]);
@@ -236,13 +247,13 @@ fn median_and_scale(v: &mut [f64]) -> (f64, f64) {
         return (0.0, 0.0);
     }
     let n = v.len();
-    let q = |v: &mut [f64], f: f64| -> f64 {
-        let k = ((f * (n - 1) as f64).round() as usize).min(n - 1);
-        *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
-    };
-    let med = q(v, 0.5);
-    let q1 = q(v, 0.25);
-    let q3 = q(v, 0.75);
+    let idx = |f: f64| ((f * (n - 1) as f64).round() as usize).min(n - 1);
+    let (k1, k2, k3) = (idx(0.25), idx(0.5), idx(0.75));
+    // One selection of the median splits the slice; the quartiles are then selected within the halves
+    // (half the work of three selections over the whole slice, same order statistics).
+    let med = *v.select_nth_unstable_by(k2, |a, b| a.total_cmp(b)).1;
+    let q1 = if k1 < k2 { *v[..k2].select_nth_unstable_by(k1, |a, b| a.total_cmp(b)).1 } else { med };
+    let q3 = if k3 > k2 { *v[k2 + 1..].select_nth_unstable_by(k3 - k2 - 1, |a, b| a.total_cmp(b)).1 } else { med };
     (med, ((q3 - q1) / IQR_NORMAL).max(0.0))
 }
 

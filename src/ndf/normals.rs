@@ -6,6 +6,44 @@
 
 use crate::heightfield::Heightfield;
 
+/// Row access to a grid of stored heights, generic over the stored float type: the NDF pass runs over
+/// [`Heightfield`] (f64) and [`super::HeightsF32`] (f32 storage, issue 8) with the same kernel. Every
+/// height is widened to f64 before it is differenced.
+pub trait HeightRows: Sync {
+    /// The stored float type.
+    type T: Copy + Into<f64> + Sync;
+    /// Columns.
+    fn nx(&self) -> usize;
+    /// Rows.
+    fn ny(&self) -> usize;
+    /// Spacing along x (m).
+    fn dx(&self) -> f64;
+    /// Spacing along y (m).
+    fn dy(&self) -> f64;
+    /// Row `i`.
+    fn row(&self, i: usize) -> &[Self::T];
+}
+
+impl HeightRows for Heightfield {
+    type T = f64;
+    fn nx(&self) -> usize {
+        self.nx
+    }
+    fn ny(&self) -> usize {
+        self.ny
+    }
+    fn dx(&self) -> f64 {
+        self.dx
+    }
+    fn dy(&self) -> f64 {
+        self.dy
+    }
+    #[inline(always)]
+    fn row(&self, i: usize) -> &[f64] {
+        Heightfield::row(self, i)
+    }
+}
+
 /// How normals are taken from the heights.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -30,27 +68,37 @@ impl NormalScheme {
     }
 
     /// Rows `i` whose samples [`NormalScheme::row_slopes`] visits.
-    pub fn rows(self, hf: &Heightfield) -> std::ops::Range<usize> {
+    pub fn rows(self, hf: &impl HeightRows) -> std::ops::Range<usize> {
+        let (nx, ny) = (hf.nx(), hf.ny());
         match self {
-            NormalScheme::Central if hf.ny >= 3 && hf.nx >= 3 => 1..hf.ny - 1,
-            NormalScheme::Triangles if hf.ny >= 2 && hf.nx >= 2 => 0..hf.ny - 1,
+            NormalScheme::Central if ny >= 3 && nx >= 3 => 1..ny - 1,
+            NormalScheme::Triangles if ny >= 2 && nx >= 2 => 0..ny - 1,
             _ => 0..0,
         }
     }
 
     /// Number of stencils (valid or not) in one row.
-    pub fn per_row(self, hf: &Heightfield) -> usize {
+    pub fn per_row(self, hf: &impl HeightRows) -> usize {
         match self {
-            NormalScheme::Central => hf.nx.saturating_sub(2),
-            NormalScheme::Triangles => 2 * hf.nx.saturating_sub(1),
+            NormalScheme::Central => hf.nx().saturating_sub(2),
+            NormalScheme::Triangles => 2 * hf.nx().saturating_sub(1),
         }
     }
 
     /// Projected area of one sample in m^2.
-    pub fn sample_area(self, hf: &Heightfield) -> f64 {
+    pub fn sample_area(self, hf: &impl HeightRows) -> f64 {
         match self {
-            NormalScheme::Central => hf.dx * hf.dy,
-            NormalScheme::Triangles => 0.5 * hf.dx * hf.dy,
+            NormalScheme::Central => hf.dx() * hf.dy(),
+            NormalScheme::Triangles => 0.5 * hf.dx() * hf.dy(),
+        }
+    }
+
+    /// Spacing of the slope lattice of heights quantized in steps `q` (m): central differences give
+    /// slopes in steps `q / (2 dx)`, `q / (2 dy)`; triangle facets (forward differences) `q / dx`, `q / dy`.
+    pub fn slope_step(self, q: f64, dx: f64, dy: f64) -> [f64; 2] {
+        match self {
+            NormalScheme::Central => [q / (2.0 * dx), q / (2.0 * dy)],
+            NormalScheme::Triangles => [q / dx, q / dy],
         }
     }
 
@@ -58,20 +106,21 @@ impl NormalScheme {
     /// slope `grad h`; return how many were valid. Stencils that touch a NaN are skipped (NaN propagates
     /// through the differences, so one test per sample suffices).
     #[inline(always)]
-    pub fn row_slopes(self, hf: &Heightfield, i: usize, stride: usize, mut f: impl FnMut(f64, f64)) -> u64 {
-        let nx = hf.nx;
+    pub fn row_slopes<H: HeightRows>(self, hf: &H, i: usize, stride: usize, mut f: impl FnMut(f64, f64)) -> u64 {
+        let nx = hf.nx();
+        let w = |v: H::T| -> f64 { v.into() };
         let mut valid = 0u64;
         match self {
             NormalScheme::Central => {
                 let (r0, r1, r2) = (hf.row(i - 1), hf.row(i), hf.row(i + 1));
-                let (kx, ky) = (0.5 / hf.dx, 0.5 / hf.dy);
+                let (kx, ky) = (0.5 / hf.dx(), 0.5 / hf.dy());
                 let mut j = 1;
                 while j + 1 < nx {
-                    let sx = (r1[j + 1] - r1[j - 1]) * kx;
-                    let sy = (r2[j] - r0[j]) * ky;
+                    let sx = (w(r1[j + 1]) - w(r1[j - 1])) * kx;
+                    let sy = (w(r2[j]) - w(r0[j])) * ky;
                     // The centre point is not in the differences but must be valid: a masked point is
                     // not surface, and its projected area must not count.
-                    if !(sx + sy + r1[j]).is_nan() {
+                    if !(sx + sy + w(r1[j])).is_nan() {
                         valid += 1;
                         f(sx, sy);
                     }
@@ -80,10 +129,10 @@ impl NormalScheme {
             }
             NormalScheme::Triangles => {
                 let (r0, r1) = (hf.row(i), hf.row(i + 1));
-                let (kx, ky) = (1.0 / hf.dx, 1.0 / hf.dy);
+                let (kx, ky) = (1.0 / hf.dx(), 1.0 / hf.dy());
                 let mut j = 0;
                 while j + 1 < nx {
-                    let (h00, h01, h10, h11) = (r0[j], r0[j + 1], r1[j], r1[j + 1]);
+                    let (h00, h01, h10, h11) = (w(r0[j]), w(r0[j + 1]), w(r1[j]), w(r1[j + 1]));
                     // Lower triangle (i,j), (i,j+1), (i+1,j).
                     let (sx, sy) = ((h01 - h00) * kx, (h10 - h00) * ky);
                     if !(sx + sy).is_nan() {

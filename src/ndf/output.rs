@@ -51,6 +51,9 @@ pub fn to_json(ndf: &EmpiricalNdf, input: serde_json::Value) -> serde_json::Valu
         "slope_mean": ndf.slope_mean,
         "slope_cov": ndf.slope_cov,
         "frame": ndf.frame,
+        "quantization": ndf.quantization,
+        "f32_storage": ndf.f32_storage,
+        "warnings": ndf.warnings,
         "bins": bins,
     })
 }

@@ -8,6 +8,7 @@ mod cli;
 mod fit;
 mod models;
 mod ndf;
+mod ndf_storage;
 mod readers;
 mod scale;
 mod synth;

@@ -1,0 +1,98 @@
+//! Quantized heights: instruments that store heights as integers times a step `q` (or a coarse float)
+//! put the central-difference slopes on a lattice of step `q / (2 dx)`, `q / (2 dy)`
+//! ([`NormalScheme::slope_step`]). Bins finer than the lattice then alternate between full and empty (a
+//! comb) instead of estimating D. This module finds `q` from the data; [`super::empirical_ndf`] caps the
+//! automatic grid so that every central bin spans at least two lattice cells, and reports it.
+
+use super::normals::{HeightRows, NormalScheme};
+use super::SlopeFrame;
+
+/// Height differences examined to find the quantum (a strided subsample of adjacent pairs).
+const QUANTUM_SAMPLE: usize = 1 << 16;
+/// Fraction of the examined differences that must lie on the lattice `k q`.
+const ON_LATTICE: f64 = 0.99;
+/// A difference is on the lattice when `|d / q - round(d / q)|` is below this (covers the rounding of
+/// a unit conversion of integer file values, ~1e-12 relative, with a wide margin).
+const LATTICE_SLACK: f64 = 1e-3;
+/// The 90th percentile of the nonzero differences must span at least this many steps (a tilted plane's
+/// differences are all equal: one "step", no lattice to speak of).
+const MIN_STEPS: f64 = 2.0;
+/// The quantum is reported only when the slope lattice step, whitened, is at least this fraction of the
+/// slope scale (an f32 file's ulp is a lattice too, but one far too fine to matter).
+pub const MATERIAL_STEP: f64 = 1e-3;
+
+/// Heights found on a lattice `z0 + k q`, and what it does to the binning.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct HeightQuantum {
+    /// The height step `q` (m).
+    pub quantum: f64,
+    /// Spacing of the slope lattice along x and y ([`NormalScheme::slope_step`]).
+    pub slope_step: [f64; 2],
+    /// Lengths of the two lattice steps in whitened slope units (`|W e_x| step_x`, `|W e_y| step_y`).
+    pub whitened_step: [f64; 2],
+    /// Fraction of the examined adjacent height differences that are multiples of `q`.
+    pub on_lattice: f64,
+    /// Most cells across the Lambert disk for which every central bin spans two lattice cells
+    /// (`2 sqrt 2 / (2 (l_x + l_y))`, odd, at least 3): near `p = 0` a bin of side `h` covers `h` of
+    /// whitened slope, and a square of side `l_x + l_y` (the lattice's covering diameter) always holds
+    /// a lattice node.
+    pub max_cells: usize,
+    /// Cells across the grid would have had without the cap (`None` when the cap did not bind).
+    pub coarsened_from: Option<usize>,
+}
+
+/// Find the height quantum of a scan: `q` is the smallest nonzero adjacent height difference (ignoring
+/// differences below 1e-6 of the 90th percentile, which are rounding specks) when at least 99% of the
+/// examined differences are integer multiples of it and the 90th percentile spans at least two steps.
+/// `None` when the heights are not on a lattice, when
+/// too few differences are nonzero to tell (fewer than 100), or when the lattice is immaterial
+/// ([`MATERIAL_STEP`]).
+pub fn detect<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame) -> Option<HeightQuantum> {
+    let (nx, ny) = (hf.nx(), hf.ny());
+    if nx < 2 || ny < 1 {
+        return None;
+    }
+    let per_row = nx - 1;
+    let row_stride = ((ny * per_row) / QUANTUM_SAMPLE).max(1).min(ny);
+    let mut d: Vec<f64> = Vec::with_capacity(QUANTUM_SAMPLE.min(ny * per_row) + nx);
+    for i in (0..ny).step_by(row_stride) {
+        let r = hf.row(i);
+        for j in 0..per_row {
+            let v = r[j + 1].into() - r[j].into();
+            if v.is_finite() {
+                d.push(v.abs());
+            }
+        }
+        if d.len() >= QUANTUM_SAMPLE {
+            break;
+        }
+    }
+    let nz: Vec<f64> = d.iter().copied().filter(|&v| v > 0.0).collect();
+    if nz.len() < 100 {
+        return None;
+    }
+    let mut sorted = nz.clone();
+    let k90 = (0.9 * (sorted.len() - 1) as f64) as usize;
+    let p90 = *sorted.select_nth_unstable_by(k90, |a, b| a.total_cmp(b)).1;
+    let q = nz.iter().copied().filter(|&v| v >= 1e-6 * p90).fold(f64::INFINITY, f64::min);
+    // A lattice needs several steps in the data: a plane (every difference equal) is not quantized.
+    if !(q.is_finite() && q > 0.0 && p90 >= MIN_STEPS * q) {
+        return None;
+    }
+    let on = d.iter().filter(|&&v| (v / q - (v / q).round()).abs() <= LATTICE_SLACK).count() as f64 / d.len() as f64;
+    if on < ON_LATTICE {
+        return None;
+    }
+    let step = scheme.slope_step(q, hf.dx(), hf.dy());
+    let w = frame.whiten;
+    let lx = w[0][0].hypot(w[1][0]) * step[0];
+    let ly = w[0][1].hypot(w[1][1]) * step[1];
+    if lx.max(ly) < MATERIAL_STEP {
+        return None;
+    }
+    let cap = (2.0 * super::frame::LAMBERT_RADIUS / (2.0 * (lx + ly))).floor();
+    // Odd, at least 3 (a finer lattice than the whole disk still gets the coarsest grid).
+    let cap = if cap.is_finite() { (cap as usize).clamp(3, super::grid::MAX_CELLS_ACROSS) } else { 3 };
+    let cap = if cap % 2 == 0 { cap - 1 } else { cap };
+    Some(HeightQuantum { quantum: q, slope_step: step, whitened_step: [lx, ly], on_lattice: on, max_cells: cap, coarsened_from: None })
+}
