@@ -349,6 +349,154 @@ def speed():
     return cells
 
 
+SCALE_FUNCS = r'''
+from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+def scale_run(scan, name, footprints, opts=(), models="beckmann-aniso,ellipsoid"):
+    """`ndfit scale` at the given footprints; returns its JSON report."""
+    out = os.path.join(WORK, name)
+    ndfit("scale", scan, *opts, "--footprint", ",".join(f"{f:.4e}" for f in footprints), "--models", models, "-o", out)
+    return json.load(open(os.path.join(out, "scale.json")))
+
+def curves(rep, model):
+    # Per footprint: both routes' (alpha_x, alpha_y, skew offset), the pixel roughness 2 Sigma_F, whether
+    # the analytic route is trusted there.
+    rows = []
+    for f in rep["footprints"]:
+        m = next(m for m in f["models"] if m["model"] == model)
+        def ab(route):
+            p = route.get("params") or {}
+            ax = p.get("alpha_x", p.get("alpha", float("nan")))
+            return ax, p.get("alpha_y", ax), route.get("skew_offset", float("nan"))
+        pr = f.get("pixel_roughness") or {}
+        rows.append(dict(F=f["footprint_m"], emp=ab(m["empirical"]), ana=ab(m["analytic"]),
+                         pix=(pr.get("alpha_x", 0.0), pr.get("alpha_y", 0.0)), trusted=m["analytic_trusted"],
+                         caveats=m["analytic_caveats"], gap=m.get("route_gap"), skew=f["moments_at_footprint"]["skewness"]))
+    return rows
+
+def scale_plot(axes, rep, model, title, truth=None):
+    rows = curves(rep, model)
+    F = np.array([r["F"] for r in rows]) * 1e6
+    a, b = axes
+    for k, (lab, col) in enumerate((("alpha_x", "tab:blue"), ("alpha_y", "tab:orange"))):
+        a.plot(F, [r["emp"][k] for r in rows], "o-", lw=2.2, color=col, label=f"{lab} empirical")
+        # Analytic route: filled triangles where its theory holds, hollow where the output flags it.
+        a.plot(F, [r["ana"][k] for r in rows], "--", lw=1, color=col)
+        for r, f in zip(rows, F):
+            a.plot(f, r["ana"][k], "^", color=col, mfc=col if r["trusted"] else "white", ms=7)
+        a.plot(F, [r["pix"][k] for r in rows], ":", color="grey", lw=1.2)
+        if truth is not None:
+            a.axhline(truth[k], color=col, lw=0.8, alpha=0.6)
+    a.plot([], [], "k^--", lw=1, label="analytic (hollow: not trusted)")
+    a.plot([], [], ":", color="grey", label="pixel roughness 2 Sigma_F")
+    a.set_xscale("log"); a.xaxis.set_minor_formatter(NullFormatter()); a.xaxis.set_major_formatter(ScalarFormatter())
+    a.set_xlabel("footprint F (um)"); a.set_ylabel("alpha"); a.set_title(f"{title}: {model}")
+    a.legend(fontsize=7)
+    b.plot(F, [r["emp"][2] for r in rows], "o-", lw=2.2, label="skew offset, empirical")
+    b.plot(F, [r["ana"][2] for r in rows], "^--", lw=1, label="skew offset, analytic")
+    b.set_ylabel("skew offset sqrt(mu^T A2^-1 mu) of the fitted ellipsoid")
+    c = b.twinx()
+    c.plot(F, [r["skew"] for r in rows], "s:", color="grey", label="moment skewness of the NDF at F (right axis)")
+    c.set_ylabel("moment skewness", color="grey")
+    b.set_xscale("log"); b.xaxis.set_minor_formatter(NullFormatter()); b.xaxis.set_major_formatter(ScalarFormatter())
+    b.set_xlabel("footprint F (um)"); b.set_title(f"{title}: skew")
+    h1, l1 = b.get_legend_handles_labels(); h2, l2 = c.get_legend_handles_labels()
+    b.legend(h1 + h2, l1 + l2, fontsize=7)
+    return rows
+
+def describe(rows, name):
+    for r in rows:
+        state = "trusted" if r["trusted"] else "NOT trusted: " + "; ".join(c.split(":")[0] for c in r["caveats"])
+        print(f"{name} F={r['F']*1e6:7.1f} um  empirical alpha_x {r['emp'][0]:.3f}  analytic {r['ana'][0]:.3f}  "
+              f"route_gap {r['gap'] if r['gap'] is None else round(r['gap'], 3)}  analytic {state}")
+'''
+
+SCALE_SYNTH = r"""
+# Synthetic Gaussian surface with known truth: RMS slopes 0.2 and 0.1 (theta_z 0.3), correlation length 6 um,
+# 256 x 256 samples of 1 um. Its slopes are Gaussian, so at every footprint the NDF is anisotropic Beckmann
+# with alpha = sqrt(2) * RMS slope = (0.283, 0.141) (data_formats/scale.md S3: filtering moves slope
+# variance into the NDF, it creates none). A GGX-shaped lobe (the ellipsoid) fitted to a Gaussian has
+# alpha^2 = kappa * Beckmann alpha^2 with kappa = 0.61 (the Kullback-Leibler optimum, scale.md sec. 4a).
+gauss = os.path.join(WORK, "gauss.x3p")
+ndfit("synth", gauss, "--surface", "gaussian", "--nx", 256, "--ny", 256, "--sigma-x", 0.2, "--sigma-y", 0.1,
+      "--theta-z", 0.3, "--corr-length", 6e-6)
+FP_SYNTH = np.geomspace(1.5e-6, 40e-6, 6)
+rep_synth = scale_run(gauss, "scale_gauss", FP_SYNTH, ["--form", "none"])
+truth_b = (math.sqrt(2) * 0.2, math.sqrt(2) * 0.1)
+truth_e = tuple(math.sqrt(0.61) * t for t in truth_b)
+fig, axes = plt.subplots(2, 2, figsize=(11, 8))
+rows_b = scale_plot(axes[0], rep_synth, "beckmann-aniso", "synthetic Gaussian", truth_b)
+rows_e = scale_plot(axes[1], rep_synth, "ellipsoid", "synthetic Gaussian", truth_e)
+fig.tight_layout(); plt.show()
+describe(rows_b, "beckmann-aniso"); describe(rows_e, "ellipsoid")
+"""
+
+SCALE_REAL = r"""
+# A real scan: a bullet land of the Hamby set (confocal, 303 x 85 after downsampling, 7.8 um spacing),
+# plane removed as for any real scan. Skipped with a note when the shared scans are absent.
+real = os.path.join(SCANS, "hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p")
+rep_real = None
+if not os.path.exists(real):
+    print(f"SKIP: {real} is absent (the shared scans are not beside the repository); the real-scan curves are not drawn.")
+else:
+    FP_REAL = np.geomspace(1e-5, 3e-4, 6)
+    rep_real = scale_run(real, "scale_real", FP_REAL)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    rows_r = scale_plot(axes, rep_real, "ellipsoid", "Hamby land")
+    fig.tight_layout(); plt.show()
+    describe(rows_r, "ellipsoid")
+    # The same with Tokuyoshi's single kernel (--blur mean): one mean within-footprint covariance for all.
+    rep_mean = scale_run(real, "scale_real_mean", FP_REAL, ["--blur", "mean"])
+    describe(curves(rep_mean, "ellipsoid"), "ellipsoid --blur mean")
+    for f in rep_real["footprints"][:1]:
+        print("theory notes at", f["footprint_m"], "m:"); [print(" -", n) for n in f["theory_notes"]]
+"""
+
+SCALE_READING = """## Reading the plots in plain words
+
+**Synthetic Gaussian surface (the answer is known).** The thick curves (empirical route: the surface filtered the
+way a renderer sees it at each footprint, then fitted) stay on the thin horizontal truth lines: the NDF a renderer
+needs does not get rougher or smoother as the pixel grows, the roughness only moves from the visible geometry into
+the material (the grey dotted pixel roughness 2 Sigma_F rises from near 0 to the full value). The analytic route
+(dashed, triangles: fit the filtered surface, then add the footprint's slope covariance to the roughness matrix,
+Tokuyoshi eq. 3) lies on top of it for Beckmann at every footprint. The ellipsoid sits lower than Beckmann by
+sqrt(kappa) = 0.78 because a GGX-shaped lobe fitted to a Gaussian is narrower; the analytic route adds the kernel in
+those same units, so it ends on the truth at both ends. In between (about 3 to 11 um here) the slope spread inside a
+footprint differs from one footprint to the next, the NDF at F gets a slightly heavier tail, the ellipsoid's core
+narrows by a few per cent, and the output flags the analytic route there (hollow triangles, printed reason). The
+skew stays near zero: a Gaussian surface is symmetric.
+
+**Real bullet land.** Here the two routes part at every footprint, and the output says why (hollow triangles, the
+printed caveats): the land's slopes are skewed and heavy-tailed (striation edges), and the slope variation inside a
+footprint differs enormously from one footprint to the next (coefficient of variation up to 14). A renderer that
+carries each pixel's own covariance (the empirical route, the default) sees a heavy-tailed mixture whose core barely
+widens, while the analytic route adds one mean covariance, which the few steep footprints dominate, and over-widens
+the lobe. With one mean kernel for every pixel (`--blur mean`, the second printed table) the routes agree again
+within a few per cent: the gap is the surface, not the algebra. For such a surface use the empirical curves. Their
+skew offset fades as the footprint grows (0.17 to 0.07), as it must once a pixel covers many striations; the
+analytic skew curve is flagged and not meaningful here.
+"""
+
+
+def scale():
+    cells = [
+        new_markdown_cell(
+            "# The NDF at a renderer's footprint (`ndfit scale`)\n\n"
+            "Empirical and analytic scale curves (alpha_x, alpha_y and skew against footprint) for a synthetic "
+            "surface whose answer is known and for a real scan. Definitions: `data_formats/scale.md`."
+        ),
+        new_code_cell(COMMON.strip()),
+        new_code_cell(SCALE_FUNCS.strip()),
+        new_markdown_cell("## A synthetic Gaussian surface: the answer is known"),
+        new_code_cell(SCALE_SYNTH.strip()),
+        new_markdown_cell("## A real scan: a Hamby bullet land"),
+        new_code_cell(SCALE_REAL.strip()),
+        new_markdown_cell(SCALE_READING),
+        new_code_cell("shutil.rmtree(WORK, ignore_errors=True)"),
+    ]
+    return cells
+
+
 def write(name, cells):
     nb = new_notebook(cells=cells)
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
@@ -362,3 +510,4 @@ def write(name, cells):
 if __name__ == "__main__":
     write("01_tour.ipynb", tour())
     write("02_speed_accuracy.ipynb", speed())
+    write("03_scale.ipynb", scale())

@@ -1,7 +1,9 @@
 """The fit objectives and the NDF difference metric of data_formats/objective.md, in numpy.
 
-Symbols as there: bins k with count c_k, direction m_k, projected solid angle W_k; N = sum_k c_k;
-expected counts E_k = N D(m_k) W_k (midpoint rule); bins with W_k = 0 are left out.
+Symbols as there: bins k with count c_k, direction m_k, projected solid angle W_k. The fit region R: bins with
+W_k > 0 and a central direction within max_theta (default 70 deg) of n; N_in = sum_{k in R} c_k; expected counts
+E_k = N_in D(m_k) W_k / S with S = sum_{j in R} D(m_j) W_j (the likelihood conditional on the normals falling in R,
+midpoint rule).
 """
 
 from __future__ import annotations
@@ -15,6 +17,9 @@ from .bins import Bins
 
 OBJECTIVES = ("poisson", "logd")
 
+#: The default largest polar angle of the fit region (objective.md), the same as the Rust fitter's.
+DEFAULT_MAX_THETA_DEG = 70.0
+
 # No floor on ln E: a lobe far too narrow for the data has ln E ~ -1e4 at occupied bins, and the deviance term
 # 2 c (E/c - 1 - ln(E/c)) ~ -2 c ln E is computed from ln E directly, so it stays finite and exact. A floor
 # (as an earlier version had) would cap that penalty and let absurdly narrow lobes look good.
@@ -24,11 +29,34 @@ def _prep(bins: Bins) -> Bins:
     return bins.used() if np.any(bins.proj_solid_angle <= 0.0) else bins
 
 
-def log_expected(model: str, params, bins: Bins, want_grad: bool = False):
-    """ln E_k = ln N + ln D(m_k) + ln W_k over the bins with W_k > 0, and d ln E / d params."""
+def region(bins: Bins, max_theta_deg: float = DEFAULT_MAX_THETA_DEG) -> Bins:
+    """The fit region R: bins with W_k > 0 and m_z >= cos(max_theta) (objective.md); its n_samples is N_in."""
     b = _prep(bins)
+    cos_max = math.cos(math.radians(min(float(max_theta_deg), 90.0)))
+    keep = b.m[:, 2] >= cos_max * np.linalg.norm(b.m, axis=1)
+    if not np.any(keep & (b.count > 0)):
+        raise ValueError(f"{bins.path}: no normal within max_theta = {max_theta_deg:g} deg of n")
+    return Bins(m=b.m[keep], count=b.count[keep], proj_solid_angle=b.proj_solid_angle[keep], path=b.path)
+
+
+def _log_norm(logd: np.ndarray, w: np.ndarray):
+    """ln S = ln sum_k D_k W_k (log-sum-exp) and the weights D_k W_k / S."""
+    lw = logd + np.log(w)
+    top = float(np.max(lw))
+    p = np.exp(lw - top)
+    tot = float(p.sum())
+    return top + math.log(tot), p / tot
+
+
+def log_expected(model: str, params, bins: Bins, want_grad: bool = False, max_theta_deg: float = DEFAULT_MAX_THETA_DEG):
+    """ln E_k = ln N_in + ln D(m_k) + ln W_k - ln S over the region R, and d ln E / d params
+    (= g_k - sum_j (D_j W_j / S) g_j with g = d ln D / d params)."""
+    b = region(bins, max_theta_deg)
     logd, g = models.log_d_and_grad(model, params, b.m, want_grad)
-    ln_e = math.log(b.n_samples) + logd + np.log(b.proj_solid_angle)
+    ln_s, wts = _log_norm(logd, b.proj_solid_angle)
+    ln_e = math.log(b.n_samples) + logd + np.log(b.proj_solid_angle) - ln_s
+    if want_grad:
+        g = g - wts @ g
     return b, ln_e, g
 
 
@@ -69,18 +97,21 @@ def poisson_residuals(model: str, params, bins: Bins) -> np.ndarray:
 
 
 def logd_objective(model: str, params, bins: Bins, want_grad: bool = False, min_count: float = 10.0):
-    """F = sum_{c_k >= 10} c_k (ln D(m_k) - ln d_k)^2 with d_k = c_k / (N W_k) (objective.md, `logd`)."""
-    b = _prep(bins)
+    """F = sum_{k in R, c_k >= 10} c_k (ln D(m_k) - ln S - ln d_k)^2 with d_k = c_k / (N_in W_k) (objective.md,
+    `logd`; S and N_in over the whole region R)."""
+    b = region(bins)
     sel = b.count >= min_count
     if not np.any(sel):
         raise ValueError(f"{bins.path}: objective 'logd' needs bins with count >= {min_count:g}; there are none")
-    m, c, w = b.m[sel], b.count[sel], b.proj_solid_angle[sel]
-    logd, g = models.log_d_and_grad(model, params, m, want_grad)
+    logd_all, g_all = models.log_d_and_grad(model, params, b.m, want_grad)
+    ln_s, wts = _log_norm(logd_all, b.proj_solid_angle)
+    c, w = b.count[sel], b.proj_solid_angle[sel]
     ln_data = np.log(c) - math.log(b.n_samples) - np.log(w)
-    r = logd - ln_data
+    r = logd_all[sel] - ln_s - ln_data
     f = float(np.sum(c * r * r))
     if not want_grad:
         return f
+    g = g_all[sel] - wts @ g_all
     return f, 2.0 * ((c * r) @ g)
 
 
@@ -94,9 +125,10 @@ def objective(name: str, model: str, params, bins: Bins, want_grad: bool = False
 
 
 def dof(model: str, bins: Bins) -> int:
-    """K - p: K bins with c_k > 0 (and W_k > 0) minus the model's parameter count (objective.md)."""
-    b = _prep(bins)
-    return int(np.count_nonzero(b.count > 0)) - len(models.PARAM_NAMES[model])
+    """K - p - 1: K bins of the region with c_k > 0, minus the model's parameter count, minus one for the
+    region's fixed total (objective.md)."""
+    b = region(bins)
+    return int(np.count_nonzero(b.count > 0)) - len(models.PARAM_NAMES[model]) - 1
 
 
 def delta(log_d: np.ndarray, log_d_ref: np.ndarray, proj_solid_angle: np.ndarray) -> float:

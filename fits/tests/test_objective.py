@@ -30,19 +30,27 @@ def test_deviance_is_twice_the_log_likelihood_ratio(model, params):
     family at other parameters, so that E > 0 in every occupied bin and no guard is involved."""
     b = _data(0, model, [v * 1.1 for v in params])
     f = obj.poisson_deviance(model, params, b)
-    n = b.n_samples
+    # The region and its conditional normalization (objective.md), computed here term by term.
+    cos_max = math.cos(math.radians(obj.DEFAULT_MAX_THETA_DEG))
+    inside = [k for k in range(len(b)) if b.proj_solid_angle[k] > 0 and b.m[k, 2] >= cos_max]
+    assert 0 < len(inside) < len(b), "the test data must reach beyond max_theta"
     d = models.d(model, params, b.m)
+    n = math.fsum(float(b.count[k]) for k in inside)
+    s_norm = math.fsum(float(d[k] * b.proj_solid_angle[k]) for k in inside)
     ll_model = 0.0
     ll_sat = 0.0
-    for c, dk, w in zip(b.count, d, b.proj_solid_angle):
-        e = n * dk * w
+    for k in inside:
+        c, e = float(b.count[k]), n * d[k] * b.proj_solid_angle[k] / s_norm
         ll_model += (c * math.log(e) if c > 0 else 0.0) - e - math.lgamma(c + 1)
         ll_sat += (c * math.log(c) if c > 0 else 0.0) - c - math.lgamma(c + 1)
     assert f == pytest.approx(2.0 * (ll_sat - ll_model), rel=1e-10)
     r = obj.poisson_residuals(model, params, b)
+    assert len(r) == len(inside)
     assert float(np.sum(r * r)) == pytest.approx(f, rel=1e-12)
-    e = n * d * b.proj_solid_angle
-    assert np.all(np.sign(r[np.abs(b.count - e) > 1e-9]) == np.sign((b.count - e)[np.abs(b.count - e) > 1e-9]))
+    e = np.array([n * d[k] * b.proj_solid_angle[k] / s_norm for k in inside])
+    cc = b.count[inside]
+    big = np.abs(cc - e) > 1e-9
+    assert np.all(np.sign(r[big]) == np.sign((cc - e)[big]))
 
 
 @pytest.mark.parametrize("objective", ["poisson", "logd"])
@@ -65,9 +73,14 @@ def test_objective_gradient_matches_central_differences(objective, model, params
 def test_logd_matches_its_definition():
     b = _data(2)
     p = [0.3, 0.3, 0.0]
-    sel = b.count >= 10
-    d_data = b.count[sel] / (b.n_samples * b.proj_solid_angle[sel])
-    ref = float(np.sum(b.count[sel] * (np.log(models.d("ggx-aniso", p, b.m[sel])) - np.log(d_data)) ** 2))
+    cos_max = math.cos(math.radians(obj.DEFAULT_MAX_THETA_DEG))
+    reg = (b.proj_solid_angle > 0) & (b.m[:, 2] >= cos_max)
+    d_all = models.d("ggx-aniso", p, b.m)
+    n_in = float(b.count[reg].sum())
+    s_norm = float(np.sum(d_all[reg] * b.proj_solid_angle[reg]))
+    sel = reg & (b.count >= 10)
+    d_data = b.count[sel] / (n_in * b.proj_solid_angle[sel])
+    ref = float(np.sum(b.count[sel] * (np.log(d_all[sel] / s_norm) - np.log(d_data)) ** 2))
     assert obj.logd_objective("ggx-aniso", p, b) == pytest.approx(ref, rel=1e-12)
 
 
@@ -94,10 +107,16 @@ def test_deviance_of_a_far_too_narrow_lobe_is_exact():
     values = []
     for alpha in (1e-4, 1e-3, 1e-2):
         f, g = obj.poisson_deviance("beckmann", [alpha], b, want_grad=True)
-        ld = models.log_d("beckmann", [alpha], b.m)
+        cos_max = math.cos(math.radians(obj.DEFAULT_MAX_THETA_DEG))
+        reg = (b.proj_solid_angle > 0) & (b.m[:, 2] >= cos_max)
+        ld = models.log_d("beckmann", [alpha], b.m[reg])
+        n = float(b.count[reg].sum())
+        lw = [l + math.log(w) for l, w in zip(ld, b.proj_solid_angle[reg])]
+        top = max(lw)
+        ln_s = top + math.log(math.fsum(math.exp(v - top) for v in lw))
         ref = 0.0
-        for c, l, w in zip(b.count, ld, b.proj_solid_angle):
-            ln_e = math.log(n) + l + math.log(w)
+        for c, l, w in zip(b.count[reg], ld, b.proj_solid_angle[reg]):
+            ln_e = math.log(n) + l + math.log(w) - ln_s
             e = math.exp(ln_e) if ln_e > -745 else 0.0
             ref += 2.0 * (e - c + (c * (math.log(c) - ln_e) if c > 0 else 0.0))
         assert f == pytest.approx(ref, rel=1e-12)

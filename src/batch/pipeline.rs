@@ -65,9 +65,12 @@ pub fn fit_scan(path: &Path, opts: &PipelineOptions, baseline: Option<&BaselineE
 /// Score a fit JSON against `ndf`, and the baseline entry's model on the same bins.
 pub fn score(fit: Value, ndf: &EmpiricalNdf, baseline: Option<&BaselineEntry>) -> Result<JobOutput> {
     let fitted = model_of_fit(&fit)?;
-    let q = quality(ndf, &fitted)?;
+    // The fit's own region (objective.md), for the baseline's model too: the same bins for both.
+    let max_theta = super::quality::max_theta_of_fit(&fit);
+    let q = quality(ndf, &fitted, max_theta)?;
     // A baseline model this version cannot evaluate falls back to its stored quality (basis "stored").
-    let same_bins = baseline.and_then(|b| b.fit_json()).and_then(|f| model_of_fit(&f).ok()).and_then(|m| quality(ndf, &m).ok());
+    let same_bins =
+        baseline.and_then(|b| b.fit_json()).and_then(|f| model_of_fit(&f).ok()).and_then(|m| quality(ndf, &m, max_theta).ok());
     Ok(JobOutput { fit, quality: Some(q), baseline_on_same_bins: same_bins })
 }
 

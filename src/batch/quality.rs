@@ -3,9 +3,10 @@
 //! Every measure here is computed by the batch itself from the empirical NDF and the fitted model's
 //! `D(m)` (the fitter's self-reported objective is not trusted for the regression decision), following
 //! `data_formats/objective.md`:
-//! - `deviance`: the Poisson deviance `F = sum_k 2 (E_k - c_k + c_k ln(c_k/E_k))` with expected counts
-//!   `E_k = N D(m_k) W_k` (midpoint rule), bins with `W_k = 0` left out;
-//! - `kl = F / (2N)`: the deviance per sample. With `sum E_k = N` it is exactly the binned Kullback-Leibler
+//! - `deviance`: the Poisson deviance `F = sum_k 2 (E_k - c_k + c_k ln(c_k/E_k))` over the fit region `R`
+//!   (bins with `W_k > 0` within the fit's `max_theta` of n) with expected counts
+//!   `E_k = N_in D(m_k) W_k / S`, `S = sum_{j in R} D(m_j) W_j` (midpoint rule, conditional on `R`);
+//! - `kl = F / (2 N_in)`: the deviance per sample. With `sum E_k = N_in` it is exactly the binned Kullback-Leibler
 //!   divergence `sum p_k ln(p_k / q_k)` of the model's bin probabilities `q_k` from the data's `p_k`, in
 //!   nats: a quantity that does not grow with the scan size, so one tolerance serves every scan. A
 //!   relative density error `eps(m)` small everywhere costs `kl ~ E[eps^2]/2`.
@@ -33,25 +34,31 @@ pub struct Quality {
     pub n_bins: usize,
 }
 
-/// Score `model` against `ndf`. Errors only when the NDF has no samples.
-pub fn quality(ndf: &EmpiricalNdf, model: &dyn Ndf) -> Result<Quality> {
-    let n: u64 = ndf.bins.iter().map(|b| b.count).sum();
+/// Score `model` against `ndf` on the fit region of polar angles up to `max_theta` (radians; `pi/2`: the
+/// hemisphere). Errors only when the region holds no samples.
+pub fn quality(ndf: &EmpiricalNdf, model: &dyn Ndf, max_theta: f64) -> Result<Quality> {
+    let cos_max = max_theta.min(std::f64::consts::FRAC_PI_2).cos();
+    // Bins without projected area carry no data and no model mass (objective.md).
+    let region: Vec<&crate::ndf::NdfBin> =
+        ndf.bins.iter().filter(|b| b.proj_solid_angle > 0.0 && b.m.z >= cos_max * b.m.norm()).collect();
+    let n: u64 = region.iter().map(|b| b.count).sum();
     if n == 0 {
-        return Err(Error::new(crate::ErrorKind::BadData, "the empirical NDF holds no samples"));
+        return Err(Error::new(crate::ErrorKind::BadData, "the empirical NDF holds no samples in the fit region"));
     }
     let nf = n as f64;
+    // A model that is NaN or negative somewhere is as wrong as a zero there.
+    let dm = |m| {
+        let d = model.d(m);
+        if d.is_finite() && d > 0.0 { d } else { 0.0 }
+    };
+    let s_norm: f64 = region.iter().map(|b| dm(b.m) * b.proj_solid_angle).sum();
     let (mut dev, mut n_bins) = (0.0f64, 0usize);
     let (mut dw, mut dsum) = (0.0f64, 0.0f64);
-    for b in &ndf.bins {
-        // Bins without projected area carry no data and no model mass (objective.md).
-        if !(b.proj_solid_angle > 0.0) {
-            continue;
-        }
-        let d = model.d(b.m);
-        // A model that is NaN or negative somewhere is as wrong as a zero there; zero mass under data
-        // gives an infinite deviance, which the floor below keeps finite but enormous (and comparable).
-        let d = if d.is_finite() && d > 0.0 { d } else { 0.0 };
-        let e = (nf * d * b.proj_solid_angle).max(f64::MIN_POSITIVE);
+    for b in region {
+        let d = dm(b.m);
+        // Zero mass under data gives an infinite deviance, which the floor keeps finite but enormous
+        // (and comparable); with S = 0 every E is at that floor.
+        let e = if s_norm > 0.0 { nf * d * b.proj_solid_angle / s_norm } else { 0.0 }.max(f64::MIN_POSITIVE);
         let c = b.count as f64;
         dev += if b.count == 0 { 2.0 * e } else { 2.0 * (e - c + c * (c.ln() - e.ln())) };
         if b.count > 0 {
@@ -65,6 +72,12 @@ pub fn quality(ndf: &EmpiricalNdf, model: &dyn Ndf) -> Result<Quality> {
     // Rounding can leave a deviance of a perfect model a few ulps below zero.
     let dev = dev.max(0.0);
     Ok(Quality { deviance: dev, kl: dev / (2.0 * nf), ndf_delta: (dw / dsum).sqrt(), n_samples: n, n_bins })
+}
+
+/// The fit region a fit JSON was fitted on: `quality.max_theta_deg` in radians (the hemisphere for a fit
+/// written before the key existed).
+pub fn max_theta_of_fit(fit: &Value) -> f64 {
+    fit.pointer("/quality/max_theta_deg").and_then(Value::as_f64).unwrap_or(90.0).to_radians()
 }
 
 /// The model a fit JSON (`ndfit.fit/1`) describes: its `model` id and its `params` by name.
@@ -105,8 +118,8 @@ mod tests {
         // N = 15; E = (8, 2, 5) from W = E pi / N; c = (10, 0, 5); plus a bin with W = 0 (ignored).
         let w = |e: f64| e * PI / 15.0;
         let ndf = EmpiricalNdf::from_bins(vec![bin(10, w(8.0)), bin(0, w(2.0)), bin(5, w(5.0)), bin(0, 0.0)], 15);
-        let q = quality(&ndf, &g).unwrap();
-        // Hand: F = 2[(8 - 10 + 10 ln(10/8)) + 2 + 0] = 2[0.23143551314209755 + 2].
+        let q = quality(&ndf, &g, PI / 2.0).unwrap();
+        // Hand (S = sum D W = 15/15 = 1, so E = N D W): F = 2[(8 - 10 + 10 ln(10/8)) + 2 + 0] = 2[0.23143551314209755 + 2].
         let f = 2.0 * ((8.0 - 10.0 + 10.0 * (1.25f64).ln()) + 2.0);
         assert!((q.deviance - f).abs() < 1e-12 * f, "{} vs {f}", q.deviance);
         assert!((q.kl - f / 30.0).abs() < 1e-14);
@@ -124,14 +137,16 @@ mod tests {
         let g = Ggx::new(1.0, 1.0, 0.0).unwrap();
         let w = |e: f64| e * PI / 30.0;
         let ndf = EmpiricalNdf::from_bins(vec![bin(10, w(10.0)), bin(20, w(20.0))], 30);
-        let q = quality(&ndf, &g).unwrap();
+        let q = quality(&ndf, &g, PI / 2.0).unwrap();
         assert!(q.deviance < 1e-12 && q.ndf_delta < 1e-12, "{q:?}");
-        // A model with (numerically) no mass at the data: large, finite, not NaN.
-        let tilted = Ggx::new(1e-4, 1e-4, 0.0).unwrap();
+        // A model with (numerically) no mass at the data, all of it in an empty bin: large, finite, not NaN.
+        let narrow = Ggx::new(1e-4, 1e-4, 0.0).unwrap();
         let far = NdfBin { m: Vector3::new(0.8, 0.0, 0.6), ..bin(30, 0.1) };
-        let q = quality(&EmpiricalNdf::from_bins(vec![far], 30), &tilted).unwrap();
+        let q = quality(&EmpiricalNdf::from_bins(vec![far, bin(0, 0.1)], 30), &narrow, PI / 2.0).unwrap();
         assert!(q.deviance.is_finite() && q.deviance > 1e3, "{q:?}");
-        assert!(quality(&EmpiricalNdf::from_bins(vec![bin(0, 1.0)], 0), &g).is_err());
+        // Outside the region (53 deg > 45 deg) the data do not count: no samples left.
+        assert!(quality(&EmpiricalNdf::from_bins(vec![far], 30), &narrow, PI / 4.0).is_err());
+        assert!(quality(&EmpiricalNdf::from_bins(vec![bin(0, 1.0)], 0), &g, PI / 2.0).is_err());
     }
 
     #[test]

@@ -130,6 +130,7 @@ impl Knobs {
             solver: self.solver,
             tolerances: Tolerances { rel: self.tol, ..Tolerances::default() },
             extra_starts: self.extra_starts,
+            ..FitOptions::default()
         }
     }
 

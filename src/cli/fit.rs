@@ -34,6 +34,11 @@ pub struct Args {
     /// Extra skew starts for the ellipsoid (0-4) beyond the default two.
     #[arg(long, default_value_t = 0)]
     extra_starts: usize,
+    /// Largest polar angle (degrees, 0-90] of the NDF bins the fit uses; the model is normalized over
+    /// them (data_formats/objective.md). Lower it to the instrument's numerical aperture
+    /// (asin(NA)) when the scan cannot see steeper slopes.
+    #[arg(long, default_value_t = ndfit::fit::objective::DEFAULT_MAX_THETA_DEG)]
+    max_theta: f64,
     /// Plot of the data against the fit, with residuals (PNG).
     #[arg(long)]
     plot: Option<PathBuf>,
@@ -52,8 +57,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         objective: args.objective.parse::<Objective>().map_err(|e| anyhow!("--objective: {}", e.message()))?,
         solver: args.solver.parse::<Solver>().map_err(|e| anyhow!("--solver: {}", e.message()))?,
         extra_starts: args.extra_starts.min(4),
+        max_theta: args.max_theta.to_radians(),
         ..FitOptions::default()
     };
+    anyhow::ensure!(args.max_theta > 0.0 && args.max_theta <= 90.0, "--max-theta {} must be in (0, 90] degrees", args.max_theta);
     let model = match args.model.as_str() {
         "auto" => None,
         m => Some(m.parse::<ModelId>().map_err(|e| anyhow!("--model: {}", e.message()))?),

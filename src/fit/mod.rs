@@ -38,6 +38,14 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::models::{Model, ModelId};
 use crate::ndf::EmpiricalNdf;
 
+/// Largest standard error of `theta_z` (radians) reported as a number. The axes of a lobe are located by
+/// its anisotropy: with the anisotropy written as a 2-vector `e (cos 2 theta_z, sin 2 theta_z)` of
+/// per-component standard error `s_e`, `se(theta_z) = s_e / (2 e) = 1 / (2 r)` with `r = e / s_e` the
+/// anisotropy in standard errors. `theta_z` counts as identified when `r >= 3`, i.e. `se <= 1/6`: for an
+/// isotropic truth `r` is Rayleigh distributed, so a chance anisotropy passes with probability
+/// `exp(-9/2) = 1.1%` (at `pi/4`, `r = 0.64`, it would pass 81% of the time).
+pub const THETA_Z_SE_MAX: f64 = 1.0 / 6.0;
+
 /// How to fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FitOptions {
@@ -50,11 +58,20 @@ pub struct FitOptions {
     /// Extra skew starts for the ellipsoid beyond the two default ones (zero skew, and the skew of the
     /// mean normal), taken in order from `(+-0.3, 0), (0, +-0.3)`; at most 4.
     pub extra_starts: usize,
+    /// Largest polar angle (radians) of the bins the objective uses; the model is normalized over them
+    /// (objective.md). Default [`objective::DEFAULT_MAX_THETA_DEG`].
+    pub max_theta: f64,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        FitOptions { objective: Objective::Poisson, solver: Solver::Lm, tolerances: Tolerances::default(), extra_starts: 0 }
+        FitOptions {
+            objective: Objective::Poisson,
+            solver: Solver::Lm,
+            tolerances: Tolerances::default(),
+            extra_starts: 0,
+            max_theta: objective::DEFAULT_MAX_THETA_DEG.to_radians(),
+        }
     }
 }
 
@@ -74,37 +91,81 @@ struct Fitted {
     delta: bool,
 }
 
+/// Fewest fine bins for which the solver first runs on the 2 x 2-merged bins
+/// ([`FitData::coarsened`]): below it a fine evaluation is already cheap.
+pub const COARSE_PASS_MIN_BINS: usize = 2000;
+
 /// The data of one fit session: the bins and their slope summary.
 struct Session {
     data: FitData,
+    /// The same region on bins merged 2 x 2, for the first pass of the solver (large NDFs only).
+    coarse: Option<FitData>,
     summary: start::SlopeSummary,
 }
 
 impl Session {
-    fn new(ndf: &EmpiricalNdf, objective: Objective) -> Result<Session> {
-        let data = FitData::new(ndf, objective)?;
+    fn new(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<Session> {
+        let data = FitData::new(ndf, opts.objective, opts.max_theta)?;
         let summary = start::summarize(&data);
-        Ok(Session { data, summary })
+        let coarse = if data.bins.len() >= COARSE_PASS_MIN_BINS { data.coarsened(ndf, 50) } else { None };
+        Ok(Session { data, coarse, summary })
     }
 }
 
-/// Run the solver from every start (contract parameters) and keep the best, canonicalized.
-fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) -> Result<Fitted> {
+/// Run the solver on `data` from every start (contract parameters): the index and result of the best
+/// finite one, and every start's objective; evaluations are added to `evaluations`.
+fn best_of_starts(
+    data: &FitData,
+    id: ModelId,
+    starts: &[Vec<f64>],
+    opts: &FitOptions,
+    evaluations: &mut usize,
+) -> Result<(usize, Option<solve::Local>, Vec<f64>)> {
     let mut best: Option<(usize, solve::Local)> = None;
-    let mut evaluations = 0;
-    let mut start_objectives = Vec::with_capacity(starts.len());
+    let mut objs = Vec::with_capacity(starts.len());
     for (i, p0) in starts.iter().enumerate() {
         let x0 = params::to_internal(id, p0);
-        let local = solve::minimize(&s.data, id, &x0, opts.solver, opts.tolerances)?;
-        evaluations += local.evaluations;
-        start_objectives.push(local.f);
+        let local = solve::minimize(data, id, &x0, opts.solver, opts.tolerances)?;
+        *evaluations += local.evaluations;
+        objs.push(local.f);
         if local.f.is_finite() && local.x.iter().all(|v| v.is_finite()) && best.as_ref().is_none_or(|(_, b)| local.f < b.f) {
             best = Some((i, local));
         }
     }
-    let (best_start, local) = best.ok_or_else(|| {
-        Error::new(ErrorKind::Numerical, format!("no usable {id} fit: the objective was not finite from any start"))
-    })?;
+    Ok(match best {
+        Some((i, l)) => (i, Some(l), objs),
+        None => (0, None, objs),
+    })
+}
+
+/// Run the solver from every start (contract parameters) and keep the best, canonicalized.
+fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) -> Result<Fitted> {
+    // Large NDFs: every start runs on the merged bins (a quarter of the cost per evaluation), and only
+    // the best is polished on the fine bins, from close to its optimum. Should that polish end outside
+    // the model's domain or not finite (a coarse pass that ran off), the starts are rerun on the fine bins.
+    let usable = |l: &solve::Local| {
+        l.f.is_finite() && l.x.iter().all(|v| v.is_finite()) && Model::from_params(id, &params::to_public(id, &l.x)).is_ok()
+    };
+    let mut evaluations = 0;
+    let mut polished = None;
+    if let Some(coarse) = &s.coarse {
+        let (i, l, objs) = best_of_starts(coarse, id, starts, opts, &mut evaluations)?;
+        if let Some(l) = l {
+            let fine = solve::minimize(&s.data, id, &l.x, opts.solver, opts.tolerances)?;
+            evaluations += fine.evaluations;
+            if usable(&fine) {
+                polished = Some((i, fine, objs));
+            }
+        }
+    }
+    let (best_start, local, start_objectives) = match polished {
+        Some(p) => p,
+        None => {
+            let (i, l, objs) = best_of_starts(&s.data, id, starts, opts, &mut evaluations)?;
+            let l = l.ok_or_else(|| Error::new(ErrorKind::Numerical, format!("no usable {id} fit: the objective was not finite from any start")))?;
+            (i, l, objs)
+        }
+    };
     let mut warnings = Vec::new();
     if !local.converged {
         warnings.push(format!("{id}: the {} solver stopped without converging ({})", opts.solver.as_str(), local.termination));
@@ -225,23 +286,39 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     let model = Model::from_params(id, &pv)?;
     let mut warnings = fit.warnings.clone();
     let k = s.data.k_nonzero;
-    let dof = k as i64 - p as i64;
+    // The total count in the region is fixed (the normalization is profiled out): one dof fewer.
+    let dof = k as i64 - p as i64 - 1;
     let reduced = (dof > 0).then(|| fit.f / dof as f64);
     // Standard errors scale with the residual variance (objective.md); with no dof, unscaled.
     let s2 = reduced.unwrap_or(1.0);
     let mut r = vec![0.0; s.data.bins.len()];
     let mut j = DMatrix::zeros(s.data.bins.len(), p);
     problem::jacobian_into(&s.data, id, &fit.x, &mut r, &mut j);
-    let cov = covariance::covariance(&j, s2);
+    let cov0 = covariance::covariance(&j, s2);
     let g = params::public_derivative(id, &fit.x);
-    let se: Vec<Option<f64>> = (0..p)
-        .map(|a| (!cov.undetermined[a] && !fit.delta).then(|| g[a].abs() * cov.cov[(a, a)].max(0.0).sqrt()))
-        .collect();
+    let se_of = |c: &covariance::Covariance, a: usize| g[a].abs() * c.cov[(a, a)].max(0.0).sqrt();
+    // theta_z of a nearly isotropic lobe: the anisotropy that locates the axes is below 3 of its
+    // standard errors (THETA_Z_SE_MAX), so the angle is noise, not a measurement with an uncertainty.
+    let tz_free: Vec<bool> =
+        (0..p).map(|a| id.param_names()[a] == "theta_z" && !cov0.undetermined[a] && !(se_of(&cov0, a) <= THETA_Z_SE_MAX)).collect();
+    let tz_se: Vec<f64> = (0..p).map(|a| se_of(&cov0, a)).collect();
+    // The other parameters' errors are then those at the reported theta_z (its column dropped): an
+    // unlocated theta_z trades off against the skew angles, which would otherwise inherit its spread.
+    let cov = if tz_free.iter().any(|t| *t) {
+        for (a, _) in tz_free.iter().enumerate().filter(|(_, t)| **t) {
+            j.column_mut(a).fill(0.0);
+        }
+        covariance::covariance(&j, s2)
+    } else {
+        cov0.clone()
+    };
+    let unident: Vec<bool> = (0..p).map(|a| !fit.delta && (cov0.undetermined[a] || tz_free[a])).collect();
+    let se: Vec<Option<f64>> = (0..p).map(|a| (!unident[a] && !fit.delta).then(|| se_of(&cov, a))).collect();
     let correlation: Vec<Vec<Option<f64>>> = (0..p)
         .map(|a| {
             (0..p)
                 .map(|b| {
-                    let ok = !cov.undetermined[a] && !cov.undetermined[b] && !fit.delta;
+                    let ok = !unident[a] && !unident[b] && !fit.delta;
                     let den = (cov.cov[(a, a)] * cov.cov[(b, b)]).sqrt();
                     // The sign of g (always positive) does not change correlations.
                     (ok && den > 0.0).then(|| (cov.cov[(a, b)] / den).clamp(-1.0, 1.0))
@@ -249,13 +326,23 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
                 .collect()
         })
         .collect();
-    for (a, u) in cov.undetermined.iter().enumerate() {
+    let mut unidentified = Vec::new();
+    for (a, u) in unident.iter().enumerate() {
+        let name = id.param_names()[a];
+        if cov0.undetermined[a] && !fit.delta {
+            warnings.push(format!("{id}: {name} is not determined by the data (a null direction of the Jacobian; its standard error is null)"));
+        } else if *u {
+            warnings.push(format!(
+                "{id}: {name} is not identified: its standard error {:.3} rad exceeds 1/6 (the anisotropy that locates the axes is below 3 standard errors: a nearly isotropic lobe); reported as null",
+                tz_se[a]
+            ));
+        }
         if *u {
-            warnings.push(format!("{id}: {} is not determined by the data (its standard error is null)", id.param_names()[a]));
+            unidentified.push(name.to_string());
         }
     }
     let max_count = ndf.bins.iter().map(|b| b.count).max().unwrap_or(0) as f64;
-    let specular = max_count > 0.5 * s.data.n;
+    let specular = max_count > 0.5 * s.data.n_total;
     if specular {
         warnings.push("specular: over half of the normals fall in one NDF bin; alpha is bounded by the bin size, not measured".into());
     }
@@ -267,6 +354,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
         matrix_a,
         input: None,
         std_errors: id.param_names().iter().zip(&se).map(|(n, v)| (n.to_string(), *v)).collect(),
+        unidentified,
         param_order: id.param_names().iter().map(|n| n.to_string()).collect(),
         correlation,
         specular,
@@ -275,9 +363,11 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
             objective_value: fit.f,
             dof,
             reduced_chi2: reduced,
-            n_bins: s.data.bins.len(),
+            n_bins: s.data.n_residual_bins,
             n_bins_nonzero: k,
             n_samples: s.data.n,
+            n_samples_total: s.data.n_total,
+            max_theta_deg: s.data.max_theta.to_degrees(),
             delta_data: metric::delta_to_data(&model, ndf),
             rank: cov.rank,
             condition: cov.condition.is_finite().then_some(cov.condition),
@@ -301,7 +391,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
 /// (`solver.converged`, `warnings`), an error only when no usable fit exists.
 pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<FitReport> {
     let t0 = Instant::now();
-    let s = Session::new(ndf, opts.objective)?;
+    let s = Session::new(ndf, opts)?;
     let fit = fit_chain(&s, id, opts)?;
     build_report(ndf, &s, fit, opts, 0.0).map(|mut r| {
         r.timings.fit_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -321,7 +411,7 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 /// that correlation from buying parameters.
 pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
     let t0 = Instant::now();
-    let s = Session::new(ndf, opts.objective)?;
+    let s = Session::new(ndf, opts)?;
     // A candidate that cannot be fitted is left out (and said so); only when none is usable is it an error.
     let mut warnings = Vec::new();
     let mut keep = |r: Result<Fitted>| match r {
@@ -359,7 +449,7 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
     let c = fits
         .iter()
         .filter_map(|f| {
-            let dof = k - f.id.n_params() as f64;
+            let dof = k - f.id.n_params() as f64 - 1.0;
             (dof > 0.0).then(|| f.f / dof)
         })
         .fold(f64::INFINITY, f64::min)
@@ -388,7 +478,7 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
         .map(|(i, f)| {
             let par = parent(f.id);
             let pi = par.and_then(idx);
-            let dof = k - f.id.n_params() as f64;
+            let dof = k - f.id.n_params() as f64 - 1.0;
             Candidate {
                 model: f.id,
                 params: names(f.id, &public(f)),

@@ -42,6 +42,11 @@ impl std::str::FromStr for Objective {
 /// undefined at 0) for a Gaussian model of its error.
 pub const LOGD_MIN_COUNT: f64 = 10.0;
 
+/// Default largest polar angle of the bins the fit uses (degrees), see [`FitData::new`] and objective.md:
+/// measured on the synthetic ellipsoid scans, whose grid loses the grazing normals near the footprint
+/// rim (slopes -> infinity), as a real instrument's numerical aperture does.
+pub const DEFAULT_MAX_THETA_DEG: f64 = 70.0;
+
 /// One bin as the objective sees it, with per-bin constants precomputed once.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Bin {
@@ -51,55 +56,128 @@ pub struct Bin {
     pub c: f64,
     /// Projected solid angle `W_k` (sr).
     pub w: f64,
-    /// `ln(N W_k)`, so `ln E_k = ln_nw + ln D(m_k)`.
+    /// `ln(N_in W_k)`, so `ln E_k = ln_nw + ln D(m_k) - ln S` (objective.md).
     pub ln_nw: f64,
     /// `ln c_k` (0 for an empty bin, where it is not used).
     pub ln_c: f64,
 }
 
-/// The bins a fit uses: `W_k > 0` and `m.z > 0` (objective.md), with `N = sum c_k`.
+/// The bins a fit uses (objective.md): the region `R` of bins with `W_k > 0` and a central direction
+/// within `max_theta` of n, with `N_in = sum_{k in R} c_k`. The model is normalized over `R`
+/// (`S = sum_{k in R} D(m_k) W_k`), so the fit is the likelihood of the counts conditional on the
+/// normals falling in `R`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitData {
-    /// Bins used by the objective.
+    /// Bins of the region `R` (for `logd`, those with `c_k < 10` are in `R`, so in `S`, but carry a zero
+    /// residual).
     pub bins: Vec<Bin>,
-    /// `N`, the total count.
+    /// `N_in`, the count inside the region.
     pub n: f64,
-    /// Number of bins with `c_k > 0`.
+    /// `N` of the whole NDF (every bin with `W_k > 0`).
+    pub n_total: f64,
+    /// Number of bins carrying a residual with `c_k > 0`.
     pub k_nonzero: usize,
+    /// Number of bins carrying a residual (all of `R` for `poisson`, `c_k >= 10` for `logd`).
+    pub n_residual_bins: usize,
+    /// Largest polar angle of a bin centre (radians).
+    pub max_theta: f64,
     /// The objective.
     pub objective: Objective,
 }
 
 impl FitData {
-    /// Select and prepare the bins of `ndf` for `objective`. Fails on an NDF with no counts.
-    pub fn new(ndf: &EmpiricalNdf, objective: Objective) -> Result<FitData> {
+    /// Select and prepare the bins of `ndf` for `objective`, keeping bins whose central direction is
+    /// within `max_theta` (radians; `>= pi/2` keeps the hemisphere) of n. Fails on an NDF with no counts
+    /// in that region.
+    pub fn new(ndf: &EmpiricalNdf, objective: Objective, max_theta: f64) -> Result<FitData> {
+        if !(max_theta > 0.0) {
+            return Err(Error::invalid(format!("max_theta must be positive, got {max_theta}")));
+        }
         let usable = |b: &&crate::ndf::NdfBin| {
             // Bins at or below the horizon have no projected area and D = 0 there: not data.
             b.proj_solid_angle > 0.0 && b.proj_solid_angle.is_finite() && b.m.z > 0.0 && b.m.iter().all(|v| v.is_finite())
         };
-        let n: f64 = ndf.bins.iter().filter(usable).map(|b| b.count as f64).sum();
-        if n <= 0.0 {
+        let n_total: f64 = ndf.bins.iter().filter(usable).map(|b| b.count as f64).sum();
+        if n_total <= 0.0 {
             return Err(Error::new(ErrorKind::BadData, "the empirical NDF has no counts (no valid normals)"));
         }
-        let min_c = match objective {
-            Objective::Poisson => 0.0,
-            Objective::Logd => LOGD_MIN_COUNT,
-        };
+        // Past pi/2 there are no bins (the horizon bounds them): the hemisphere.
+        let max_theta = max_theta.min(std::f64::consts::FRAC_PI_2);
+        let cos_max = max_theta.cos();
+        let inside = |b: &&crate::ndf::NdfBin| b.m.z >= cos_max * b.m.norm();
+        let n: f64 = ndf.bins.iter().filter(usable).filter(inside).map(|b| b.count as f64).sum();
+        if n <= 0.0 {
+            return Err(Error::new(
+                ErrorKind::BadData,
+                format!("no normal within max_theta = {:.1} deg of the mean plane's normal", max_theta.to_degrees()),
+            ));
+        }
         let bins: Vec<Bin> = ndf
             .bins
             .iter()
             .filter(usable)
-            .filter(|b| b.count as f64 >= min_c)
+            .filter(inside)
             .map(|b| {
                 let c = b.count as f64;
                 Bin { m: b.m.normalize(), c, w: b.proj_solid_angle, ln_nw: (n * b.proj_solid_angle).ln(), ln_c: if c > 0.0 { c.ln() } else { 0.0 } }
             })
             .collect();
-        let k_nonzero = bins.iter().filter(|b| b.c > 0.0).count();
-        if bins.is_empty() {
+        let carries = |b: &&Bin| objective == Objective::Poisson || b.c >= LOGD_MIN_COUNT;
+        let k_nonzero = bins.iter().filter(carries).filter(|b| b.c > 0.0).count();
+        let n_residual_bins = bins.iter().filter(carries).count();
+        if n_residual_bins == 0 {
             return Err(Error::new(ErrorKind::BadData, format!("no NDF bin qualifies for the {} objective", objective.as_str())));
         }
-        Ok(FitData { bins, n, k_nonzero, objective })
+        Ok(FitData { bins, n, n_total, k_nonzero, n_residual_bins, max_theta, objective })
+    }
+
+    /// The same region on a grid twice as coarse: the fine bins of `ndf` in the region merged 2 x 2 by
+    /// their cell (counts and `W` summed, direction the `W`-weighted mean), for a cheap first pass of
+    /// the solver (the optimum is then polished on the fine bins). `None` when the NDF has no grid or
+    /// merging would leave fewer than `min_bins` bins.
+    pub fn coarsened(&self, ndf: &EmpiricalNdf, min_bins: usize) -> Option<FitData> {
+        let n = ndf.grid.n;
+        if n == 0 || ndf.bin_cells.len() != ndf.bins.len() {
+            return None;
+        }
+        let nc = n / 2 + 1;
+        let mut acc: Vec<(f64, f64, Vector3<f64>)> = vec![(0.0, 0.0, Vector3::zeros()); nc * nc];
+        let cos_max = self.max_theta.cos();
+        for (b, &cell) in ndf.bins.iter().zip(&ndf.bin_cells) {
+            let ok = b.proj_solid_angle > 0.0 && b.proj_solid_angle.is_finite() && b.m.z > 0.0 && b.m.iter().all(|v| v.is_finite());
+            if !ok || b.m.z < cos_max * b.m.norm() {
+                continue;
+            }
+            let (ix, iy) = (cell as usize % n, cell as usize / n);
+            let a = &mut acc[(iy / 2) * nc + ix / 2];
+            a.0 += b.count as f64;
+            a.1 += b.proj_solid_angle;
+            a.2 += b.proj_solid_angle * b.m.normalize();
+        }
+        let bins: Vec<Bin> = acc
+            .into_iter()
+            .filter(|a| a.1 > 0.0)
+            .map(|(c, w, m)| Bin { m: m.normalize(), c, w, ln_nw: (self.n * w).ln(), ln_c: if c > 0.0 { c.ln() } else { 0.0 } })
+            .collect();
+        if bins.len() < min_bins {
+            return None;
+        }
+        let carries = |b: &&Bin| self.objective == Objective::Poisson || b.c >= LOGD_MIN_COUNT;
+        let k_nonzero = bins.iter().filter(carries).filter(|b| b.c > 0.0).count();
+        let n_residual_bins = bins.iter().filter(carries).count();
+        (n_residual_bins > 0).then_some(FitData { bins, k_nonzero, n_residual_bins, ..self.clone() })
+    }
+
+    /// `ln S = ln sum_k D(m_k) W_k` over the region from `ln D(m_k)` (one per bin; log-sum-exp, so that
+    /// no extreme lobe overflows or underflows the sum).
+    pub fn ln_norm(&self, ln_d: &[f64]) -> f64 {
+        let shift = self.bins.iter().zip(ln_d).map(|(b, l)| l + b.w.ln()).fold(f64::NEG_INFINITY, f64::max);
+        // Guard: a model with no finite mass anywhere in R; the caller reports a failed evaluation.
+        if !shift.is_finite() {
+            return shift;
+        }
+        let s: f64 = self.bins.iter().zip(ln_d).map(|(b, l)| (l + b.w.ln() - shift).exp()).sum();
+        shift + s.ln()
     }
 }
 
@@ -116,7 +194,8 @@ fn expm1_minus(l: f64) -> f64 {
     }
 }
 
-/// Residual `r_k` and `d r_k / d ln D(m_k)` for a bin given `ln D(m_k)`.
+/// Residual `r_k` and `d r_k / d ln D(m_k)` for a bin given the normalized `ln D(m_k) - ln S`
+/// (objective.md; `ln S = 0` is the unconditional `E_k = N D W`).
 #[inline]
 pub fn residual(objective: Objective, bin: &Bin, ln_d: f64) -> (f64, f64) {
     match objective {
@@ -139,6 +218,8 @@ pub fn residual(objective: Objective, bin: &Bin, ln_d: f64) -> (f64, f64) {
             let dr = if r != 0.0 { (e - c) / r } else { -c.sqrt() };
             (r, dr)
         }
+        // A region bin with too few counts for logd: no residual (it still counts in S).
+        Objective::Logd if bin.c < LOGD_MIN_COUNT => (0.0, 0.0),
         Objective::Logd => {
             let sc = bin.c.sqrt();
             // ln d_k = ln(c_k / (N W_k)) = ln c_k - ln_nw.

@@ -20,7 +20,9 @@ fn perr<E: std::fmt::Display>(e: E) -> Error {
 /// Draw the plot to `path` (PNG, written atomically).
 pub fn plot_fit(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> Result<()> {
     crate::plot::ensure_font();
-    let data = FitData::new(ndf, Objective::Poisson)?;
+    // The whole hemisphere: the plot shows every bin, those beyond the fit's max_theta too.
+    let data = FitData::new(ndf, Objective::Poisson, std::f64::consts::FRAC_PI_2)?;
+    let ln_s = data.ln_norm(&data.bins.iter().map(|b| model.d(b.m).max(f64::MIN_POSITIVE).ln()).collect::<Vec<_>>());
     let mut pts_d = Vec::new();
     let mut pts_f = Vec::new();
     let mut pts_r = Vec::new();
@@ -34,7 +36,7 @@ pub fn plot_fit(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> 
             pts_f.push((th, dm.log10()));
         }
         // Guard: a D of 0 (Beckmann far in its tail) has ln D = -inf; its residual is still finite.
-        let (r, _) = residual(Objective::Poisson, b, if dm > 0.0 { dm.ln() } else { -745.0 });
+        let (r, _) = residual(Objective::Poisson, b, if dm > 0.0 { dm.ln() } else { -745.0 } - ln_s);
         if b.c > 0.0 || r.abs() > 0.5 {
             pts_r.push((th, r));
         }

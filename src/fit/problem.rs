@@ -9,29 +9,58 @@ use super::lnd::LnD;
 use super::objective::{residual, FitData};
 use crate::models::ModelId;
 
-/// Residuals into `r` (length = bins) at internal vector `x`; returns the objective `sum r^2`.
+/// Residuals into `r` (length = bins) at internal vector `x`; returns the objective `sum r^2`
+/// (non-finite when the model has no mass in the region).
+///
+/// Two passes (objective.md): `ln D(m_k)` into `r`, then `ln S` and the residuals of
+/// `ln E_k = ln(N_in W_k) + ln D(m_k) - ln S`.
 pub fn residuals_into(data: &FitData, id: ModelId, x: &[f64], r: &mut [f64]) -> f64 {
     let f = LnD::new(id, x);
+    for (rk, bin) in r.iter_mut().zip(&data.bins) {
+        *rk = f.value(&bin.m);
+    }
+    let ln_s = data.ln_norm(r);
     let mut sum = 0.0;
     for (rk, bin) in r.iter_mut().zip(&data.bins) {
-        let (v, _) = residual(data.objective, bin, f.value(&bin.m));
+        let (v, _) = residual(data.objective, bin, *rk - ln_s);
         *rk = v;
         sum += v * v;
     }
-    sum
+    if ln_s.is_finite() {
+        sum
+    } else {
+        f64::NAN
+    }
 }
 
 /// Residuals and the Jacobian (column-major, bins x params) at `x`. Buffers are the caller's.
+///
+/// With `g_k = d ln D(m_k) / d x` and the normalization profiled out, `d ln E_k / d x = g_k - gbar`,
+/// `gbar = sum_j D_j W_j g_j / S` (the rank-one term of the conditional likelihood), so
+/// `J_k = (d r_k / d ln E_k) (g_k - gbar)`.
 pub fn jacobian_into(data: &FitData, id: ModelId, x: &[f64], r: &mut [f64], jac: &mut DMatrix<f64>) {
     let f = LnD::new(id, x);
     let p = x.len();
     let mut g = [0.0; 5];
     for (k, bin) in data.bins.iter().enumerate() {
-        let ln_d = f.value_grad(&bin.m, &mut g[..p]);
-        let (v, dr) = residual(data.objective, bin, ln_d);
-        r[k] = v;
+        r[k] = f.value_grad(&bin.m, &mut g[..p]);
         for (j, gj) in g[..p].iter().enumerate() {
-            jac[(k, j)] = dr * gj;
+            jac[(k, j)] = *gj;
+        }
+    }
+    let ln_s = data.ln_norm(r);
+    let mut gbar = [0.0; 5];
+    for (k, bin) in data.bins.iter().enumerate() {
+        let wk = (r[k] - ln_s).exp() * bin.w;
+        for (j, gb) in gbar[..p].iter_mut().enumerate() {
+            *gb += wk * jac[(k, j)];
+        }
+    }
+    for (k, bin) in data.bins.iter().enumerate() {
+        let (v, dr) = residual(data.objective, bin, r[k] - ln_s);
+        r[k] = v;
+        for (j, gb) in gbar[..p].iter().enumerate() {
+            jac[(k, j)] = dr * (jac[(k, j)] - gb);
         }
     }
 }

@@ -51,16 +51,20 @@ pub struct Quality {
     pub objective: String,
     /// The objective `F = sum r_k^2` at the optimum (the Poisson deviance, or the weighted log-D sum).
     pub objective_value: f64,
-    /// Degrees of freedom `K - p`.
+    /// Degrees of freedom `K - p - 1` (the region's total count is fixed).
     pub dof: i64,
-    /// `F / (K - p)`; near 1 for independent Poisson counts, larger for correlated normals.
+    /// `F / (K - p - 1)`; near 1 for independent Poisson counts, larger for correlated normals.
     pub reduced_chi2: Option<f64>,
     /// Bins in the objective.
     pub n_bins: usize,
     /// Bins with a non-zero count (`K`).
     pub n_bins_nonzero: usize,
-    /// Total count `N`.
+    /// Count `N_in` inside the fitted region (bins within `max_theta_deg`).
     pub n_samples: f64,
+    /// Count `N` of the whole NDF (the normals beyond `max_theta_deg` are `n_samples_total - n_samples`).
+    pub n_samples_total: f64,
+    /// Largest polar angle of the bins in the objective (degrees; objective.md).
+    pub max_theta_deg: f64,
     /// `delta(D_fit; D_empirical)` over the bins (objective.md), counting noise included.
     pub delta_data: Option<f64>,
     /// Numerical rank of the Jacobian at the optimum (= parameter count when all are determined).
@@ -157,6 +161,12 @@ pub struct FitReport {
     pub input: Option<InputInfo>,
     /// Standard errors by parameter name; `null` for a parameter the data do not determine.
     pub std_errors: BTreeMap<String, Option<f64>>,
+    /// Parameters the data do not identify, with their standard errors `null`: a null direction of the
+    /// Jacobian, or `theta_z` of a nearly isotropic lobe (standard error above
+    /// [`super::THETA_Z_SE_MAX`]). Their value in `params` is a valid but arbitrary choice, and the other
+    /// parameters' errors are those at that value.
+    #[serde(default)]
+    pub unidentified: Vec<String>,
     /// Parameter names in the order of the rows and columns of `correlation`.
     pub param_order: Vec<String>,
     /// Correlation matrix of the parameters (`null` entries for undetermined parameters).

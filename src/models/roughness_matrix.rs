@@ -47,13 +47,42 @@ impl GgxMatrix {
 
     /// The roughness matrix of a (rotated) GGX: `Rz^T diag(ax^2, ay^2) Rz` (2x2 block of eq. 3's `Rz`).
     pub fn from_ggx(g: &Ggx) -> Self {
-        let (s, c) = g.theta_z.sin_cos();
-        let rz = Matrix2::new(c, -s, s, c);
-        let a = rz.transpose() * Matrix2::from_diagonal(&Vector2::new(g.alpha_x.powi(2), g.alpha_y.powi(2))) * rz;
-        let a = (a + a.transpose()) * 0.5;
+        let a = Self::matrix_from_params(g.alpha_x, g.alpha_y, g.theta_z);
         let det = g.alpha_x.powi(2) * g.alpha_y.powi(2);
         let a_inv = Matrix2::new(a[(1, 1)], -a[(0, 1)], -a[(1, 0)], a[(0, 0)]) / det;
         GgxMatrix { a, a_inv, sqrt_det: g.alpha_x * g.alpha_y }
+    }
+
+    /// `A = Rz^T diag(alpha_x^2, alpha_y^2) Rz` for the contract's `theta_z` (the local frame is
+    /// `m' = Rz(theta_z) m`, so `s' = Rz s` and `s'^T diag(1/alpha^2) s' = s^T A^-1 s`: Tokuyoshi eq. 15 ->
+    /// 17). Exactly symmetric. The one place the crate builds a roughness matrix from parameters.
+    pub fn matrix_from_params(alpha_x: f64, alpha_y: f64, theta_z: f64) -> Matrix2<f64> {
+        let (s, c) = theta_z.sin_cos();
+        let rz = Matrix2::new(c, -s, s, c);
+        let a = rz.transpose() * Matrix2::from_diagonal(&Vector2::new(alpha_x * alpha_x, alpha_y * alpha_y)) * rz;
+        (a + a.transpose()) * 0.5
+    }
+
+    /// Inverse of [`GgxMatrix::matrix_from_params`] in the canonical form (`alpha_x >= alpha_y`,
+    /// `theta_z` in `(-pi/2, pi/2]`, `theta_z = 0` when the alphas tie; models/canonical.rs): the
+    /// eigenvalues of `A` are `alpha^2`, the eigenvector of the larger is the local x axis. `None` when `A`
+    /// is not finite or not positive definite. No alpha range check (see [`GgxMatrix::new`]).
+    pub fn params_from_matrix(a: &Matrix2<f64>) -> Option<(f64, f64, f64)> {
+        if a.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let (_, l2, _) = sym2_eigen(&((a + a.transpose()) * 0.5));
+        // A non-positive eigenvalue has no alpha: the matrix is no roughness matrix.
+        if !(l2 > 0.0) {
+            return None;
+        }
+        Some(params_unchecked(&((a + a.transpose()) * 0.5)))
+    }
+
+    /// Eigenvalues `l1 >= l2` of a symmetric 2x2 matrix and the unit eigenvector of `l1`, in closed form
+    /// (stable when the eigenvalues differ by orders of magnitude or `A` is nearly diagonal).
+    pub fn eigen(a: &Matrix2<f64>) -> (f64, f64, Vector2<f64>) {
+        sym2_eigen(a)
     }
 
     /// The roughness matrix `A`.
@@ -69,13 +98,18 @@ impl GgxMatrix {
     /// Back to `alpha_x >= alpha_y`, `theta_z` in `(-pi/2, pi/2]` (the canonical [`Ggx`]): the eigenvalues
     /// of `A` are `alpha^2` and the eigenvector of the larger one is the local x axis.
     pub fn to_ggx(&self) -> Ggx {
-        let (l1, l2, v1) = sym2_eigen(&self.a);
-        // Local x axis in the scan frame is (cos tz, -sin tz) (row 1 of Rz), so tz = atan2(-v1.y, v1.x).
-        let tz = (-v1.y).atan2(v1.x);
-        // A is positive definite (checked in `new`); max(0) only absorbs rounding of a tiny l2.
-        let (ax, ay, tz) = canonical::canonical_aniso(l1.sqrt(), l2.max(0.0).sqrt(), tz);
+        let (ax, ay, tz) = params_unchecked(&self.a);
         Ggx { alpha_x: ax.max(ALPHA_MIN), alpha_y: ay.max(ALPHA_MIN), theta_z: tz }
     }
+}
+
+/// Canonical `(alpha_x, alpha_y, theta_z)` of a symmetric `A` whose eigenvalues are checked elsewhere.
+fn params_unchecked(a: &Matrix2<f64>) -> (f64, f64, f64) {
+    let (l1, l2, v1) = sym2_eigen(a);
+    // Local x axis in the scan frame is (cos tz, -sin tz) (row 1 of Rz), so tz = atan2(-v1.y, v1.x).
+    let tz = (-v1.y).atan2(v1.x);
+    // Callers check positive definiteness; max(0) only absorbs rounding of a tiny l2.
+    canonical::canonical_aniso(l1.max(0.0).sqrt(), l2.max(0.0).sqrt(), tz)
 }
 
 /// Eigenvalues `l1 >= l2` of a symmetric 2x2 matrix and the unit eigenvector of `l1` (closed form).
@@ -138,4 +172,34 @@ pub fn disk_to_slope_jacobian(hx: f64, hy: f64) -> Option<Matrix2<f64>> {
     }
     let hz = hz2.sqrt();
     Some(Matrix2::new(1.0 - hy * hy, hx * hy, hx * hy, 1.0 - hx * hx) * (-1.0 / (hz2 * hz)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn params_round_trip_against_nalgebra_eigen() {
+        // The closed-form eigen-decomposition against nalgebra's iterative symmetric_eigen (a second
+        // algorithm) for the larger eigenvalue (1e-12 relative) and against the construction's alpha^2 for
+        // both: the smaller one is conditioned by l1 / l2 (rounding of the entries, ~eps l1, is all of
+        // it), so 10 eps l1 / l2 relative. params -> matrix -> params recovers the canonical parameters
+        // (rounding of a 2x2 product: 1e-12).
+        for &(ax, ay, tz) in &[(0.3, 0.1, 0.6), (0.05, 0.2, -1.2), (1e-4, 10.0, 0.3), (0.5, 0.5, 0.0), (0.2, 0.19, 1.5)] {
+            let a = GgxMatrix::matrix_from_params(ax, ay, tz);
+            let e = a.symmetric_eigen();
+            let hi = e.eigenvalues.max();
+            let (l1, l2, v1) = GgxMatrix::eigen(&a);
+            let (big, small) = (f64::max(ax, ay).powi(2), f64::min(ax, ay).powi(2));
+            assert!((l1 / hi - 1.0).abs() < 1e-12 && (l1 / big - 1.0).abs() < 1e-12, "{ax} {ay} {tz}: {l1} vs {hi}");
+            assert!((l2 / small - 1.0).abs() < 10.0 * f64::EPSILON * big / small + 1e-12, "{ax} {ay} {tz}: {l2} vs {small}");
+            assert!(((a * v1) - v1 * l1).norm() < 1e-12 * hi);
+            let (bx, by, t2) = GgxMatrix::params_from_matrix(&a).unwrap();
+            assert!(bx >= by && t2.abs() <= std::f64::consts::FRAC_PI_2 + 1e-12);
+            let b = GgxMatrix::matrix_from_params(bx, by, t2);
+            assert!((a - b).norm() < 1e-12 * a.norm(), "{a} vs {b}");
+        }
+        assert!(GgxMatrix::params_from_matrix(&Matrix2::new(1.0, 0.0, 0.0, -1e-3)).is_none());
+        assert!(GgxMatrix::params_from_matrix(&Matrix2::new(f64::NAN, 0.0, 0.0, 1.0)).is_none());
+    }
 }

@@ -3,9 +3,11 @@
 use nalgebra::Matrix2;
 
 use super::footprint::{footprint_field, footprint_stats, kernel_sigma, slope_field, FootprintStats};
-use super::ndf_at::{bin_slopes, counts_on, sample_slopes, sample_slopes_with, slope_moments, Blur, SlopeMoments};
+use super::ndf_at::{
+    bin_slopes, counts_on, gaussian_slopes, sample_slopes, sample_slopes_with, slope_moments, Blur, SlopeMoments,
+};
 use super::roughness::{
-    aniso_params, filter_isotropic, filter_model, model_from_slope_form, skew_offset, slope_form, IsoRule, SlopeForm,
+    add_kernel_matrix, aniso_params, filter_isotropic, model_from_slope_form, skew_offset, slope_form, IsoRule, SlopeForm,
 };
 use crate::error::{Error, ErrorKind, Result};
 use crate::heightfield::Heightfield;
@@ -140,6 +142,30 @@ pub struct ModelAtFootprint {
     /// `||A2_emp - A2_ana|| / ||A2_emp||` (Frobenius; `mu` included as `mu mu^T` for the ellipsoid):
     /// how far the two routes' slope forms lie apart.
     pub route_gap: Option<f64>,
+    /// Why the analytic route cannot be trusted for this model at this footprint, in plain words; empty
+    /// when every condition of its theory holds (data_formats/scale.md sec. 4, "Where the analytic route
+    /// holds").
+    pub analytic_caveats: Vec<String>,
+}
+
+impl ModelAtFootprint {
+    /// The analytic route is trustworthy here: every condition of its theory holds (no caveat).
+    pub fn analytic_trusted(&self) -> bool {
+        self.analytic_caveats.is_empty()
+    }
+}
+
+/// The kernel `N(0, Sigma_F)` expressed as a GGX roughness matrix: the GGX fitted to a sample of the
+/// kernel itself (data_formats/scale.md sec. 4a). GGX's `A` is no covariance (GGX has no finite slope
+/// variance), so Tokuyoshi's `2 Sigma` is in Beckmann units; a GGX fitted to a Gaussian of roughness
+/// matrix `2 Sigma` has a roughness matrix `kappa 2 Sigma` with `kappa` about 0.55 under the Poisson
+/// deviance, and adding `2 Sigma` to a GGX base over-filters by `1 / kappa` once the kernel dominates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GgxKernel {
+    /// Roughness matrix of the GGX fitted to the kernel.
+    pub matrix: Matrix2<f64>,
+    /// `kappa = tr(matrix) / tr(2 Sigma_F)`.
+    pub ratio: f64,
 }
 
 /// Everything computed at one footprint.
@@ -162,6 +188,23 @@ pub struct FootprintResult {
     pub sigma_w_spread: f64,
     /// Where the Tokuyoshi route is not expected to match, in words (scale.md sec. 4).
     pub theory_notes: Vec<String>,
+    /// The kernel in GGX units (None when no GGX-shaped model was run, the kernel is below the alpha
+    /// range, or its fit failed; the GGX-shaped analytic routes then add Tokuyoshi's literal `2 Sigma_F`).
+    pub ggx_kernel: Option<GgxKernel>,
+    /// Independent footprints in the scan, about `n_points dx dy / (pi F^2)` (at least 1): the sample
+    /// size behind the moments of `h_F`.
+    pub n_independent: f64,
+    /// The analytic route holds for these models here (scale.md sec. 4): a plain summary.
+    pub analytic_summary: String,
+}
+
+/// Conditions of the analytic route's theory found violated at one footprint (scale.md sec. 4).
+#[derive(Debug, Clone, Default)]
+struct Violations {
+    /// Applies to every model.
+    all: Vec<String>,
+    /// Applies to GGX-shaped models only (ggx, ggx-aniso, ellipsoid).
+    ggx: Vec<String>,
 }
 
 /// Run both routes at every footprint of `opts` on a heightfield.
@@ -205,41 +248,73 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
         let tv = traces.iter().map(|t| (t - tm).powi(2)).sum::<f64>() / traces.len().max(1) as f64;
         // A footprint below the grid spacing has Sigma_w = 0 everywhere: no spread to speak of.
         let sigma_w_spread = if tm > 0.0 { tv.sqrt() / tm } else { 0.0 };
-        let mut theory_notes = Vec::new();
-        // Thresholds are indicative, not tests: a Gaussian has skewness 0; a coefficient of variation of 1
-        // is that of an exponential spread of widths.
-        if resolved.skewness > 0.3 {
+        // Independent footprints: one per kernel area pi (2 sigma_K)^2 = pi F^2 (at least one).
+        let n_independent = (stats.n_points as f64 * hf.dx * hf.dy / (std::f64::consts::PI * fp * fp)).clamp(1.0, stats.n_points.max(1) as f64);
+        // Share of the slope variance the kernel carries (S3); 0 for a flat scan.
+        let share = if stats.cov_slopes.trace() > 0.0 { (stats.sigma_f.trace() / stats.cov_slopes.trace()).clamp(0.0, 1.0) } else { 0.0 };
+        let viol = violations(&resolved, sigma_w_spread, share, opts.blur, n_independent);
+        let mut theory_notes = viol.all.clone();
+        theory_notes.extend(viol.ggx.iter().cloned());
+        let ggx_family = |id: ModelId| matches!(id, ModelId::Ggx | ModelId::GgxAniso | ModelId::Ellipsoid);
+        let ggx_kernel = match fitter {
+            Some(f) if opts.models.iter().any(|&id| ggx_family(id)) => {
+                ggx_kernel(f, &stats.sigma_f, s_res.len(), cells, seed ^ 0x6b65_726e_656c)
+            }
+            _ => None,
+        };
+        if let Some(k) = ggx_kernel {
             theory_notes.push(format!(
-                "the filtered surface's slopes are skewed (skewness {:.2}): not Gaussian, so only the ellipsoid can follow them and A + 2 Sigma is approximate",
-                resolved.skewness
-            ));
-        }
-        if sigma_w_spread > 1.0 {
-            theory_notes.push(format!(
-                "the within-footprint covariance varies strongly between footprints (coefficient of variation {sigma_w_spread:.2}): the NDF at F is a heavy-tailed mixture, one mean Sigma_F cannot reproduce it"
+                "GGX-shaped models (ggx, ggx-aniso, ellipsoid) add the kernel in their own units: the GGX fitted to the kernel N(0, Sigma_F) has kappa = {:.3} times Tokuyoshi's 2 Sigma_F (GGX's roughness is no variance)",
+                k.ratio
             ));
         }
         let mut fitted: Vec<_> = opts
             .models
             .iter()
-            .map(|&id| model_at_footprint(id, &stats, &resolved, &ndf_res, &ndf_at, (&halves.0, &halves.1), fitter))
+            .map(|&id| {
+                let kernel = if ggx_family(id) { ggx_kernel.map(|k| k.matrix) } else { None };
+                let ctx = RouteCtx { stats: &stats, resolved: &resolved, ndf_res: &ndf_res, ndf_at: &ndf_at, halves: (&halves.0, &halves.1) };
+                let mut m = model_at_footprint(id, &ctx, kernel, fitter);
+                m.0.analytic_caveats = caveats(&m.0, &viol, ggx_family(id), kernel.is_none() && stats.sigma_f.trace() > crate::models::ALPHA_MIN.powi(2));
+                m
+            })
             .collect();
         fill_ic(&mut fitted);
-        let models = fitted.into_iter().map(|(m, _)| m).collect();
-        out.push(FootprintResult { stats, at_f, resolved, pixel_roughness, models, ndf_at, sigma_w_spread, theory_notes });
+        let models: Vec<ModelAtFootprint> = fitted.into_iter().map(|(m, _)| m).collect();
+        let analytic_summary = summary(&models);
+        out.push(FootprintResult {
+            stats,
+            at_f,
+            resolved,
+            pixel_roughness,
+            models,
+            ndf_at,
+            sigma_w_spread,
+            theory_notes,
+            ggx_kernel,
+            n_independent,
+            analytic_summary,
+        });
     }
     Ok(out)
 }
 
+/// What one model's two routes need at one footprint.
+struct RouteCtx<'a> {
+    stats: &'a FootprintStats,
+    resolved: &'a SlopeMoments,
+    ndf_res: &'a EmpiricalNdf,
+    ndf_at: &'a EmpiricalNdf,
+    halves: (&'a [u64], &'a [u64]),
+}
+
 fn model_at_footprint(
     id: ModelId,
-    stats: &FootprintStats,
-    resolved: &SlopeMoments,
-    ndf_res: &EmpiricalNdf,
-    ndf_at: &EmpiricalNdf,
-    halves: (&[u64], &[u64]),
+    ctx: &RouteCtx,
+    ggx_kernel: Option<Matrix2<f64>>,
     fitter: Option<&dyn Fitter>,
 ) -> (ModelAtFootprint, Option<Fitted>) {
+    let RouteCtx { stats, resolved, ndf_res, ndf_at, halves } = *ctx;
     let delta = |m: &Model| delta(m, ndf_at, Some(halves));
     let failed = |source, e: String| RouteResult { model: None, ic: None, delta: None, source, error: Some(e) };
     let empirical = match fitter.map(|f| f.fit(ndf_at, id)) {
@@ -254,10 +329,11 @@ fn model_at_footprint(
     let (empirical, fitted) = empirical;
     // Analytic route: base model of h_F, then + 2 Sigma_F (Tokuyoshi eq. 3).
     let base = match fitter.map(|f| f.fit(ndf_res, id)) {
-        Some(Ok(f)) => Ok((f.model, "fit+kernel")),
+        Some(Ok(f)) => Ok((f.model, if ggx_kernel.is_some() { "fit+ggx-kernel" } else { "fit+kernel" })),
         // The filtered surface can be too flat to fit (its NDF narrower than any model allows): fall back
-        // on the moment estimate A = 2 Cov(s_F), the Beckmann maximum-likelihood value (scale.md sec. 4c).
-        _ => model_from_slope_form(id, &SlopeForm { a2: 2.0 * resolved.cov, mu: resolved.mean }).map(|m| (m, "moments+kernel")),
+        // on the moment estimate A = 2 Cov(s_F), the Beckmann maximum-likelihood value (scale.md sec. 4b).
+        _ => model_from_slope_form(id, &SlopeForm { a2: 2.0 * resolved.cov, mu: resolved.mean })
+            .map(|m| (m, if ggx_kernel.is_some() { "moments+ggx-kernel" } else { "moments+kernel" })),
     };
     let (analytic, tokuyoshi_iso) = match base {
         Ok((m, source)) => {
@@ -267,7 +343,9 @@ fn model_at_footprint(
                 _ => None,
             }
             .map(|a| (filter_isotropic(a, &stats.sigma_f, IsoRule::Eq10), filter_isotropic(a, &stats.sigma_f, IsoRule::Eq13)));
-            match filter_model(&m, &stats.sigma_f) {
+            // Tokuyoshi eq. 3: + 2 Sigma_F, or the same kernel in GGX units for GGX-shaped models (sec. 4a).
+            let kernel = ggx_kernel.unwrap_or(2.0 * stats.sigma_f);
+            match add_kernel_matrix(&m, &kernel) {
                 Ok(f) => (RouteResult { model: Some(f), ic: None, delta: Some(delta(&f)), source, error: None }, iso),
                 Err(e) => (failed(source, e.to_string()), iso),
             }
@@ -285,7 +363,99 @@ fn model_at_footprint(
         },
         _ => None,
     };
-    (ModelAtFootprint { id, empirical, analytic, tokuyoshi_iso, route_gap }, fitted)
+    (ModelAtFootprint { id, empirical, analytic, tokuyoshi_iso, route_gap, analytic_caveats: Vec::new() }, fitted)
+}
+
+/// The GGX fitted to `n` samples of the kernel `N(0, Sigma_F)` on `cells` bins ([`GgxKernel`]). None when
+/// the kernel is narrower than any model allows (a footprint below the grid spacing) or the fit fails.
+fn ggx_kernel(fitter: &dyn Fitter, sigma_f: &Matrix2<f64>, n: usize, cells: usize, seed: u64) -> Option<GgxKernel> {
+    let tr = sigma_f.trace();
+    // Below ALPHA_MIN^2 the kernel is a mirror: nothing to fit, and nothing to add either.
+    if !(tr.is_finite() && tr > crate::models::ALPHA_MIN.powi(2)) || n < 3 {
+        return None;
+    }
+    let ndf = bin_slopes(&gaussian_slopes(sigma_f, n, seed), Some(cells)).ok()?;
+    let m = fitter.fit(&ndf, ModelId::GgxAniso).ok()?.model;
+    let a = slope_form(&m).ok()?.a2;
+    Some(GgxKernel { matrix: a, ratio: a.trace() / (2.0 * tr) })
+}
+
+/// Indicative thresholds of the theory's conditions (scale.md sec. 4). Sampling spreads of a Gaussian's
+/// moments from `n` independent samples: skewness (whitened third-moment norm) `sqrt(12 / n)`, Mardia
+/// kurtosis `sqrt(64 / n)` around 8; a condition counts as violated only beyond 3 such spreads.
+fn violations(resolved: &SlopeMoments, spread: f64, share: f64, blur: Blur, n_indep: f64) -> Violations {
+    let mut v = Violations::default();
+    let skew_lim = 0.3 + 3.0 * (12.0 / n_indep).sqrt();
+    if resolved.skewness > skew_lim {
+        v.all.push(format!(
+            "the filtered surface's slopes are skewed (skewness {:.2} > {skew_lim:.2}): they are not Gaussian, so adding one Gaussian kernel to a fitted lobe is approximate (only the ellipsoid can follow skew)",
+            resolved.skewness
+        ));
+    }
+    // 10 is the Mardia kurtosis of a bivariate Student t with 12 degrees of freedom: clearly heavier than
+    // a Gaussian (8), so the variance Sigma_F is carried by a few steep footprints a fitted lobe ignores.
+    let kurt_lim = 10.0 + 3.0 * (64.0 / n_indep).sqrt();
+    if resolved.kurtosis > kurt_lim {
+        v.all.push(format!(
+            "the filtered surface's slopes are heavy-tailed (kurtosis {:.1} > {kurt_lim:.1}, 8 for a Gaussian): their variance, which Sigma_F measures, sits in a few steep places, while a fitted lobe follows the bulk",
+            resolved.kurtosis
+        ));
+    }
+    // Per-footprint covariances (S1) make the NDF at F a scale mixture of Gaussians. Per axis, with the
+    // resolved part Gaussian of variance R and within-footprint variances V of mean m and coefficient of
+    // variation cv: E s^4 = 3 (R + m)^2 + 3 Var V, so the excess kurtosis is 3 (cv share)^2 with
+    // share = m / (R + m) = tr Sigma_F / tr Cov(s) (cv taken from tr Sigma_w). GGX-shaped fits follow the
+    // lobe's core and react to it first: on a Gaussian surface an excess of 0.4 already opens a route gap
+    // of 0.13 for them (0.04 for Beckmann, data_formats/scale.md sec. 4b), hence 0.25 for them and 1
+    // (the excess kurtosis of a Laplace-like tail) for every model.
+    if blur == Blur::PerFootprint {
+        let excess = 3.0 * (spread * share).powi(2);
+        let words = |lim: f64| {
+            format!(
+                "the within-footprint covariance varies between footprints (coefficient of variation {spread:.2}, carrying {:.0} % of the slope variance): the NDF at F is a mixture with excess kurtosis {excess:.2} > {lim}, which one mean Sigma_F cannot reproduce",
+                100.0 * share
+            )
+        };
+        if excess > 1.0 {
+            v.all.push(words(1.0));
+        } else if excess > 0.25 {
+            v.ggx.push(words(0.25) + " (GGX-shaped models follow the core)");
+        }
+    }
+    v
+}
+
+/// The caveats of one model's analytic route: the footprint's violations plus the model's own.
+fn caveats(m: &ModelAtFootprint, v: &Violations, ggx_shaped: bool, no_kernel_fit: bool) -> Vec<String> {
+    let mut c = v.all.clone();
+    if ggx_shaped {
+        c.extend(v.ggx.iter().cloned());
+    }
+    let literal_ggx = ggx_shaped && no_kernel_fit;
+    if m.analytic.error.is_some() {
+        c.push("the analytic route failed".into());
+    } else if m.analytic.source.starts_with("moments") {
+        c.push("the filtered surface could not be fitted (too flat for the bins); its base is a moment estimate".into());
+    }
+    if literal_ggx {
+        c.push("the kernel could not be fitted in GGX units; Tokuyoshi's literal A + 2 Sigma_F over-filters a GGX lobe".into());
+    }
+    c
+}
+
+/// One sentence: for which models the analytic route holds at this footprint.
+fn summary(models: &[ModelAtFootprint]) -> String {
+    let ok: Vec<&str> = models.iter().filter(|m| m.analytic_trusted()).map(|m| m.id.as_str()).collect();
+    let bad: Vec<&str> = models.iter().filter(|m| !m.analytic_trusted()).map(|m| m.id.as_str()).collect();
+    match (ok.is_empty(), bad.is_empty()) {
+        (_, true) => "the analytic route (fit of the filtered surface plus the kernel) can be trusted for every model here".into(),
+        (true, false) => "the analytic route cannot be trusted here for any model (see each model's analytic_caveats); use the empirical route".into(),
+        (false, false) => format!(
+            "the analytic route can be trusted here for {} but not for {} (see analytic_caveats); use the empirical route for those",
+            ok.join(", "),
+            bad.join(", ")
+        ),
+    }
 }
 
 /// Fill in the QBIC of every empirical fit at one footprint (see [`qbic`]).
@@ -383,35 +553,67 @@ pub fn recommend(results: &[FootprintResult], tolerance: f64) -> Recommendation 
     let chosen = cands.iter().find(|c| c.passes).map(|c| c.model);
     let mut words = Vec::new();
     let fps: Vec<String> = results.iter().map(|r| format!("{:.3e}", r.stats.footprint)).collect();
+    let plural = |n: usize| if n == 1 { "" } else { "s" };
+    words.push(match chosen {
+        Some(m) => format!("Recommended model: {m}."),
+        None => "No model meets the tolerance.".into(),
+    });
     words.push(format!(
-        "Models were tried from simplest (fewest parameters; ties by lower information criterion) to most general, each fitted to the NDF seen at every footprint ({} m). A model passes when its error delta_model (the NDF difference of objective.md, less the histogram's counting noise) stays at or below {} at all of them.",
+        "How it was chosen: at each footprint the scene implies ({} m; a footprint is the width of one pixel on the surface) the measured surface was filtered the way a renderer sees it, and every model was fitted to the resulting NDF. A model's error is delta_model, the root-mean-square relative difference between the model's NDF and the measured one, weighted by where the normals are, after removing the histogram's own counting noise (0.1 means the model is off by about 10 %). Models were tried from the simplest (fewest parameters; ties by the lower information criterion) to the most general; the first whose error stays at or below the tolerance {} at every footprint is recommended.",
         fps.join(", "),
         tolerance
     ));
     for c in &cands {
         if Some(c.model) == chosen {
             words.push(format!(
-                "{} ({} parameter{}) is the simplest that passes: its worst error is {:.3} at {:.3e} m.",
+                "{} ({} parameter{}) is the simplest that passes: its worst error is {:.3} (about {:.0} %) at {:.3e} m.",
                 c.model,
                 c.n_params,
-                if c.n_params == 1 { "" } else { "s" },
+                plural(c.n_params),
                 c.worst_delta_model,
+                100.0 * c.worst_delta_model,
                 c.worst_footprint
             ));
             break;
         }
         if c.worst_delta_model.is_finite() {
             words.push(format!(
-                "{} was rejected: its error reaches {:.3} at {:.3e} m, above {}.",
-                c.model, c.worst_delta_model, c.worst_footprint, tolerance
+                "{} ({} parameter{}) would cost an error of {:.3} (about {:.0} %) at {:.3e} m, above the tolerance: rejected.",
+                c.model,
+                c.n_params,
+                plural(c.n_params),
+                c.worst_delta_model,
+                100.0 * c.worst_delta_model,
+                c.worst_footprint
             ));
         } else {
             words.push(format!("{} was rejected: it could not be fitted at {:.3e} m.", c.model, c.worst_footprint));
         }
     }
-    if chosen.is_none() {
-        words.push("No model meets the tolerance; raise --tolerance or use the most general model with its reported error.".into());
+    if let Some(m) = chosen {
+        let later: Vec<String> = cands
+            .iter()
+            .skip_while(|c| c.model != m)
+            .skip(1)
+            .map(|c| format!("{} ({} parameter{}, worst error {:.3})", c.model, c.n_params, plural(c.n_params), c.worst_delta_model))
+            .collect();
+        if !later.is_empty() {
+            words.push(format!(
+                "Also fitted, not needed: {}. A model with more parameters (or as many and a worse information criterion) is not chosen once a simpler one meets the tolerance.",
+                later.join(", ")
+            ));
+        }
+    } else {
+        let best = cands.iter().filter(|c| c.worst_delta_model.is_finite()).min_by(|a, b| a.worst_delta_model.total_cmp(&b.worst_delta_model));
+        match best {
+            Some(b) => words.push(format!(
+                "The smallest worst-case error is {}'s, {:.3} at {:.3e} m; raise --tolerance above it or use that model with its reported error.",
+                b.model, b.worst_delta_model, b.worst_footprint
+            )),
+            None => words.push("No model could be fitted; check the scan and the footprints.".into()),
+        }
     }
+    words.push("The blur samples use a fixed seed (--seed), so the same scan and options give the same recommendation.".into());
     Recommendation { model: chosen, tolerance, candidates: cands, explanation: words.join(" ") }
 }
 

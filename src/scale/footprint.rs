@@ -129,9 +129,9 @@ pub fn footprint_field(
 
 /// The symmetric positive semi-definite part of a symmetric 2x2 matrix (negative eigenvalues set to 0).
 pub fn psd_part(m: Matrix2<f64>) -> Matrix2<f64> {
-    let e = m.symmetric_eigen();
-    let l = e.eigenvalues.map(|v| v.max(0.0));
-    e.eigenvectors * Matrix2::from_diagonal(&l) * e.eigenvectors.transpose()
+    let (l1, l2, v1) = crate::models::GgxMatrix::eigen(&m);
+    let v2 = nalgebra::Vector2::new(-v1.y, v1.x);
+    v1 * v1.transpose() * l1.max(0.0) + v2 * v2.transpose() * l2.max(0.0)
 }
 
 /// Scalar summary of one footprint: the matrices the two routes need.

@@ -60,6 +60,17 @@ pub fn sample_slopes_with(ff: &FootprintField, per_point: usize, blur: Option<Bl
     out
 }
 
+/// `n` slopes drawn from the centred Gaussian `N(0, cov)` (seeded): the kernel of Tokuyoshi eq. 3 as a
+/// sample, so that a model can be fitted to the kernel itself (the kernel in the model's own units,
+/// data_formats/scale.md sec. 4a).
+pub fn gaussian_slopes(cov: &Matrix2<f64>, n: usize, seed: u64) -> Vec<Vector2<f64>> {
+    let l = chol2(cov);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| l * Vector2::new(rng.sample::<f64, _>(StandardNormal), rng.sample::<f64, _>(StandardNormal)))
+        .collect()
+}
+
 /// Lower Cholesky factor of a PSD 2x2 (zero where a variance is zero: a footprint with one slope).
 fn chol2(m: &Matrix2<f64>) -> Matrix2<f64> {
     let a = m[(0, 0)].max(0.0).sqrt();
@@ -81,6 +92,9 @@ pub struct SlopeMoments {
     pub cov: Matrix2<f64>,
     /// `||E[z (x) z (x) z]||_F` with `z = Cov^-1/2 (s - mean)`.
     pub skewness: f64,
+    /// Mardia's kurtosis `E[|z|^4]` of the whitened slopes: 8 for any bivariate Gaussian (its sampling
+    /// spread is `~sqrt(64 / n)`), larger for heavy tails (0 when the covariance is degenerate).
+    pub kurtosis: f64,
 }
 
 /// Moments of a slope sample.
@@ -99,19 +113,22 @@ pub fn slope_moments(s: &[Vector2<f64>]) -> Result<SlopeMoments> {
     let skewness = if e.eigenvalues.min() > 0.0 {
         let w = e.eigenvectors * Matrix2::from_diagonal(&e.eigenvalues.map(|v| 1.0 / v.sqrt())) * e.eigenvectors.transpose();
         let mut t = [0.0f64; 4]; // xxx, xxy, xyy, yyy
+        let mut q = 0.0;
         for v in s {
             let z = w * (v - mean);
+            q += z.norm_squared().powi(2);
             t[0] += z[0] * z[0] * z[0];
             t[1] += z[0] * z[0] * z[1];
             t[2] += z[0] * z[1] * z[1];
             t[3] += z[1] * z[1] * z[1];
         }
         let t = t.map(|x| x / n);
-        (t[0] * t[0] + 3.0 * t[1] * t[1] + 3.0 * t[2] * t[2] + t[3] * t[3]).sqrt()
+        ((t[0] * t[0] + 3.0 * t[1] * t[1] + 3.0 * t[2] * t[2] + t[3] * t[3]).sqrt(), q / n)
     } else {
-        0.0
+        (0.0, 0.0)
     };
-    Ok(SlopeMoments { n: s.len(), mean, cov, skewness })
+    let (skewness, kurtosis) = skewness;
+    Ok(SlopeMoments { n: s.len(), mean, cov, skewness, kurtosis })
 }
 
 /// Samples used for the robust binning frame (a strided subsample), as in `src/ndf`.

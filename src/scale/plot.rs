@@ -55,6 +55,13 @@ pub fn write_plot(path: &Path, results: &[FootprintResult]) -> Result<()> {
         let deg = |k: usize| move |m: &Model| p(m, k).map(f64::to_degrees);
         let pix: Vec<(f64, f64, f64)> =
             results.iter().filter_map(|r| r.pixel_roughness.map(|(a, b, _)| (r.stats.footprint, a, b))).collect();
+        // Footprints where the model's analytic route is flagged (analytic_caveats): hollow triangles.
+        let untrusted: Vec<f64> = results
+            .iter()
+            .filter(|r| r.models.iter().any(|m| m.id == id && !m.analytic_trusted()))
+            .map(|r| r.stats.footprint)
+            .collect();
+        let untrusted = untrusted.as_slice();
         // Panel 1: alphas.
         let mut lines: Vec<(String, Vec<(f64, f64)>, RGBColor, bool)> = vec![
             ("alpha_x empirical".into(), series(results, id, false, param(0)), BLUE, false),
@@ -66,7 +73,7 @@ pub fn write_plot(path: &Path, results: &[FootprintResult]) -> Result<()> {
         }
         lines.push(("pixel roughness (2 Sigma_F) alpha_x".into(), pix.iter().map(|p| (p.0, p.1)).collect(), RGBColor(120, 120, 120), false));
         lines.push(("pixel roughness (2 Sigma_F) alpha_y".into(), pix.iter().map(|p| (p.0, p.2)).collect(), RGBColor(190, 190, 190), false));
-        draw_panel(&panels[0], &format!("{id}: roughness vs footprint"), "alpha", (lo, hi), &lines)?;
+        draw_panel(&panels[0], &format!("{id}: roughness vs footprint (hollow triangles: analytic route not trusted)"), "alpha", (lo, hi), &lines, untrusted)?;
         // Panel 2: angles.
         let mut ang = Vec::new();
         if id == ModelId::Ellipsoid {
@@ -80,7 +87,7 @@ pub fn write_plot(path: &Path, results: &[FootprintResult]) -> Result<()> {
             ang.push(("theta_z empirical".to_string(), series(results, id, false, deg(k)), GREEN, false));
             ang.push(("theta_z analytic".to_string(), series(results, id, true, deg(k)), GREEN, true));
         }
-        draw_panel(&panels[1], &format!("{id}: angles (degrees) vs footprint"), "degrees", (lo, hi), &ang)?;
+        draw_panel(&panels[1], &format!("{id}: angles (degrees) vs footprint"), "degrees", (lo, hi), &ang, untrusted)?;
         // Panel 3: skew.
         let skew = vec![
             ("skew offset empirical".to_string(), series(results, id, false, |m| Some(model_skew(m))), BLUE, false),
@@ -92,7 +99,7 @@ pub fn write_plot(path: &Path, results: &[FootprintResult]) -> Result<()> {
                 false,
             ),
         ];
-        draw_panel(&panels[2], "skew vs footprint", "skew (scale-free)", (lo, hi), &skew)?;
+        draw_panel(&panels[2], "skew vs footprint", "skew (scale-free)", (lo, hi), &skew, untrusted)?;
         root.present().map_err(plot_err)?;
     }
     let img = image::RgbImage::from_raw(W, H, buf).ok_or_else(|| plot_err("buffer size"))?;
@@ -109,6 +116,7 @@ fn draw_panel<DB: DrawingBackend>(
     ylabel: &str,
     (lo, hi): (f64, f64),
     lines: &[Line],
+    untrusted: &[f64],
 ) -> Result<()> {
     let ys: Vec<f64> = lines.iter().flat_map(|l| l.1.iter().map(|p| p.1)).collect();
     let (mut y0, mut y1) = ys.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
@@ -143,7 +151,14 @@ fn draw_panel<DB: DrawingBackend>(
         s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(w)));
         if *analytic {
             chart
-                .draw_series(pts.iter().map(|&(x, y)| TriangleMarker::new((x, y), 5, c.filled())))
+                .draw_series(pts.iter().filter(|p| !untrusted.contains(&p.0)).map(|&(x, y)| TriangleMarker::new((x, y), 5, c.filled())))
+                .map_err(plot_err)?;
+            // TriangleMarker always fills: a hollow one is a white triangle with a coloured outline.
+            let tri = vec![(0, -6), (5, 3), (-5, 3), (0, -6)];
+            chart
+                .draw_series(pts.iter().filter(|p| untrusted.contains(&p.0)).map(|&(x, y)| {
+                    EmptyElement::at((x, y)) + Polygon::new(tri.clone(), WHITE.filled()) + PathElement::new(tri.clone(), c.stroke_width(2))
+                }))
                 .map_err(plot_err)?;
         } else {
             chart.draw_series(pts.iter().map(|&(x, y)| Circle::new((x, y), 4, c.filled()))).map_err(plot_err)?;

@@ -70,6 +70,8 @@ pub fn footprint_json(r: &FootprintResult) -> Value {
             if let Some(g) = m.route_gap {
                 o["route_gap"] = num(g);
             }
+            o["analytic_trusted"] = json!(m.analytic_trusted());
+            o["analytic_caveats"] = json!(m.analytic_caveats);
             if let Some((e10, e13)) = m.tokuyoshi_iso {
                 o["tokuyoshi_eq10_alpha"] = num(e10);
                 o["tokuyoshi_eq13_alpha"] = num(e13);
@@ -78,7 +80,7 @@ pub fn footprint_json(r: &FootprintResult) -> Value {
         })
         .collect();
     let mom = |m: &super::ndf_at::SlopeMoments| {
-        json!({"n": m.n, "mean": [m.mean[0], m.mean[1]], "cov": mat2(&m.cov), "skewness": num(m.skewness)})
+        json!({"n": m.n, "mean": [m.mean[0], m.mean[1]], "cov": mat2(&m.cov), "skewness": num(m.skewness), "kurtosis": num(m.kurtosis)})
     };
     json!({
         "footprint_m": s.footprint,
@@ -92,6 +94,9 @@ pub fn footprint_json(r: &FootprintResult) -> Value {
         "moments_resolved": mom(&r.resolved),
         "sigma_w_spread": num(r.sigma_w_spread),
         "theory_notes": r.theory_notes,
+        "n_independent": num(r.n_independent),
+        "ggx_kernel": r.ggx_kernel.map(|k| json!({"matrix": mat2(&k.matrix), "kappa": num(k.ratio)})),
+        "analytic_summary": r.analytic_summary,
         "models": models,
     })
 }
@@ -100,7 +105,7 @@ pub fn footprint_json(r: &FootprintResult) -> Value {
 pub fn report_json(input: Value, options: Value, results: &[FootprintResult], rec: Option<&Recommendation>) -> Value {
     json!({
         "schema": "ndfit.scale/1",
-        "definition": "NDF as seen at footprint F: the slopes of the low-passed surface h_F = K_F * h, each blurred by a Gaussian of its footprint's within-footprint slope covariance (data_formats/scale.md eq. S1). Empirical route: that distribution sampled, binned and fitted. Analytic route: the model fitted to h_F's NDF plus twice the mean within-footprint covariance Sigma_F in the roughness matrix (Tokuyoshi eq. 3). Kernel: Gaussian with sigma = F/2 (Tokuyoshi eq. 2). The routes agree exactly only for Beckmann on Gaussian statistics with one kernel covariance; for GGX and the ellipsoid A + 2 Sigma is an approximation (Tokuyoshi sec. 2), and varying within-footprint covariances make the NDF at F heavier-tailed than either route's single Gaussian kernel: route_gap and theory_notes say how far and why.",
+        "definition": "NDF as seen at footprint F: the slopes of the low-passed surface h_F = K_F * h, each blurred by a Gaussian of its footprint's within-footprint slope covariance (data_formats/scale.md eq. S1). Empirical route: that distribution sampled, binned and fitted. Analytic route: the model fitted to h_F's NDF plus the kernel in its roughness matrix: twice the mean within-footprint covariance Sigma_F for Beckmann (Tokuyoshi eq. 3), the GGX fitted to that Gaussian kernel for GGX-shaped models (GGX's roughness is no variance). Kernel: Gaussian with sigma = F/2 (Tokuyoshi eq. 2). The routes agree exactly only for Beckmann on Gaussian statistics with one kernel covariance; for GGX and the ellipsoid the sum is an approximation (Tokuyoshi sec. 2); skewed or heavy-tailed slopes and strongly varying within-footprint covariances break the theory. Per model and footprint, analytic_trusted and analytic_caveats say whether the analytic route can be trusted and why not; route_gap says how far the routes lie apart.",
         "input": input,
         "options": options,
         "footprints": results.iter().map(footprint_json).collect::<Vec<_>>(),

@@ -6,7 +6,7 @@ use nalgebra::{Matrix2, Matrix3, Vector2};
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::models::ellipsoid::rotation_xyz;
-use crate::models::{canonical, Beckmann, Ellipsoid, Ggx, Model, ModelId, ALPHA_MIN};
+use crate::models::{canonical, Beckmann, Ellipsoid, Ggx, GgxMatrix, Model, ModelId, ALPHA_MIN};
 
 /// A model in slope space: the roughness matrix `A2` (Tokuyoshi eq. 3, 17) and the centre `mu` of the
 /// lobe in slope space (zero except for a tilted ellipsoid, eq. S4).
@@ -18,35 +18,21 @@ pub struct SlopeForm {
     pub mu: Vector2<f64>,
 }
 
-/// `A = Rz^T diag(alpha_x^2, alpha_y^2) Rz` for the contract's `theta_z` (the local frame is
-/// `m' = Rz(theta_z) m`, so `s' = Rz s` and `s'^T diag(1/alpha^2) s' = s^T A^-1 s`; Tokuyoshi eq. 15 -> 17).
+/// `A = Rz^T diag(alpha_x^2, alpha_y^2) Rz` for the contract's `theta_z` (Tokuyoshi eq. 15 -> 17):
+/// [`GgxMatrix::matrix_from_params`], the crate's one implementation.
 pub fn aniso_matrix(alpha_x: f64, alpha_y: f64, theta_z: f64) -> Matrix2<f64> {
-    let (s, c) = theta_z.sin_cos();
-    let rz = Matrix2::new(c, -s, s, c);
-    rz.transpose() * Matrix2::new(alpha_x * alpha_x, 0.0, 0.0, alpha_y * alpha_y) * rz
+    GgxMatrix::matrix_from_params(alpha_x, alpha_y, theta_z)
 }
 
 /// Inverse of [`aniso_matrix`]: `(alpha_x, alpha_y, theta_z)` with `alpha_x >= alpha_y` and
-/// `theta_z` in `(-pi/2, pi/2]` (the canonical one of the equivalent parameterizations).
+/// `theta_z` in `(-pi/2, pi/2]` ([`GgxMatrix::params_from_matrix`]); an error when `A` is not finite or
+/// not positive definite.
 pub fn aniso_params(a: &Matrix2<f64>) -> Result<(f64, f64, f64)> {
     check_finite2(a)?;
-    let sym = 0.5 * (a + a.transpose());
-    let e = sym.symmetric_eigen();
-    let (i1, i2) = if e.eigenvalues[0] >= e.eigenvalues[1] { (0, 1) } else { (1, 0) };
-    let (l1, l2) = (e.eigenvalues[i1], e.eigenvalues[i2]);
-    if l2 <= 0.0 {
-        return Err(Error::new(ErrorKind::Numerical, format!("roughness matrix is not positive definite (eigenvalues {l1}, {l2})")));
-    }
-    // Columns of Rz^T are the eigenvectors: the first is (cos, -sin) of theta_z.
-    let v = e.eigenvectors.column(i1);
-    let mut t = (-v[1]).atan2(v[0]);
-    // An eigenvector's sign is free: fold theta_z into (-pi/2, pi/2].
-    if t > std::f64::consts::FRAC_PI_2 {
-        t -= std::f64::consts::PI;
-    } else if t <= -std::f64::consts::FRAC_PI_2 {
-        t += std::f64::consts::PI;
-    }
-    Ok((l1.sqrt(), l2.sqrt(), t))
+    GgxMatrix::params_from_matrix(a).ok_or_else(|| {
+        let (l1, l2, _) = GgxMatrix::eigen(&(0.5 * (a + a.transpose())));
+        Error::new(ErrorKind::Numerical, format!("roughness matrix is not positive definite (eigenvalues {l1}, {l2})"))
+    })
 }
 
 /// Slope form of an ellipsoid matrix A (eq. S4): with `A^T A = [[P, q], [q^T, r]]`,
@@ -125,11 +111,7 @@ pub fn filter_isotropic(alpha: f64, sigma: &Matrix2<f64>, rule: IsoRule) -> f64 
     let tr = sigma.trace();
     let add = match rule {
         IsoRule::MomentMatched => tr,
-        IsoRule::Eq10 => {
-            // Largest eigenvalue of a symmetric 2x2, closed form.
-            let d = ((sigma[(0, 0)] - sigma[(1, 1)]).powi(2) / 4.0 + sigma[(0, 1)] * sigma[(1, 0)]).max(0.0).sqrt();
-            2.0 * (tr / 2.0 + d)
-        }
+        IsoRule::Eq10 => 2.0 * GgxMatrix::eigen(&(0.5 * (sigma + sigma.transpose()))).0,
         IsoRule::Eq13 => 2.0 * tr,
     };
     (alpha * alpha + add.max(0.0)).sqrt()
@@ -140,27 +122,31 @@ pub fn filter_isotropic(alpha: f64, sigma: &Matrix2<f64>, rule: IsoRule) -> f64 
 pub fn filter_model(model: &Model, sigma: &Matrix2<f64>) -> Result<Model> {
     check_finite2(sigma)?;
     let sigma = super::footprint::psd_part(0.5 * (sigma + sigma.transpose()));
+    add_kernel_matrix(model, &(2.0 * sigma))
+}
+
+/// A model whose roughness matrix is `A2 + K` for a kernel roughness matrix `K` (symmetric PSD), `mu`
+/// unchanged (eq. S4); an isotropic model takes `alpha^2 + tr(K) / 2`. `K = 2 Sigma` is Tokuyoshi eq. 3
+/// ([`filter_model`]); for GGX-shaped models `ndfit scale` passes the GGX fitted to the kernel itself
+/// (data_formats/scale.md sec. 4a). The result has the same id.
+pub fn add_kernel_matrix(model: &Model, k: &Matrix2<f64>) -> Result<Model> {
+    check_finite2(k)?;
+    let k = super::footprint::psd_part(0.5 * (k + k.transpose()));
+    let iso = |alpha: f64| (alpha * alpha + 0.5 * k.trace()).sqrt();
     match model {
-        Model::Ggx(g) => Ok(Model::Ggx(Ggx::new(
-            filter_isotropic(g.alpha_x, &sigma, IsoRule::MomentMatched),
-            filter_isotropic(g.alpha_x, &sigma, IsoRule::MomentMatched),
-            0.0,
-        )?)),
-        Model::Beckmann(b) => {
-            let a = filter_isotropic(b.alpha_x, &sigma, IsoRule::MomentMatched);
-            Ok(Model::Beckmann(Beckmann::new(a, a, 0.0)?))
-        }
+        Model::Ggx(g) => Ok(Model::Ggx(Ggx::new(iso(g.alpha_x), iso(g.alpha_x), 0.0)?)),
+        Model::Beckmann(b) => Ok(Model::Beckmann(Beckmann::new(iso(b.alpha_x), iso(b.alpha_x), 0.0)?)),
         Model::GgxAniso(g) => {
-            let (ax, ay, t) = aniso_params(&(aniso_matrix(g.alpha_x, g.alpha_y, g.theta_z) + 2.0 * sigma))?;
+            let (ax, ay, t) = aniso_params(&(aniso_matrix(g.alpha_x, g.alpha_y, g.theta_z) + k))?;
             Ok(Model::GgxAniso(Ggx::new(ax, ay, t)?))
         }
         Model::BeckmannAniso(b) => {
-            let (ax, ay, t) = aniso_params(&(aniso_matrix(b.alpha_x, b.alpha_y, b.theta_z) + 2.0 * sigma))?;
+            let (ax, ay, t) = aniso_params(&(aniso_matrix(b.alpha_x, b.alpha_y, b.theta_z) + k))?;
             Ok(Model::BeckmannAniso(Beckmann::new(ax, ay, t)?))
         }
         Model::Ellipsoid(e) => {
             let mut f = ellipsoid_slope_form(&e.a())?;
-            f.a2 += 2.0 * sigma;
+            f.a2 += k;
             let p = ellipsoid_params_from_ata(&ellipsoid_ata(&f))?;
             Ok(Model::Ellipsoid(Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4])?))
         }
@@ -193,9 +179,11 @@ pub fn model_from_slope_form(id: ModelId, f: &SlopeForm) -> Result<Model> {
 
 /// Raise a roughness matrix's eigenvalues to `ALPHA_MIN^2`: below it a model is a mirror (models/mod.rs).
 fn floor_matrix(a: &Matrix2<f64>) -> Matrix2<f64> {
-    let e = (0.5 * (a + a.transpose())).symmetric_eigen();
-    let l = e.eigenvalues.map(|v| v.max(ALPHA_MIN * ALPHA_MIN));
-    e.eigenvectors * Matrix2::from_diagonal(&l) * e.eigenvectors.transpose()
+    let (l1, l2, v1) = GgxMatrix::eigen(&(0.5 * (a + a.transpose())));
+    // Local x axis (cos tz, -sin tz) is the eigenvector of l1 (see GgxMatrix::params_from_matrix).
+    let tz = (-v1.y).atan2(v1.x);
+    let floor = |l: f64| l.max(ALPHA_MIN * ALPHA_MIN).sqrt();
+    GgxMatrix::matrix_from_params(floor(l1), floor(l2), tz)
 }
 
 fn check_finite2(a: &Matrix2<f64>) -> Result<()> {

@@ -41,12 +41,11 @@ fn ellipsoid_scans_at_1024_squared_fit_within_half_a_percent() {
 }
 
 #[test]
-#[ignore = "KNOWN SHORTFALL (see data_formats/fit.md): these scans fit with delta 0.6%-3.4% > 0.5%"]
 fn ellipsoid_scans_rough_and_skewed_at_1024_squared() {
-    // Measured: [0.3,0.1,0.3,-0.2,0.8] 0.89%, [1.5,0.15,-0.5,0.5,-1] 3.3%, [0.1,0.05,0.55,-0.55,0.3] 0.61%.
-    // With counts replaced by the exact bin integrals of the truth on the same bins the first gives
-    // 0.19% (diagnose_midpoint_vs_estimation), so the excess comes from the NDF of the discretized scan
-    // (slope tail cut at the footprint rim), not from the fit.
+    // The grid of a synthetic cap loses the grazing normals near its footprint rim (slopes -> infinity),
+    // so the data's tail is short; the default fit region (bins within 70 deg, model normalized over
+    // them, objective.md) leaves that tail out. Measured (measure_max_theta_on_ellipsoid_scans): 0.10%,
+    // 0.34%, 0.21% here, against 0.89%, 3.3%, 0.61% with the whole hemisphere.
     for p in [[0.3, 0.1, 0.3, -0.2, 0.8], [1.5, 0.15, -0.5, 0.5, -1.0], [0.1, 0.05, 0.55, -0.55, 0.3]] {
         let (d, _) = ellipsoid_case(p, 1024, 0.0, NormalScheme::Central);
         assert!(d <= DELTA_MAX, "{p:?}: delta {d}");
@@ -119,4 +118,47 @@ fn diagnose_midpoint_vs_estimation() {
     }).sum::<f64>().sqrt();
     let est = ndfit::fit::metric::delta(|m| ndf.d_at(*m), |m| truth.d(*m), ndf.bins.iter().map(|b| (b.m, b.proj_solid_angle)));
     eprintln!("midpoint rms rel err {mid:.2e}; delta(D_emp; D_true) on bins {est:?}");
+}
+
+#[test]
+#[ignore = "measurement: the default max_theta (objective.md) from the synthetic ellipsoid scans"]
+fn measure_max_theta_on_ellipsoid_scans() {
+    use ndfit::fit::FitOptions;
+    let cases = [
+        [0.02, 0.02, 0.0, 0.0, 0.0],
+        [0.005, 0.005, 0.0, 0.0, 0.0],
+        [0.3, 0.1, 0.3, -0.2, 0.8],
+        [1.5, 0.15, -0.5, 0.5, -1.0],
+        [0.1, 0.05, 0.55, -0.55, 0.3],
+        [0.9, 0.5, 0.0, 0.0, 0.2],
+    ];
+    let thetas: Vec<f64> = std::env::var("NDFIT_THETAS").ok().map(|s| s.split(',').map(|t| t.parse().expect("theta")).collect()).unwrap_or(vec![60.0, 70.0, 75.0, 80.0, 85.0, 90.0]);
+    for p in cases {
+        let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+        let (hf, truth) = ellipsoid_surface(&settings(1024, 7), &ep).expect("synth");
+        let truth = truth.to_model().expect("truth model");
+        // NDFIT_BALANCED=1: the binning `ndfit fit` uses by default (Preset::Balanced).
+        // NDFIT_BINNING=target,maxcells: another binning.
+        let nopts = if std::env::var("NDFIT_BALANCED").is_ok() {
+            ndfit::bench::Preset::Balanced.ndf_options(hf.valid_count() as u64)
+        } else if let Ok(b) = std::env::var("NDFIT_BINNING") {
+            let v: Vec<f64> = b.split(',').map(|t| t.parse().expect("binning")).collect();
+            let o = NdfOptions { target_count: v[0], ..NdfOptions::default() };
+            NdfOptions { cells_across: Some(o.cells_for(hf.valid_count() as u64).min(v[1] as usize)), ..o }
+        } else {
+            NdfOptions::default()
+        };
+        let ndf = empirical_ndf(&hf, &nopts).expect("ndf");
+        let mut line = format!("{p:?} bins {}:", ndf.bins.len());
+        for &t in &thetas {
+            match fit_model(&ndf, ModelId::Ellipsoid, &FitOptions { max_theta: t.to_radians(), ..FitOptions::default() }) {
+                Ok(rep) => {
+                    let d = delta_to_truth(&rep.to_model().expect("model"), &truth);
+                    line += &format!(" {t}:{:.3}%", d * 100.0);
+                }
+                Err(e) => line += &format!(" {t}:FAILED({e})"),
+            }
+        }
+        eprintln!("{line}");
+    }
 }
