@@ -8,6 +8,7 @@
 use crate::error::{Error, ErrorKind, Result};
 use crate::heightfield::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, Cursor};
+use crate::io::heights;
 use crate::io::raw_opts::{spacing, z_scale};
 use crate::io::ReadOptions;
 
@@ -66,25 +67,25 @@ pub fn read_npy(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
             _ => f64::NAN,
         }
     };
-    let vals: Vec<f64> = if (endian, kind, size) == ('<', 'f', 8) {
-        // The common case (numpy's default float64) without the per-element dispatch of `value`.
-        raw.chunks_exact(8).map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * zs).collect()
-    } else {
-        raw.chunks_exact(size).map(|b| value(b) * zs).collect()
-    };
-    let z = if fortran {
-        // Column-major: element (i, j) is at j * ny + i.
-        let mut z = vec![0.0; n];
+    // One pass from the mapped file into the heights buffer (allocated once, huge pages): decode,
+    // scale, and mask infinities as NaN (what `Heightfield::new` would do in a second pass).
+    let fin = |v: f64| if v.is_infinite() { f64::NAN } else { v };
+    let mut z = heights::with_capacity(n);
+    if fortran {
+        // Column-major: element (i, j) is stored at j * ny + i; written in row-major order.
         for i in 0..ny {
-            for j in 0..nx {
-                z[i * nx + j] = vals[j * ny + i];
-            }
+            z.extend((0..nx).map(|j| {
+                let k = (j * ny + i) * size;
+                fin(value(&raw[k..k + size]) * zs)
+            }));
         }
-        z
+    } else if (endian, kind, size) == ('<', 'f', 8) {
+        // The common case (numpy's default float64) without the per-element dispatch of `value`.
+        z.extend(raw.chunks_exact(8).map(|b| fin(f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * zs)));
     } else {
-        vals
-    };
-    let mut hf = Heightfield::new(nx, ny, dx, dy, z)?;
+        z.extend(raw.chunks_exact(size).map(|b| fin(value(b) * zs)));
+    }
+    let mut hf = Heightfield::new_finite_or_nan(nx, ny, dx, dy, z)?;
     hf.meta = ScanMeta { format: "npy".into(), ..Default::default() };
     hf.meta.instrument.insert("npy.descr".into(), descr);
     Ok(hf)

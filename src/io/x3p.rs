@@ -18,6 +18,7 @@ use std::io::Read;
 use crate::error::{Error, ErrorKind, Result};
 use crate::heightfield::{Heightfield, ScanMeta};
 use crate::io::bytes::checked_size;
+use crate::io::heights;
 use crate::io::xml::{self, Element};
 
 /// Largest `main.xml` read (an inline `DataList` of a big scan can be large; this bounds memory).
@@ -296,7 +297,7 @@ pub fn decode(raw: &[u8], t: ZType, inc: f64, off: f64, crc: Option<u32>) -> Res
         if v.is_finite() { v } else { f64::NAN }
     };
     let size = t.size();
-    let mut out = Vec::with_capacity(raw.len() / size);
+    let mut out = heights::with_capacity(raw.len() / size);
     let mut hasher = crc.map(|_| crc32fast::Hasher::new());
     // 64 KiB blocks: hashed and decoded while in cache.
     for block in raw.chunks(1 << 16) {

@@ -5,5 +5,6 @@ mod formats;
 pub mod gen;
 mod peers;
 mod preprocess;
+mod npy_layouts;
 mod robust;
 mod x3p;
