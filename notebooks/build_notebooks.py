@@ -128,9 +128,10 @@ def residual_maps(bins, fits, name):
     for ax in axes[len(fits):]:
         ax.axis("off")
     for ax, (m, doc) in zip(axes, fits.items()):
+        # Residuals exist on the fit region only (bins within max_theta of n, objective.md).
         r = obj.poisson_residuals(m, doc["params"], bins)
         lim = max(3.0, np.percentile(np.abs(r), 99))
-        disk_plot(ax, bins, r, f"{name}: {m}\nF = {np.sum(r * r):.0f}", cmap="RdBu_r", vmin=-lim, vmax=lim,
+        disk_plot(ax, obj.region(bins), r, f"{name}: {m}\nF = {np.sum(r * r):.0f}", cmap="RdBu_r", vmin=-lim, vmax=lim,
                   label="signed deviance residual")
     fig.tight_layout(); plt.show()
 

@@ -4,31 +4,32 @@
 
 use super::knobs::{Binning, Knobs};
 use crate::fit::{FitOptions, Solver};
-use crate::ndf::{NdfOptions, NormalScheme};
+use crate::ndf::{NdfOptions, NormalScheme, DEFAULT_TARGET_COUNT, MAX_AUTO_CELLS};
 
-/// Mean count per bin of the NDF a fit sees. Measured (docs/PERFORMANCE.md, knobs `target_count` and
-/// `cells`): the fit error is smallest with a few thousand bins holding at least a few hundred normals
-/// each, and the fit time grows in proportion to the bin count (exponent ~1.05), so the fit's NDF is
-/// coarser than the NDF default of 64 per bin (the NDF written by `ndfit ndf` keeps that default).
+/// Mean count per bin of the `fast` preset's NDF. With the conditional objective (data_formats/objective.md)
+/// finer bins buy accuracy (docs/PERFORMANCE.md, knobs `target_count` and `cells` at 2048^2: 3221 bins
+/// give a fit error of 2.2e-3 in 7 ms of fitting, 32101 bins 9.3e-5 in 65 ms), so only `fast` coarsens.
 pub const FIT_TARGET_COUNT: f64 = 256.0;
 
-/// Most cells across the disk of the NDF a fit sees: 63 (about 3200 bins) measured as accurate as 127 and
-/// 255 on a 2048^2 scan at a quarter and a sixteenth of the fit time, so the fit's cost stops growing
-/// with the scan size.
+/// Most cells across the disk of the `fast` preset's NDF: 63 (about 3200 bins), which holds the fit's
+/// cost constant whatever the scan size.
 pub const FIT_MAX_CELLS: usize = 63;
 
 /// A named speed/accuracy trade.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Preset {
-    /// Every second point along both axes (4x fewer normals), looser solver tolerance.
+    /// Every second point along both axes (4x fewer normals), [`FIT_TARGET_COUNT`] samples per bin up
+    /// to [`FIT_MAX_CELLS`] cells across, a looser solver tolerance.
     Fast,
-    /// The knee of the front: every point, [`FIT_TARGET_COUNT`] samples per bin up to [`FIT_MAX_CELLS`]
-    /// cells across, the default solver.
+    /// What `ndfit fit` does without a preset: every point, the NDF's own binning
+    /// ([`crate::ndf::DEFAULT_TARGET_COUNT`] samples per bin up to [`crate::ndf::MAX_AUTO_CELLS`] cells
+    /// across), the default solver. The most accurate binning measured on the synthetic set.
     #[default]
     Balanced,
-    /// Triangle facets (twice the normals), a tighter tolerance and four extra ellipsoid starts (a
-    /// guard against local minima on real data; no gain on the synthetic set).
+    /// Balanced's binning with a tighter tolerance and four extra ellipsoid starts: a guard against
+    /// local minima on real data, no gain on the synthetic set. (Triangle facets measured no better
+    /// than central differences at 2048^2, so central it stays.)
     Accurate,
 }
 
@@ -50,8 +51,8 @@ impl Preset {
     pub fn knobs(self) -> PresetKnobs {
         match self {
             Preset::Fast => PresetKnobs { stride: 2, scheme: NormalScheme::Central, target_count: FIT_TARGET_COUNT, max_cells: FIT_MAX_CELLS, tol: 1e-6, extra_starts: 0 },
-            Preset::Balanced => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: FIT_TARGET_COUNT, max_cells: FIT_MAX_CELLS, tol: 1e-10, extra_starts: 0 },
-            Preset::Accurate => PresetKnobs { stride: 1, scheme: NormalScheme::Triangles, target_count: FIT_TARGET_COUNT, max_cells: FIT_MAX_CELLS, tol: 1e-12, extra_starts: 4 },
+            Preset::Balanced => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: DEFAULT_TARGET_COUNT, max_cells: MAX_AUTO_CELLS, tol: 1e-10, extra_starts: 0 },
+            Preset::Accurate => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: DEFAULT_TARGET_COUNT, max_cells: MAX_AUTO_CELLS, tol: 1e-12, extra_starts: 4 },
         }
     }
 
@@ -60,6 +61,11 @@ impl Preset {
     pub fn ndf_options(self, samples: u64) -> NdfOptions {
         let k = self.knobs();
         let auto = NdfOptions { scheme: k.scheme, cells_across: None, target_count: k.target_count, frame: None };
+        if k.max_cells >= MAX_AUTO_CELLS {
+            // The automatic choice caps there already; leaving it automatic keeps the NDF's own guards
+            // (the quantized-height cap) exactly as `ndfit fit` without a preset.
+            return auto;
+        }
         NdfOptions { cells_across: Some(auto.cells_for(samples).min(k.max_cells)), ..auto }
     }
 

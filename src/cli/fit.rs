@@ -44,7 +44,7 @@ pub struct Args {
     plot: Option<PathBuf>,
     #[command(flatten)]
     ndf: super::ndf::NdfArgs,
-    /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` is the knee). Sets the
+    /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` = the defaults). Sets the
     /// subsampling stride, the NDF's normals and bins (unless --ndf-cells), the tolerance and the starts.
     #[arg(long, value_enum)]
     preset: Option<ndfit::bench::Preset>,

@@ -125,16 +125,20 @@ fn presets_are_ordered() {
     let (f, b, a) = (Preset::Fast.knobs(), Preset::Balanced.knobs(), Preset::Accurate.knobs());
     assert!(f.stride >= b.stride && b.stride >= a.stride);
     assert!(f.tol >= b.tol && b.tol >= a.tol);
-    // Balanced is the library's fit default on a coarser NDF: FIT_TARGET_COUNT samples per bin, at
-    // most FIT_MAX_CELLS across. 2e5 samples at 256 per bin: sqrt(8e5 / (pi 256)) = 31.5 -> 32, made
-    // odd (33) by the grid; 1e8 samples would want 705, capped at 63.
-    use ndfit::bench::presets::{FIT_MAX_CELLS, FIT_TARGET_COUNT};
-    assert_eq!(FIT_TARGET_COUNT, 256.0);
-    assert_eq!(ndfit::ndf::BinGrid::new(Preset::Balanced.ndf_options(200_000).cells_across.expect("set")).n, 33);
-    assert_eq!(Preset::Balanced.ndf_options(100_000_000).cells_across, Some(FIT_MAX_CELLS));
+    // Balanced is what `ndfit fit` does by default: the NDF's own automatic grid, for any sample count.
+    for n in [10_000u64, 200_000, 1_000_000, 100_000_000] {
+        let (b, d) = (Preset::Balanced.ndf_options(n), ndfit::ndf::NdfOptions::default());
+        assert_eq!((b.cells_across, b.target_count, b.scheme), (d.cells_across, d.target_count, d.scheme), "{n}");
+    }
     assert_eq!(Preset::Balanced.ndf_options(1_000_000).scheme, NormalScheme::Central);
     assert_eq!(Preset::Balanced.fit_options(), ndfit::fit::FitOptions::default());
-    assert_eq!(Preset::Accurate.ndf_options(1_000_000).scheme, NormalScheme::Triangles);
+    // Fast coarsens: FIT_TARGET_COUNT samples per bin, at most FIT_MAX_CELLS across. 2e5 samples at 256
+    // per bin: sqrt(8e5 / (pi 256)) = 31.5 -> 32, made odd (33) by the grid; 1e8 would want 705, capped.
+    use ndfit::bench::presets::{FIT_MAX_CELLS, FIT_TARGET_COUNT};
+    assert_eq!(FIT_TARGET_COUNT, 256.0);
+    assert_eq!(ndfit::ndf::BinGrid::new(Preset::Fast.ndf_options(200_000).cells_across.expect("set")).n, 33);
+    assert_eq!(Preset::Fast.ndf_options(100_000_000).cells_across, Some(FIT_MAX_CELLS));
+    assert!(Preset::Accurate.fit_options().extra_starts > Preset::Balanced.fit_options().extra_starts);
 }
 
 /// `ndfit fit --preset` recovers the truth of a synthetic ellipsoid scan: alphas within 5 %. A 512^2 scan
