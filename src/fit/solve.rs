@@ -167,43 +167,39 @@ fn finish<S: State<Param = Vec<f64>, Float = f64>>(data: &FitData, id: ModelId, 
     Ok(Local { x, f, termination: format!("{status:?}"), converged, evaluations })
 }
 
-/// Nelder-Mead on the scaled deviance, in phases like [`lbfgs`]: argmin's simplex criterion is absolute
-/// (standard deviation of the vertex costs below `tol.rel`), which an unscaled deviance of ~1e5 never
-/// meets (it ran its 10000 iterations in the `ggx-aniso` stage: 5.7 s for one 2048^2 fit); divided by
-/// the cost at the phase's start it is relative. Each new phase rebuilds the simplex around the best
-/// point (the usual cure for a collapsed simplex).
-fn nelder_mead(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Result<Local> {
+/// The phase driver shared by the argmin solvers: each phase runs `phase(cost, x)` on the deviance
+/// divided by its value at the phase's start (see [`Cost`]), keeps the phase's best point when it is
+/// better, and stops once a phase gains less than `tol.rel` relative (or after [`PHASES`]). That makes
+/// argmin's absolute stopping criteria relative to the deviance near the optimum (the first phase's
+/// scale is set by a poor start, often 100x the optimum) and restarts a solver that stopped on a
+/// non-finite trial or a collapsed simplex.
+fn phased(
+    data: &FitData,
+    id: ModelId,
+    x0: &[f64],
+    tol: Tolerances,
+    name: &str,
+    mut phase: impl FnMut(Cost<'_>, &[f64]) -> Result<Local>,
+) -> Result<Local> {
     let evals = std::cell::Cell::new(1);
     let mut r = vec![0.0; data.bins.len()];
     let mut x = x0.to_vec();
     let mut f = residuals_into(data, id, &x, &mut r);
     if !f.is_finite() {
-        return Err(Error::new(ErrorKind::Numerical, "Nelder-Mead: the objective is not finite at the start"));
+        return Err(Error::new(ErrorKind::Numerical, format!("{name}: the objective is not finite at the start")));
     }
     let mut termination = String::new();
     let mut converged = false;
     for _ in 0..PHASES {
-        // Initial simplex: steps of 0.1 in log alpha (10%) and 0.05 rad, the scale of a rough first guess.
-        let mut simplex = vec![x.clone()];
-        for i in 0..x.len() {
-            let mut v = x.clone();
-            v[i] += if super::params::alpha_slots(id).contains(&i) { 0.1 } else { 0.05 };
-            simplex.push(v);
-        }
         // Guard: a perfect fit (f = 0) has nothing to scale by; the unit scale is then as good as any.
         let scale = if f > 0.0 { 1.0 / f } else { 1.0 };
-        let solver = NelderMead::new(simplex).with_sd_tolerance(tol.rel).map_err(arg_err)?;
-        let res = Executor::new(Cost { data, id, scale, evals: &evals }, solver)
-            .configure(|s| s.max_iters(50 * tol.max_iter as u64))
-            .run()
-            .map_err(arg_err)?;
-        let phase = finish(data, id, &res.state, evals.get())?;
-        termination = phase.termination;
-        converged = phase.converged;
-        let gained = f - phase.f;
-        if phase.f.is_finite() && gained > 0.0 {
-            x = phase.x;
-            f = phase.f;
+        let done = phase(Cost { data, id, scale, evals: &evals }, &x)?;
+        termination = done.termination;
+        converged = done.converged;
+        let gained = f - done.f;
+        if done.f.is_finite() && gained > 0.0 {
+            x = done.x;
+            f = done.f;
         }
         if !(gained > tol.rel * f) {
             break;
@@ -212,55 +208,51 @@ fn nelder_mead(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Resu
     Ok(Local { x, f, termination, converged, evaluations: evals.get() })
 }
 
+/// Nelder-Mead on the scaled deviance, in phases ([`phased`]): argmin's simplex criterion is absolute
+/// (standard deviation of the vertex costs below `tol.rel`), which an unscaled deviance of ~1e5 never
+/// meets (it ran its 10000 iterations in the `ggx-aniso` stage: 5.7 s for one 2048^2 fit); divided by
+/// the cost at the phase's start it is relative. Each new phase rebuilds the simplex around the best
+/// point (the usual cure for a collapsed simplex).
+fn nelder_mead(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Result<Local> {
+    phased(data, id, x0, tol, "Nelder-Mead", |cost, x| {
+        // Initial simplex: steps of 0.1 in log alpha (10%) and 0.05 rad, the scale of a rough first guess.
+        let mut simplex = vec![x.to_vec()];
+        for i in 0..x.len() {
+            let mut v = x.to_vec();
+            v[i] += if super::params::alpha_slots(id).contains(&i) { 0.1 } else { 0.05 };
+            simplex.push(v);
+        }
+        let evals = cost.evals;
+        let solver = NelderMead::new(simplex).with_sd_tolerance(tol.rel).map_err(arg_err)?;
+        let res = Executor::new(cost, solver).configure(|s| s.max_iters(50 * tol.max_iter as u64)).run().map_err(arg_err)?;
+        finish(data, id, &res.state, evals.get())
+    })
+}
+
 /// L-BFGS memory: 10 pairs took fewer evaluations than 5 on the bench's ellipsoid (22 + 39 against
 /// 26 + 45 cost + gradient calls; Hager-Zhang's line search took 90-140 cost calls, More-Thuente 22-48).
 const LBFGS_MEMORY: usize = 10;
 /// Most phases of L-BFGS and Nelder-Mead (each rescales the cost and restarts the solver).
 const PHASES: usize = 6;
 
-/// L-BFGS (More-Thuente line search) on the scaled deviance, in phases: each phase divides the cost by
-/// its value at the phase's start (see [`Cost`]) and stops when the scaled cost changes by less than
-/// `tol.rel` in an iteration, i.e. the deviance by less than `tol.rel` relative to where the phase
-/// began. A phase that gained less than `tol.rel` relative ends the run (converged if argmin says so);
-/// otherwise a new phase starts from its best point with a fresh scale and memory. That makes the
-/// criterion relative to the deviance near the optimum (the first phase's scale is set by a poor start,
-/// often 100x the optimum) and restarts a line search that stopped on a non-finite trial.
+/// L-BFGS (More-Thuente line search) on the scaled deviance, in phases ([`phased`]): each phase stops
+/// when the scaled cost changes by less than `tol.rel` in an iteration, i.e. the deviance by less than
+/// `tol.rel` relative to where the phase began.
 fn lbfgs(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Result<Local> {
-    let evals = std::cell::Cell::new(1);
-    let mut r = vec![0.0; data.bins.len()];
-    let mut x = x0.to_vec();
-    let mut f = residuals_into(data, id, &x, &mut r);
-    if !f.is_finite() {
-        return Err(Error::new(ErrorKind::Numerical, "L-BFGS: the objective is not finite at the start"));
-    }
-    let mut termination = String::new();
-    let mut converged = false;
-    for _ in 0..PHASES {
-        // Guard: a perfect fit (f = 0) has nothing to scale by; the unit scale is then as good as any.
-        let scale = if f > 0.0 { 1.0 / f } else { 1.0 };
+    phased(data, id, x0, tol, "L-BFGS", |cost, x| {
+        let evals = cost.evals;
         let solver = LBFGS::new(MoreThuenteLineSearch::new(), LBFGS_MEMORY)
             .with_tolerance_cost(tol.rel)
             .map_err(arg_err)?
             // The gradient criterion is off: the cost criterion above is the relative one.
             .with_tolerance_grad(0.0)
             .map_err(arg_err)?;
-        let res = Executor::new(Cost { data, id, scale, evals: &evals }, solver)
-            .configure(|s| s.param(x.clone()).max_iters(5 * tol.max_iter as u64))
+        let res = Executor::new(cost, solver)
+            .configure(|s| s.param(x.to_vec()).max_iters(5 * tol.max_iter as u64))
             .run()
             .map_err(arg_err)?;
-        let phase = finish(data, id, &res.state, evals.get())?;
-        termination = phase.termination;
-        converged = phase.converged;
-        let gained = f - phase.f;
-        if phase.f.is_finite() && gained > 0.0 {
-            x = phase.x;
-            f = phase.f;
-        }
-        if !(gained > tol.rel * f) {
-            break;
-        }
-    }
-    Ok(Local { x, f, termination, converged, evaluations: evals.get() })
+        finish(data, id, &res.state, evals.get())
+    })
 }
 
 #[cfg(test)]

@@ -246,16 +246,22 @@ pub fn gsf() -> Vec<u8> {
     b
 }
 
-/// NumPy v1 `<f8` array (rows, columns), C order.
-pub fn npy() -> Vec<u8> {
-    let dict = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({NY}, {NX}), }}");
-    let mut header = dict.into_bytes();
+/// The NumPy v1 file header (magic, version, length, dict padded to 64 bytes) for an array of `descr`.
+pub fn npy_header(descr: &str, fortran: bool, ny: usize, nx: usize) -> Vec<u8> {
+    let order = if fortran { "True" } else { "False" };
+    let mut header = format!("{{'descr': '{descr}', 'fortran_order': {order}, 'shape': ({ny}, {nx}), }}").into_bytes();
     let total = 10 + header.len() + 1;
     header.extend(std::iter::repeat_n(b' ', (64 - total % 64) % 64));
     header.push(b'\n');
     let mut b = b"\x93NUMPY\x01\x00".to_vec();
     b.extend((header.len() as u16).to_le_bytes());
     b.extend(header);
+    b
+}
+
+/// NumPy v1 `<f8` array (rows, columns), C order.
+pub fn npy() -> Vec<u8> {
+    let mut b = npy_header("<f8", false, NY, NX);
     for k in 0..NX * NY {
         let v = if is_hole(k) { f64::NAN } else { stored(k / NX, k % NX) as f64 };
         b.extend(v.to_le_bytes());

@@ -18,17 +18,7 @@ fn a(i: usize, j: usize) -> f64 {
 
 /// NPY v1 bytes of `a` on an `ny x nx` grid, with the given descr and order.
 fn npy(ny: usize, nx: usize, descr: &str, fortran: bool) -> Vec<u8> {
-    let dict = format!(
-        "{{'descr': '{descr}', 'fortran_order': {}, 'shape': ({ny}, {nx}), }}",
-        if fortran { "True" } else { "False" }
-    );
-    let mut header = dict.into_bytes();
-    let total = 10 + header.len() + 1;
-    header.extend(std::iter::repeat_n(b' ', (64 - total % 64) % 64));
-    header.push(b'\n');
-    let mut b = b"\x93NUMPY\x01\x00".to_vec();
-    b.extend((header.len() as u16).to_le_bytes());
-    b.extend(header);
+    let mut b = super::gen::npy_header(descr, fortran, ny, nx);
     let order: Vec<(usize, usize)> = if fortran {
         (0..nx).flat_map(|j| (0..ny).map(move |i| (i, j))).collect()
     } else {
