@@ -9,12 +9,19 @@ use super::lnd::LnD;
 use super::objective::{residual, FitData};
 use crate::models::ModelId;
 
+/// Bins evaluated by [`residuals_into`] since the last reset (profiling: the cost of a fit in bin
+/// evaluations, independent of the machine; one relaxed add per call).
+pub static RESIDUAL_BIN_EVALS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+/// Bins evaluated by [`jacobian_into`] since the last reset (as [`RESIDUAL_BIN_EVALS`]).
+pub static JACOBIAN_BIN_EVALS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
 /// Residuals into `r` (length = bins) at internal vector `x`; returns the objective `sum r^2`
 /// (non-finite when the model has no mass in the region).
 ///
 /// Two passes (objective.md): `ln D(m_k)` into `r`, then `ln S` and the residuals of
 /// `ln E_k = ln(N_in W_k) + ln D(m_k) - ln S`.
 pub fn residuals_into(data: &FitData, id: ModelId, x: &[f64], r: &mut [f64]) -> f64 {
+    RESIDUAL_BIN_EVALS.fetch_add(data.bins.len(), std::sync::atomic::Ordering::Relaxed);
     let f = LnD::new(id, x);
     for (rk, bin) in r.iter_mut().zip(&data.bins) {
         *rk = f.value(&bin.m);
@@ -39,6 +46,7 @@ pub fn residuals_into(data: &FitData, id: ModelId, x: &[f64], r: &mut [f64]) -> 
 /// `gbar = sum_j D_j W_j g_j / S` (the rank-one term of the conditional likelihood), so
 /// `J_k = (d r_k / d ln E_k) (g_k - gbar)`.
 pub fn jacobian_into(data: &FitData, id: ModelId, x: &[f64], r: &mut [f64], jac: &mut DMatrix<f64>) {
+    JACOBIAN_BIN_EVALS.fetch_add(data.bins.len(), std::sync::atomic::Ordering::Relaxed);
     let f = LnD::new(id, x);
     let p = x.len();
     let mut g = [0.0; 5];
