@@ -39,6 +39,9 @@ pub struct LnD {
     beckmann: bool,
     ax: f64,
     ay: f64,
+    /// `1 / ax`, `1 / ay` (multiplications in the per-bin work instead of divisions).
+    iax: f64,
+    iay: f64,
     /// `d alpha / d u` for each axis.
     gx: f64,
     gy: f64,
@@ -89,6 +92,8 @@ impl LnD {
             beckmann,
             ax,
             ay,
+            iax: 1.0 / ax,
+            iay: 1.0 / ay,
             gx: ux.exp(),
             gy: uy.exp(),
             r,
@@ -110,10 +115,10 @@ impl LnD {
         let v = self.r * m;
         if self.beckmann {
             let z2 = v.z * v.z;
-            let e = ((v.x / self.ax).powi(2) + (v.y / self.ay).powi(2)) / z2;
+            let e = ((v.x * self.iax).powi(2) + (v.y * self.iay).powi(2)) / z2;
             return self.constant - e - 2.0 * z2.ln();
         }
-        let q = (v.x / self.ax).powi(2) + (v.y / self.ay).powi(2) + v.z * v.z;
+        let q = (v.x * self.iax).powi(2) + (v.y * self.iay).powi(2) + v.z * v.z;
         self.constant - 2.0 * q.ln()
     }
 
@@ -121,25 +126,31 @@ impl LnD {
     /// (length = the model's parameter count).
     #[inline]
     pub fn value_grad(&self, m: &Vector3<f64>, grad: &mut [f64]) -> f64 {
+        self.grad(m, grad);
+        self.value(m)
+    }
+
+    /// The gradient of `ln D(m)` alone (as [`LnD::value_grad`], without the logarithm of the value:
+    /// the Jacobian reuses the residual pass's `ln D`).
+    #[inline]
+    pub fn grad(&self, m: &Vector3<f64>, grad: &mut [f64]) {
         let (ax, ay) = (self.ax, self.ay);
         let v = self.r * m;
-        let (iax2, iay2) = (1.0 / (ax * ax), 1.0 / (ay * ay));
+        let (iax2, iay2) = (self.iax * self.iax, self.iay * self.iay);
         // d lnD / d ax, d lnD / d ay, and d lnD / d v (for the angles).
-        let (val, dax, day, dv) = if self.beckmann {
+        let (dax, day, dv) = if self.beckmann {
             let z2 = v.z * v.z;
             let e = (v.x * v.x * iax2 + v.y * v.y * iay2) / z2;
-            let val = self.constant - e - 2.0 * z2.ln();
             let dax = -1.0 / ax + 2.0 * v.x * v.x * iax2 / (ax * z2);
             let day = -1.0 / ay + 2.0 * v.y * v.y * iay2 / (ay * z2);
             let dv = Vector3::new(-2.0 * v.x * iax2 / z2, -2.0 * v.y * iay2 / z2, 2.0 * e / v.z - 4.0 / v.z);
-            (val, dax, day, dv)
+            (dax, day, dv)
         } else {
             let q = v.x * v.x * iax2 + v.y * v.y * iay2 + v.z * v.z;
-            let val = self.constant - 2.0 * q.ln();
             let dax = -1.0 / ax - 0.5 * ax * self.an2_ax / self.an2 + 4.0 * v.x * v.x * iax2 / (ax * q);
             let day = -1.0 / ay - 0.5 * ay * self.an2_ay / self.an2 + 4.0 * v.y * v.y * iay2 / (ay * q);
             let dv = Vector3::new(v.x * iax2, v.y * iay2, v.z) * (-4.0 / q);
-            (val, dax, day, dv)
+            (dax, day, dv)
         };
         let dtz = dv.dot(&(self.r_tz * m));
         match self.shape {
@@ -157,6 +168,5 @@ impl LnD {
                 grad[4] = dtz;
             }
         }
-        val
     }
 }

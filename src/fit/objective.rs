@@ -60,6 +60,16 @@ pub struct Bin {
     pub ln_nw: f64,
     /// `ln c_k` (0 for an empty bin, where it is not used).
     pub ln_c: f64,
+    /// `ln W_k` (precomputed: the normalization `S` needs it at every evaluation).
+    pub ln_w: f64,
+}
+
+impl Bin {
+    /// A bin from its direction (normalized here), count `c`, projected solid angle `w` and the region's
+    /// count `n` (`N_in`).
+    pub fn new(m: Vector3<f64>, c: f64, w: f64, n: f64) -> Bin {
+        Bin { m: m.normalize(), c, w, ln_nw: (n * w).ln(), ln_c: if c > 0.0 { c.ln() } else { 0.0 }, ln_w: w.ln() }
+    }
 }
 
 /// The bins a fit uses (objective.md): the region `R` of bins with `W_k > 0` and a central direction
@@ -119,7 +129,7 @@ impl FitData {
             .filter(inside)
             .map(|b| {
                 let c = b.count as f64;
-                Bin { m: b.m.normalize(), c, w: b.proj_solid_angle, ln_nw: (n * b.proj_solid_angle).ln(), ln_c: if c > 0.0 { c.ln() } else { 0.0 } }
+                Bin::new(b.m, c, b.proj_solid_angle, n)
             })
             .collect();
         let carries = |b: &&Bin| objective == Objective::Poisson || b.c >= LOGD_MIN_COUNT;
@@ -157,7 +167,7 @@ impl FitData {
         let bins: Vec<Bin> = acc
             .into_iter()
             .filter(|a| a.1 > 0.0)
-            .map(|(c, w, m)| Bin { m: m.normalize(), c, w, ln_nw: (self.n * w).ln(), ln_c: if c > 0.0 { c.ln() } else { 0.0 } })
+            .map(|(c, w, m)| Bin::new(m, c, w, self.n))
             .collect();
         if bins.len() < min_bins {
             return None;
@@ -171,27 +181,49 @@ impl FitData {
     /// `ln S = ln sum_k D(m_k) W_k` over the region from `ln D(m_k)` (one per bin; log-sum-exp, so that
     /// no extreme lobe overflows or underflows the sum).
     pub fn ln_norm(&self, ln_d: &[f64]) -> f64 {
-        let shift = self.bins.iter().zip(ln_d).map(|(b, l)| l + b.w.ln()).fold(f64::NEG_INFINITY, f64::max);
+        let shift = self.bins.iter().zip(ln_d).map(|(b, l)| l + b.ln_w).fold(f64::NEG_INFINITY, f64::max);
         // Guard: a model with no finite mass anywhere in R; the caller reports a failed evaluation.
         if !shift.is_finite() {
             return shift;
         }
-        let s: f64 = self.bins.iter().zip(ln_d).map(|(b, l)| (l + b.w.ln() - shift).exp()).sum();
+        let s: f64 = self.bins.iter().zip(ln_d).map(|(b, l)| (l + b.ln_w - shift).exp()).sum();
         shift + s.ln()
     }
 }
 
-/// `exp(l) - 1 - l` (with `l = ln(E/c)`, `h = c (exp(l) - 1 - l)`), accurate near `l = 0` where the direct
-/// form cancels.
+/// `exp(l) - 1 - l` given `l` and `el = exp(l)` (with `l = ln(E/c)`, `h = c (exp(l) - 1 - l)`), accurate
+/// near `l = 0` where the direct form cancels: there a series in `l` alone, so no transcendental is needed
+/// when the caller already has `E` (and so `el = E / c`).
 #[inline]
-fn expm1_minus(l: f64) -> f64 {
-    if l.abs() < 1e-3 {
-        // Series; the first omitted term l^6/720 is below 1e-16 relative to l^2/2 here.
-        let l2 = l * l;
-        l2 * (0.5 + l / 6.0 + l2 / 24.0 + l2 * l / 120.0)
+fn expm1_minus(l: f64, el: f64) -> f64 {
+    if l.abs() < 0.05 {
+        // Taylor series to l^9: the first omitted term l^10/10! is below 2e-17 relative to l^2/2 here.
+        let t = 1.0 / 5040.0 + l * (1.0 / 40320.0 + l * (1.0 / 362880.0));
+        l * l * (0.5 + l * (1.0 / 6.0 + l * (1.0 / 24.0 + l * (1.0 / 120.0 + l * (1.0 / 720.0 + l * t)))))
     } else {
-        l.exp_m1() - l
+        // |l| >= 0.05: the result is >= 1.2e-3 while el carries tens of ulps (E and l may be computed
+        // apart), so the relative error stays below ~1e-11.
+        el - 1.0 - l
     }
+}
+
+/// The Poisson deviance residual of a bin with count `c` and expectation `e = E_k`, given
+/// `l = ln(E_k / c_k)` (unused at `c = 0`): `r_k` and `d r_k / d ln E_k` (objective.md).
+#[inline]
+pub fn poisson_residual(c: f64, e: f64, l: f64) -> (f64, f64) {
+    // h = E - c + c ln(c/E) = c (exp(l) - 1 - l) >= 0: accurate near l = 0 where E - c and c ln(c/E) cancel.
+    let h = if c == 0.0 {
+        e
+    } else if l < 700.0 {
+        c * expm1_minus(l, e / c)
+    } else {
+        // Guard: far above the data (l > 700) exp overflows; h is then E to all digits anyway.
+        f64::INFINITY
+    };
+    let r = if c > e { (2.0 * h).sqrt() } else { -(2.0 * h).sqrt() };
+    // dr/dlnD = (E - c)/r; at r = 0 its limit is -sqrt(c) (r ~ -(E-c)/sqrt(c) near E = c).
+    let dr = if r != 0.0 { (e - c) / r } else { -c.sqrt() };
+    (r, dr)
 }
 
 /// Residual `r_k` and `d r_k / d ln D(m_k)` for a bin given the normalized `ln D(m_k) - ln S`
@@ -201,22 +233,10 @@ pub fn residual(objective: Objective, bin: &Bin, ln_d: f64) -> (f64, f64) {
     match objective {
         Objective::Poisson => {
             let ln_e = bin.ln_nw + ln_d;
-            let c = bin.c;
-            // h = E - c + c ln(c/E) = c (exp(l) - 1 - l) >= 0 with l = ln(E/c): one exponential per bin,
-            // accurate near l = 0 where E - c and c ln(c/E) cancel.
-            let (e, h) = if c == 0.0 {
-                let e = ln_e.exp();
-                (e, e)
-            } else {
-                let l = ln_e - bin.ln_c;
-                // Guard: far above the data (l > 700) exp overflows; h is then E to all digits anyway.
-                let h = if l < 700.0 { c * expm1_minus(l) } else { f64::INFINITY };
-                (c * l.exp(), h)
-            };
-            let r = if c > e { (2.0 * h).sqrt() } else { -(2.0 * h).sqrt() };
-            // dr/dlnD = (E - c)/r; at r = 0 its limit is -sqrt(c) (r ~ -(E-c)/sqrt(c) near E = c).
-            let dr = if r != 0.0 { (e - c) / r } else { -c.sqrt() };
-            (r, dr)
+            let l = ln_e - bin.ln_c;
+            // At c = 0, l is not used and E = exp(ln E).
+            let e = if bin.c == 0.0 { ln_e.exp() } else { bin.c * l.exp() };
+            poisson_residual(bin.c, e, l)
         }
         // A region bin with too few counts for logd: no residual (it still counts in S).
         Objective::Logd if bin.c < LOGD_MIN_COUNT => (0.0, 0.0),
@@ -224,6 +244,49 @@ pub fn residual(objective: Objective, bin: &Bin, ln_d: f64) -> (f64, f64) {
             let sc = bin.c.sqrt();
             // ln d_k = ln(c_k / (N W_k)) = ln c_k - ln_nw.
             (sc * (ln_d - (bin.ln_c - bin.ln_nw)), sc)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `exp(l) - 1 - l` on both sides of the series threshold (0.05) against libm's `exp_m1(l) - l`, which
+    /// is accurate to ~2 eps / |l| relative there (a cancellation of size l against l^2/2): 1e-12 relative
+    /// covers that at |l| >= 1e-3, while a wrong series term would be off by > 1e-8.
+    #[test]
+    fn expm1_minus_matches_libm() {
+        for l in [-0.3f64, -0.0500001, -0.05, -0.0499999, -0.01, -1e-3, 1e-3, 0.01, 0.0499999, 0.05, 0.0500001, 0.3, 2.0] {
+            let want = l.exp_m1() - l;
+            let got = expm1_minus(l, l.exp());
+            assert!((got - want).abs() <= 1e-12 * want, "l = {l}: {got} vs {want}");
+        }
+        // Near 0, where exp_m1(l) - l cancels: the Taylor terms to l^4/24 (the next, l^5/120, is 1e-20
+        // relative to l^2 at l = 1e-6), so a few ulps.
+        let l = 1e-6f64;
+        assert!((expm1_minus(l, l.exp()) - l * l * (0.5 + l / 6.0 + l * l / 24.0)).abs() <= 1e-15 * l * l);
+    }
+
+    /// The Poisson residual squares to the deviance term `2 (E - c + c ln(c/E))` (objective.md), evaluated
+    /// directly, with the sign of `c - E`. The direct form cancels near `E = c` (terms of size `E + c`
+    /// summing to `h`): its rounding, ~8 eps (E + c) absolute, is the tolerance besides 1e-12 relative.
+    #[test]
+    fn poisson_residual_is_the_deviance_term() {
+        for (c, e) in [(10.0f64, 12.0f64), (10.0, 7.5), (3.0, 0.2), (1.0, 40.0), (0.0, 2.5), (100.0, 100.5)] {
+            let l = if c > 0.0 { (e / c).ln() } else { 0.0 };
+            let (r, dr) = poisson_residual(c, e, l);
+            let h = e - c + if c > 0.0 { c * (c / e).ln() } else { 0.0 };
+            let tol = 1e-12 * 2.0 * h + 16.0 * f64::EPSILON * (e + c);
+            assert!((r * r - 2.0 * h).abs() <= tol, "c {c} e {e}: r^2 {} vs {}", r * r, 2.0 * h);
+            assert_eq!(r > 0.0, c > e);
+            // dr/dlnE = (E - c)/r: checked against a central difference in l (E = c e^l scales with it).
+            if c > 0.0 {
+                let hs = 1e-6f64;
+                let rp = poisson_residual(c, e * hs.exp(), l + hs).0;
+                let rm = poisson_residual(c, e * (-hs).exp(), l - hs).0;
+                assert!(((rp - rm) / (2.0 * hs) - dr).abs() <= 1e-6 * dr.abs().max(1.0), "c {c} e {e}: {dr}");
+            }
         }
     }
 }

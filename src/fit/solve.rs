@@ -92,7 +92,7 @@ pub fn minimize(data: &FitData, id: ModelId, x0: &[f64], solver: Solver, tol: To
 }
 
 fn lm(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Result<Local> {
-    let problem = Problem { data, id, x: DVector::from_column_slice(x0) };
+    let problem = Problem::new(data, id, x0);
     let (problem, report) = LevenbergMarquardt::new()
         .with_ftol(tol.rel)
         .with_xtol(tol.rel)
@@ -100,8 +100,8 @@ fn lm(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Result<Local>
         .with_patience(tol.max_iter)
         .minimize(problem);
     let x = problem.x.as_slice().to_vec();
-    let mut r = vec![0.0; data.bins.len()];
-    let f = residuals_into(data, id, &x, &mut r);
+    // Usually the last residual pass (LM ends on an accepted step), else evaluated.
+    let f = problem.objective();
     Ok(Local {
         x,
         f,
