@@ -49,14 +49,17 @@ pub struct LnD {
     r_tx: Matrix3<f64>,
     r_ty: Matrix3<f64>,
     r_tz: Matrix3<f64>,
-    /// `||A n||^2` and its derivatives.
-    an2: f64,
-    an2_tx: f64,
-    an2_ty: f64,
-    /// `d (||A n||^2) / d ax / ax` and the same for `ay` (the factors `sy^2`, `sx^2 cy^2`).
-    an2_ax: f64,
-    an2_ay: f64,
     constant: f64,
+    /// Per-evaluation parts of the ellipsoid gradient, so the per-bin work has one division (`1/q`):
+    /// `d lnD/d ax = k_ax + c_ax v1^2 / q` with `k_ax = -1/ax - ax (d||A n||^2/d ax / ax) / (2 ||A n||^2)`,
+    /// `c_ax = 4/ax^3` (the same for `ay`), and the skew angles' `||A n||` terms
+    /// `k_tx = -(d||A n||^2/d theta_x) / (2 ||A n||^2)`, `k_ty`.
+    k_ax: f64,
+    k_ay: f64,
+    c_ax: f64,
+    c_ay: f64,
+    k_tx: f64,
+    k_ty: f64,
 }
 
 impl LnD {
@@ -87,6 +90,10 @@ impl LnD {
         let r = rotation_xyz(tx, ty, tz);
         let an2 = if beckmann { 1.0 } else { ax * ax * sy * sy + ay * ay * sx * sx * cy * cy + cx * cx * cy * cy };
         let constant = -LN_PI - ax.ln() - ay.ln() - 0.5 * an2.ln();
+        // Derivatives of ||A n||^2 by the skew angles, and by ax, ay divided by ax, ay.
+        let an2_tx = 2.0 * sx * cx * cy * cy * (ay * ay - 1.0);
+        let an2_ty = 2.0 * sy * cy * (ax * ax - ay * ay * sx * sx - cx * cx);
+        let (an2_ax, an2_ay) = (2.0 * sy * sy, 2.0 * sx * sx * cy * cy);
         LnD {
             shape,
             beckmann,
@@ -100,12 +107,13 @@ impl LnD {
             r_tx: drx * ry * rz,
             r_ty: rx * dry * rz,
             r_tz: rx * ry * drz,
-            an2,
-            an2_tx: 2.0 * sx * cx * cy * cy * (ay * ay - 1.0),
-            an2_ty: 2.0 * sy * cy * (ax * ax - ay * ay * sx * sx - cx * cx),
-            an2_ax: 2.0 * sy * sy,
-            an2_ay: 2.0 * sx * sx * cy * cy,
             constant,
+            k_ax: -1.0 / ax - 0.5 * ax * an2_ax / an2,
+            k_ay: -1.0 / ay - 0.5 * ay * an2_ay / an2,
+            c_ax: 4.0 / (ax * ax * ax),
+            c_ay: 4.0 / (ay * ay * ay),
+            k_tx: -0.5 * an2_tx / an2,
+            k_ty: -0.5 * an2_ty / an2,
         }
     }
 
@@ -147,9 +155,10 @@ impl LnD {
             (dax, day, dv)
         } else {
             let q = v.x * v.x * iax2 + v.y * v.y * iay2 + v.z * v.z;
-            let dax = -1.0 / ax - 0.5 * ax * self.an2_ax / self.an2 + 4.0 * v.x * v.x * iax2 / (ax * q);
-            let day = -1.0 / ay - 0.5 * ay * self.an2_ay / self.an2 + 4.0 * v.y * v.y * iay2 / (ay * q);
-            let dv = Vector3::new(v.x * iax2, v.y * iay2, v.z) * (-4.0 / q);
+            let iq = 1.0 / q;
+            let dax = self.k_ax + self.c_ax * v.x * v.x * iq;
+            let day = self.k_ay + self.c_ay * v.y * v.y * iq;
+            let dv = Vector3::new(v.x * iax2, v.y * iay2, v.z) * (-4.0 * iq);
             (dax, day, dv)
         };
         let dtz = dv.dot(&(self.r_tz * m));
@@ -163,8 +172,8 @@ impl LnD {
             Shape::Full => {
                 grad[0] = dax * self.gx;
                 grad[1] = day * self.gy;
-                grad[2] = dv.dot(&(self.r_tx * m)) - 0.5 * self.an2_tx / self.an2;
-                grad[3] = dv.dot(&(self.r_ty * m)) - 0.5 * self.an2_ty / self.an2;
+                grad[2] = dv.dot(&(self.r_tx * m)) + self.k_tx;
+                grad[3] = dv.dot(&(self.r_ty * m)) + self.k_ty;
                 grad[4] = dtz;
             }
         }

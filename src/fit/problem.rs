@@ -116,19 +116,19 @@ fn jacobian_pass(data: &FitData, id: ModelId, x: &[f64], jac: &mut DMatrix<f64>,
     JACOBIAN_BIN_EVALS.fetch_add(data.bins.len(), Ordering::Relaxed);
     let f = LnD::new(id, x);
     let np = x.len();
+    let nb = data.bins.len();
+    let js = jac.as_mut_slice();
     let mut g = [0.0; 5];
     let mut gbar = [0.0; 5];
-    for (k, bin) in data.bins.iter().enumerate() {
+    for (k, (bin, pk)) in data.bins.iter().zip(&ws.p).enumerate() {
         f.grad(&bin.m, &mut g[..np]);
-        let pk = ws.p[k];
         for j in 0..np {
-            jac[(k, j)] = g[j];
+            js[j * nb + k] = g[j];
             gbar[j] += pk * g[j];
         }
     }
-    for j in 0..np {
-        let gb = gbar[j];
-        for (jk, dr) in jac.column_mut(j).iter_mut().zip(&ws.dr) {
+    for (col, gb) in js.chunks_exact_mut(nb).zip(&gbar[..np]) {
+        for (jk, dr) in col.iter_mut().zip(&ws.dr) {
             *jk = dr * (*jk - gb);
         }
     }
