@@ -175,7 +175,15 @@ impl FitData {
         let carries = |b: &&Bin| self.objective == Objective::Poisson || b.c >= LOGD_MIN_COUNT;
         let k_nonzero = bins.iter().filter(carries).filter(|b| b.c > 0.0).count();
         let n_residual_bins = bins.iter().filter(carries).count();
-        (n_residual_bins > 0).then_some(FitData { bins, k_nonzero, n_residual_bins, ..self.clone() })
+        (n_residual_bins > 0).then_some(FitData {
+            bins,
+            n: self.n,
+            n_total: self.n_total,
+            k_nonzero,
+            n_residual_bins,
+            max_theta: self.max_theta,
+            objective: self.objective,
+        })
     }
 
     /// `ln S = ln sum_k D(m_k) W_k` over the region from `ln D(m_k)` (one per bin; log-sum-exp, so that
