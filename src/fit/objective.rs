@@ -93,6 +93,10 @@ pub struct FitData {
     pub max_theta: f64,
     /// The objective.
     pub objective: Objective,
+    /// Whether Levenberg-Marquardt sees compressed residuals ([`super::problem::Problem`]): set for a
+    /// region of at least [`super::problem::COMPRESS_MIN_BINS`] fine bins and inherited by its merged
+    /// bins ([`FitData::coarsened`]), so one fit's passes all solve the same way.
+    pub lm_compressed: bool,
 }
 
 impl FitData {
@@ -138,7 +142,8 @@ impl FitData {
         if n_residual_bins == 0 {
             return Err(Error::new(ErrorKind::BadData, format!("no NDF bin qualifies for the {} objective", objective.as_str())));
         }
-        Ok(FitData { bins, n, n_total, k_nonzero, n_residual_bins, max_theta, objective })
+        let lm_compressed = bins.len() >= super::problem::COMPRESS_MIN_BINS;
+        Ok(FitData { bins, n, n_total, k_nonzero, n_residual_bins, max_theta, objective, lm_compressed })
     }
 
     /// The same region on a grid twice as coarse: the fine bins of `ndf` in the region merged 2 x 2 by
@@ -183,6 +188,7 @@ impl FitData {
             n_residual_bins,
             max_theta: self.max_theta,
             objective: self.objective,
+            lm_compressed: self.lm_compressed,
         })
     }
 
