@@ -56,6 +56,12 @@ impl Preset {
         }
     }
 
+    /// Whether [`Preset::ndf_options`] needs the scan's valid count (a pass over every height): only
+    /// when the preset caps the automatic grid below the NDF's own cap.
+    pub fn needs_sample_count(self) -> bool {
+        self.knobs().max_cells < MAX_AUTO_CELLS
+    }
+
     /// The NDF options of this preset for a scan with about `samples` valid normals (the bin count is
     /// the automatic one for [`PresetKnobs::target_count`], capped at [`PresetKnobs::max_cells`]).
     pub fn ndf_options(self, samples: u64) -> NdfOptions {
