@@ -569,23 +569,57 @@ fn cheap_rule(x0: f64, x1: f64, y0: f64, y1: f64, rim: &RimShape) -> Option<&'st
 }
 
 /// `[W, omega, int p_x dW, int p_y dW]` over a rectangle inside the disk by tensor Gauss-Legendre.
+///
+/// Most cells of a grid take this rule (all but the rim), so it runs in vector registers: the `K` nodes
+/// along x of one row of nodes are evaluated together with the branch-free densities, in `K` lanes of
+/// partial sums, and on x86-64 CPUs with AVX2 the loop is compiled 4 wide (IEEE operations, no FMA, so
+/// the same results as the default 2-wide build).
 #[inline]
 fn tensor_sums(frame: &SlopeFrame, x0: f64, x1: f64, y0: f64, y1: f64, rule: &[(f64, f64)]) -> [f64; 4] {
-    let (hx, hy) = (0.5 * (x1 - x0), 0.5 * (y1 - y0));
-    let (mx, my) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
-    let mut s = [0.0; 4];
-    for &(u, wu) in rule {
-        for &(v, wv) in rule {
-            let p = [mx + hx * u, my + hy * v];
-            let wt = wu * wv * hx * hy;
-            let (dw, dom) = frame.densities(p);
-            s[0] += dw * wt;
-            s[1] += dom * wt;
-            s[2] += p[0] * dw * wt;
-            s[3] += p[1] * dw * wt;
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+            return unsafe { tensor_sums_avx2(frame, x0, x1, y0, y1, rule) };
         }
     }
-    s
+    tensor_sums_any(frame, x0, x1, y0, y1, rule)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn tensor_sums_avx2(frame: &SlopeFrame, x0: f64, x1: f64, y0: f64, y1: f64, rule: &[(f64, f64)]) -> [f64; 4] {
+    tensor_sums_any(frame, x0, x1, y0, y1, rule)
+}
+
+#[inline(always)]
+fn tensor_sums_any(frame: &SlopeFrame, x0: f64, x1: f64, y0: f64, y1: f64, rule: &[(f64, f64)]) -> [f64; 4] {
+    match rule.len() {
+        4 => tensor_sums_k::<4>(frame, x0, x1, y0, y1, rule),
+        8 => tensor_sums_k::<8>(frame, x0, x1, y0, y1, rule),
+        k => unreachable!("the cheap rules are GL4 and GL8, not {k} points"),
+    }
+}
+
+#[inline(always)]
+fn tensor_sums_k<const K: usize>(frame: &SlopeFrame, x0: f64, x1: f64, y0: f64, y1: f64, rule: &[(f64, f64)]) -> [f64; 4] {
+    let (hx, hy) = (0.5 * (x1 - x0), 0.5 * (y1 - y0));
+    let (mx, my) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let xs: [f64; K] = std::array::from_fn(|i| mx + hx * rule[i].0);
+    let wxs: [f64; K] = std::array::from_fn(|i| rule[i].1 * hx);
+    let mut s = [[0.0f64; K]; 4];
+    for &(v, wv) in &rule[..K] {
+        let (y, wy) = (my + hy * v, wv * hy);
+        for i in 0..K {
+            let (dw, dom) = frame.densities_branch_free([xs[i], y]);
+            let wt = wxs[i] * wy;
+            s[0][i] += dw * wt;
+            s[1][i] += dom * wt;
+            s[2][i] += xs[i] * dw * wt;
+            s[3][i] += y * dw * wt;
+        }
+    }
+    s.map(|lanes| lanes.iter().sum())
 }
 
 /// Bins from per-cell counts: every cell that meets the disk or holds a count, with its exact `W`, solid
