@@ -7,6 +7,7 @@
 use std::collections::BTreeMap;
 
 use crate::error::{Error, Result};
+use crate::heights::Heights;
 
 /// What a reader learned about the file besides the heights (for `ndfit info`).
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -38,8 +39,9 @@ pub struct Heightfield {
     pub x0: f64,
     /// y of row 0 in metres.
     pub y0: f64,
-    /// Heights in metres, row-major: `z[i * nx + j]`; NaN marks an invalid point.
-    pub z: Vec<f64>,
+    /// Heights in metres, row-major: `z[i * nx + j]`; NaN marks an invalid point. Derefs to `[f64]`;
+    /// may be a zero-copy view of the scan file until first written ([`Heights`]).
+    pub z: Heights,
     /// File metadata.
     pub meta: ScanMeta,
 }
@@ -63,12 +65,13 @@ impl Heightfield {
         for h in z.iter_mut().filter(|h| h.is_infinite()) {
             *h = f64::NAN;
         }
-        Ok(Heightfield { nx, ny, dx, dy, x0: 0.0, y0: 0.0, z, meta: ScanMeta::default() })
+        Ok(Heightfield { nx, ny, dx, dy, x0: 0.0, y0: 0.0, z: z.into(), meta: ScanMeta::default() })
     }
 
     /// [`Heightfield::new`] for readers whose heights are already finite or NaN (no infinities):
     /// skips the masking pass over the data, which matters for files of hundreds of megabytes.
-    pub(crate) fn new_finite_or_nan(nx: usize, ny: usize, dx: f64, dy: f64, z: Vec<f64>) -> Result<Self> {
+    pub(crate) fn new_finite_or_nan(nx: usize, ny: usize, dx: f64, dy: f64, z: impl Into<Heights>) -> Result<Self> {
+        let z: Heights = z.into();
         debug_assert!(z.iter().all(|h| !h.is_infinite()));
         let n = nx.checked_mul(ny).ok_or_else(|| Error::invalid("grid size overflows"))?;
         if nx == 0 || ny == 0 || z.len() != n {

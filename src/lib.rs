@@ -20,6 +20,7 @@ pub mod bench;
 pub mod error;
 pub mod fit;
 pub mod heightfield;
+pub mod heights;
 pub mod io;
 pub mod models;
 pub mod ndf;

@@ -67,7 +67,7 @@ pub fn apply(hf: Heightfield, pre: &Preprocess) -> Result<Heightfield> {
         FormRemoval::Polynomial(k) => form::remove_polynomial(&hf, k)?,
         FormRemoval::Cylinder => form::remove_cylinder(&hf)?.residual,
     };
-    hf.z = z;
+    hf.z = z.into();
     Ok(hf)
 }
 

@@ -2,7 +2,7 @@
 
 use crate::fit::{FitOptions, Objective, Solver, Tolerances};
 use crate::models::ModelId;
-use crate::ndf::{NdfOptions, NormalScheme, SlopeFrame};
+use crate::ndf::{NdfOptions, NormalScheme, SlopeFrame, MAX_AUTO_CELLS};
 
 /// How normals are binned on the hemisphere.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -103,13 +103,21 @@ impl Default for Knobs {
 }
 
 impl Knobs {
-    /// The NDF options of these knobs for a scan with about `samples` valid normals.
+    /// Whether [`Knobs::ndf_options`] needs the scan's valid count: only for an automatic grid capped
+    /// below the NDF's own cap (counting is a pass over every height).
+    pub fn needs_sample_count(&self) -> bool {
+        self.cells.is_none() && self.max_cells.is_some_and(|m| m < MAX_AUTO_CELLS)
+    }
+
+    /// The NDF options of these knobs for a scan with about `samples` valid normals (used only when
+    /// [`Knobs::needs_sample_count`]).
     pub fn ndf_options(&self, samples: u64) -> NdfOptions {
         let auto = NdfOptions { target_count: self.target_count, ..NdfOptions::default() };
         let cells = match (self.cells, self.max_cells) {
             (Some(c), _) => Some(c),
-            (None, Some(m)) => Some(auto.cells_for(samples).min(m)),
-            (None, None) => None,
+            (None, Some(m)) if m < MAX_AUTO_CELLS => Some(auto.cells_for(samples).min(m)),
+            // The automatic choice caps at MAX_AUTO_CELLS itself (and keeps the NDF's own guards).
+            (None, _) => None,
         };
         NdfOptions {
             scheme: self.scheme,

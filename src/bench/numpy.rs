@@ -7,7 +7,7 @@ use std::process::Command;
 use super::accuracy::RefNodes;
 use super::knobs::Knobs;
 use super::presets::Preset;
-use super::pipeline::{self, StageTimes};
+use super::pipeline::{self, Outcome, StageTimes};
 use super::scene::{Scene, DX};
 use super::sweep::median_times;
 use crate::error::{Error, ErrorKind, Result};
@@ -91,6 +91,10 @@ pub struct Comparison {
     pub ndfit_fit_delta: Option<f64>,
     /// The numpy pipeline's fit error on the same nodes (task `fit`).
     pub numpy_fit_delta: Option<f64>,
+    /// ndfit's settings: `defaults` (task `ndf`: what `ndfit ndf` does), `balanced` (task `fit`: what
+    /// `ndfit fit` does, judged against the target) or `fast` (the same numpy run against the `fast`
+    /// preset, for information: a user's cheapest choice, with both fits' errors beside it).
+    pub preset: String,
 }
 
 /// The script: `fits/numpy_pipeline.py` under the current directory, else beside the crate's sources.
@@ -122,53 +126,61 @@ pub fn run_numpy(python: &Path, script: &Path, npy: &Path, fit: bool, bins: usiz
 }
 
 /// Compare on `scene`: task `ndf` times read + NDF with the NDF defaults (what `ndfit ndf` writes),
-/// task `fit` the whole pipeline to the ellipsoid with the `balanced` preset (what `ndfit fit` does).
-pub fn compare(python: &Path, script: &Path, scene: &Scene, nodes: &RefNodes, fit: bool, repeats: usize) -> Result<Comparison> {
+/// task `fit` the whole pipeline to the ellipsoid with the `balanced` preset (what `ndfit fit` does),
+/// and then, against the same numpy run, with the `fast` preset (not judged against the target).
+pub fn compare(python: &Path, script: &Path, scene: &Scene, nodes: &RefNodes, fit: bool, repeats: usize) -> Result<Vec<Comparison>> {
     let knobs = if fit {
         Knobs { model: Some(ModelId::Ellipsoid), ..Preset::Balanced.bench_knobs(scene.size) }
     } else {
         Knobs { size: scene.size, model: None, ..Knobs::default() }
     };
+    let (t, o) = timed_runs(scene, &knobs, repeats)?;
+    // The numpy side bins into as many cells across the disk as ndfit did (at least 16, a sane histogram).
+    let bins_across = o.ndf.grid.n.max(16);
+    let np = run_numpy(python, script, &scene.path, fit, bins_across, repeats)?;
+    let theirs = np.params.as_ref().and_then(|p| {
+        let v: Option<Vec<f64>> = ModelId::Ellipsoid.param_names().iter().map(|k| p.get(*k).copied()).collect();
+        Model::from_params(ModelId::Ellipsoid, &v?).ok()
+    });
+    let numpy_fit_delta = if fit { theirs.and_then(|m| nodes.delta_model(&m, &scene.truth)) } else { None };
+    let row = |t: StageTimes, o: &Outcome, preset: &str| {
+        let ratio = if fit { np.t_total_ms / t.total() } else { np.t_ndf_ms / (t.read + t.ndf) };
+        let target = if fit { FIT_TARGET } else { NDF_TARGET };
+        let judged = preset != "fast" && scene.size == target.size;
+        Comparison {
+            task: if fit { "fit" } else { "ndf" }.into(),
+            size: scene.size,
+            ndfit: t,
+            numpy: np.clone(),
+            ratio,
+            target,
+            met: judged.then_some(ratio >= target.required),
+            ndf_grid_mpts_per_s: (scene.size * scene.size) as f64 / (t.ndf * 1e3),
+            ndf_normals_mpts_per_s: o.ndf.n_samples as f64 / (t.ndf * 1e3),
+            numpy_bins_across: bins_across,
+            ndfit_fit_delta: o.fit.as_ref().and_then(|r| r.to_model().ok()).and_then(|m| nodes.delta_model(&m, &scene.truth)),
+            numpy_fit_delta,
+            preset: preset.into(),
+        }
+    };
+    let mut out = vec![row(t, &o, if fit { "balanced" } else { "defaults" })];
+    if fit {
+        let fast = Knobs { model: Some(ModelId::Ellipsoid), ..Preset::Fast.bench_knobs(scene.size) };
+        let (tf, of) = timed_runs(scene, &fast, repeats)?;
+        out.push(row(tf, &of, "fast"));
+    }
+    Ok(out)
+}
+
+/// `repeats` runs of the pipeline: the median stage times and the last run's outcome.
+fn timed_runs(scene: &Scene, knobs: &Knobs, repeats: usize) -> Result<(StageTimes, Outcome)> {
     let ro = scene.read_options();
     let mut runs = Vec::new();
     let mut last = None;
     for _ in 0..repeats.max(1) {
-        let o = pipeline::run(&scene.path, &ro, &knobs)?;
+        let o = pipeline::run(&scene.path, &ro, knobs)?;
         runs.push(o.times);
         last = Some(o);
     }
-    let t = median_times(&runs);
-    let o = last.as_ref().expect("at least one run was made");
-    // The numpy side bins into as many cells across the disk as ndfit did (at least 16, a sane histogram).
-    let bins_across = o.ndf.grid.n.max(16);
-    let np = run_numpy(python, script, &scene.path, fit, bins_across, repeats)?;
-    let (ratio, ndfit_fit_delta, numpy_fit_delta) = if fit {
-        let mine = last.as_ref().and_then(|o| o.fit.as_ref()).and_then(|r| r.to_model().ok());
-        let theirs = np.params.as_ref().and_then(|p| {
-            let v: Option<Vec<f64>> = ModelId::Ellipsoid.param_names().iter().map(|k| p.get(*k).copied()).collect();
-            Model::from_params(ModelId::Ellipsoid, &v?).ok()
-        });
-        (
-            np.t_total_ms / t.total(),
-            mine.and_then(|m| nodes.delta_model(&m, &scene.truth)),
-            theirs.and_then(|m| nodes.delta_model(&m, &scene.truth)),
-        )
-    } else {
-        (np.t_ndf_ms / (t.read + t.ndf), None, None)
-    };
-    let target = if fit { FIT_TARGET } else { NDF_TARGET };
-    Ok(Comparison {
-        task: if fit { "fit" } else { "ndf" }.into(),
-        size: scene.size,
-        ndfit: t,
-        numpy: np,
-        ratio,
-        target,
-        met: (scene.size == target.size).then_some(ratio >= target.required),
-        ndf_grid_mpts_per_s: (scene.size * scene.size) as f64 / (t.ndf * 1e3),
-        ndf_normals_mpts_per_s: o.ndf.n_samples as f64 / (t.ndf * 1e3),
-        numpy_bins_across: bins_across,
-        ndfit_fit_delta,
-        numpy_fit_delta,
-    })
+    Ok((median_times(&runs), last.expect("at least one run was made")))
 }

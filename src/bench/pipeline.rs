@@ -94,7 +94,8 @@ pub fn run(path: &Path, read_opts: &ReadOptions, knobs: &Knobs) -> Result<Outcom
     // The bin count of a capped automatic grid needs the sample count: the valid points estimate it
     // (timed with the NDF stage, where the library's own automatic choice does the same work).
     let t = Instant::now();
-    let opts = knobs.ndf_options(hf.valid_count() as u64);
+    let samples = if knobs.needs_sample_count() { hf.valid_count() as u64 } else { 0 };
+    let opts = knobs.ndf_options(samples);
     let t_opts = ms(t);
     let ndf = match knobs.storage {
         Storage::F64 => {

@@ -6,21 +6,17 @@ use super::knobs::{Binning, Knobs};
 use crate::fit::{FitOptions, Solver};
 use crate::ndf::{NdfOptions, NormalScheme, DEFAULT_TARGET_COUNT, MAX_AUTO_CELLS};
 
-/// Mean count per bin of the `fast` preset's NDF. With the conditional objective (data_formats/objective.md)
-/// finer bins buy accuracy (docs/PERFORMANCE.md, knobs `target_count` and `cells` at 2048^2: 3221 bins
-/// give a fit error of 2.2e-3 in 7 ms of fitting, 32101 bins 9.3e-5 in 65 ms), so only `fast` coarsens.
-pub const FIT_TARGET_COUNT: f64 = 256.0;
-
-/// Most cells across the disk of the `fast` preset's NDF: 63 (about 3200 bins), which holds the fit's
-/// cost constant whatever the scan size.
-pub const FIT_MAX_CELLS: usize = 63;
+/// Subsampling stride of the `fast` preset: every fourth point along both axes (16x fewer normals).
+/// On the measured front (docs/PERFORMANCE.md) a coarser sampling of the scan buys more time per unit of
+/// error than coarser bins do, so `fast` keeps the NDF's own binning and subsamples.
+pub const FAST_STRIDE: usize = 4;
 
 /// A named speed/accuracy trade.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Preset {
-    /// Every second point along both axes (4x fewer normals), [`FIT_TARGET_COUNT`] samples per bin up
-    /// to [`FIT_MAX_CELLS`] cells across, a looser solver tolerance.
+    /// Every [`FAST_STRIDE`]-th point along both axes (16x fewer normals), the NDF's own binning for
+    /// them, a looser solver tolerance.
     Fast,
     /// What `ndfit fit` does without a preset: every point, the NDF's own binning
     /// ([`crate::ndf::DEFAULT_TARGET_COUNT`] samples per bin up to [`crate::ndf::MAX_AUTO_CELLS`] cells
@@ -50,10 +46,16 @@ impl Preset {
     /// the pipeline but properties of the job).
     pub fn knobs(self) -> PresetKnobs {
         match self {
-            Preset::Fast => PresetKnobs { stride: 2, scheme: NormalScheme::Central, target_count: FIT_TARGET_COUNT, max_cells: FIT_MAX_CELLS, tol: 1e-6, extra_starts: 0 },
+            Preset::Fast => PresetKnobs { stride: FAST_STRIDE, scheme: NormalScheme::Central, target_count: DEFAULT_TARGET_COUNT, max_cells: MAX_AUTO_CELLS, tol: 1e-6, extra_starts: 0 },
             Preset::Balanced => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: DEFAULT_TARGET_COUNT, max_cells: MAX_AUTO_CELLS, tol: 1e-10, extra_starts: 0 },
             Preset::Accurate => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: DEFAULT_TARGET_COUNT, max_cells: MAX_AUTO_CELLS, tol: 1e-12, extra_starts: 4 },
         }
+    }
+
+    /// Whether [`Preset::ndf_options`] needs the scan's valid count (a pass over every height): only
+    /// when the preset caps the automatic grid below the NDF's own cap.
+    pub fn needs_sample_count(self) -> bool {
+        self.knobs().max_cells < MAX_AUTO_CELLS
     }
 
     /// The NDF options of this preset for a scan with about `samples` valid normals (the bin count is

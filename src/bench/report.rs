@@ -79,7 +79,7 @@ fn machine(s: &Value) -> String {
 
 fn presets(rows: &[Row]) -> String {
     let mut o = String::from(
-        "| preset | knobs | bins | total ms | read | NDF | fit | peak MiB | fit delta | alpha err | angle err (rad) |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| preset | knobs | bins | total ms | read | NDF | fit | peak MiB | fit delta | alpha err | angle err (rad) |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows.iter().filter(|r| r.group.starts_with("preset_")) {
         let _ = writeln!(
@@ -162,7 +162,7 @@ fn numpy(s: &Value) -> String {
     }
     let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
     let mut o = String::from(
-        "| task | size | ndfit ms (read / NDF / fit) | numpy ms (load / gradient / histogram / fit) | bins across | ratio numpy/ndfit | target | fit delta ndfit | fit delta numpy |\n|---|---|---|---|---|---|---|---|---|\n",
+        "| task | ndfit settings | size | ndfit ms (read / NDF / fit) | numpy ms (load / gradient / histogram / fit) | bins across | ratio numpy/ndfit | target | fit delta ndfit | fit delta numpy |\n|---|---|---|---|---|---|---|---|---|\n",
     );
     for c in &cmp {
         let (n, p) = (&c["ndfit"], &c["numpy"]);
@@ -170,12 +170,14 @@ fn numpy(s: &Value) -> String {
         let verdict = match c["met"].as_bool() {
             Some(true) => "met".to_string(),
             Some(false) => "**not met**".to_string(),
+            None if c["preset"] == "fast" => "not judged (the `fast` preset, for information)".to_string(),
             None => format!("not judged (the target is at {}^2)", c["target"]["size"]),
         };
         let _ = writeln!(
             o,
-            "| {} | {}^2 | {:.0} / {:.0} / {:.0} | {:.0} / {:.0} / {:.0} / {:.0} | {} | **{:.1}x** | >= {}x{aim}: {verdict} | {} | {} |",
+            "| {} | {} | {}^2 | {:.1} / {:.1} / {:.1} | {:.0} / {:.0} / {:.0} / {:.0} | {} | **{:.1}x** | >= {}x{aim}: {verdict} | {} | {} |",
             c["task"].as_str().unwrap_or("?"),
+            c["preset"].as_str().unwrap_or("?"),
             c["size"],
             f(&n["read"]),
             f(&n["ndf"]),

@@ -213,40 +213,43 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             let scene = Scene::create(&work, size)?;
             let frame = pipeline::run(&scene.path, &scene.read_options(), &Knobs { size, model: None, ..Knobs::default() })?.ndf.frame;
             let nodes = RefNodes::new(&frame, REF_CELLS);
-            let c = compare(py, &script, &scene, &nodes, fit, plan.repeats)?;
-            eprintln!(
-                "numpy {:>4} {:>5}: ndfit {:>9.1} ms, numpy {:>9.1} ms, ratio {:.1}x (target >= {}x{} at {}^2): {}  fit_delta ndfit {} numpy {}",
-                c.task,
-                c.size,
-                if fit { c.ndfit.total() } else { c.ndfit.read + c.ndfit.ndf },
-                if fit { c.numpy.t_total_ms } else { c.numpy.t_ndf_ms },
-                c.ratio,
-                c.target.required,
-                c.target.aim.map_or(String::new(), |a| format!(", aim {a}x")),
-                c.target.size,
-                match c.met {
-                    Some(true) => "MET",
-                    Some(false) => "NOT MET",
-                    None => "not judged at this size",
-                },
-                fmt_opt(c.ndfit_fit_delta),
-                fmt_opt(c.numpy_fit_delta)
-            );
-            if !fit {
+            for c in compare(py, &script, &scene, &nodes, fit, plan.repeats)? {
                 eprintln!(
-                    "ndf throughput {:>5}: {:.1} M grid points/s ({:.1} M normals/s) in the NDF stage (target >= {} M/s at 4096^2): {}",
+                    "numpy {:>4} {:>5} ({}): ndfit {:>9.1} ms, numpy {:>9.1} ms, ratio {:.1}x (target >= {}x{} at {}^2): {}  fit_delta ndfit {} numpy {}",
+                    c.task,
                     c.size,
-                    c.ndf_grid_mpts_per_s,
-                    c.ndf_normals_mpts_per_s,
-                    THROUGHPUT_TARGET_MPTS,
-                    match (c.met, c.ndf_grid_mpts_per_s >= THROUGHPUT_TARGET_MPTS) {
-                        (None, _) => "not judged at this size",
-                        (_, true) => "MET",
-                        (_, false) => "NOT MET",
-                    }
+                    c.preset,
+                    if fit { c.ndfit.total() } else { c.ndfit.read + c.ndfit.ndf },
+                    if fit { c.numpy.t_total_ms } else { c.numpy.t_ndf_ms },
+                    c.ratio,
+                    c.target.required,
+                    c.target.aim.map_or(String::new(), |a| format!(", aim {a}x")),
+                    c.target.size,
+                    match c.met {
+                        Some(true) => "MET",
+                        Some(false) => "NOT MET",
+                        None if c.preset == "fast" => "not judged (fast preset, for information)",
+                        None => "not judged at this size",
+                    },
+                    fmt_opt(c.ndfit_fit_delta),
+                    fmt_opt(c.numpy_fit_delta)
                 );
+                if !fit {
+                    eprintln!(
+                        "ndf throughput {:>5}: {:.1} M grid points/s ({:.1} M normals/s) in the NDF stage (target >= {} M/s at 4096^2): {}",
+                        c.size,
+                        c.ndf_grid_mpts_per_s,
+                        c.ndf_normals_mpts_per_s,
+                        THROUGHPUT_TARGET_MPTS,
+                        match (c.met, c.ndf_grid_mpts_per_s >= THROUGHPUT_TARGET_MPTS) {
+                            (None, _) => "not judged at this size",
+                            (_, true) => "MET",
+                            (_, false) => "NOT MET",
+                        }
+                    );
+                }
+                comparisons.push(c);
             }
-            comparisons.push(c);
             if args.work_dir.is_none() {
                 let _ = std::fs::remove_file(&scene.path);
             }

@@ -75,7 +75,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         if p.stride() > 1 {
             hf = ndfit::preprocess::subsample(&hf, p.stride()).map_err(|e| e.with_path(&args.scan.scan))?;
         }
-        let po = p.ndf_options(hf.valid_count() as u64);
+        let po = p.ndf_options(if p.needs_sample_count() { hf.valid_count() as u64 } else { 0 });
         ndf_opts = ndfit::ndf::NdfOptions { cells_across: args.ndf.ndf_cells.or(po.cells_across), ..po };
         let pf = p.fit_options();
         opts.tolerances = pf.tolerances;

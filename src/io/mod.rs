@@ -9,7 +9,7 @@ pub mod al3d;
 pub mod atomic;
 pub mod bytes;
 pub mod gsf;
-mod heights;
+pub(crate) mod heights;
 pub mod image;
 pub mod md5;
 pub mod metropro;
@@ -207,8 +207,8 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
     if md.is_dir() {
         return Err(Error::new(ErrorKind::InvalidInput, "is a directory, not a scan file"));
     }
-    let bytes = FileBytes::open(path, md.len())?;
-    let bytes: &[u8] = &bytes;
+    let file = FileBytes::open(path, md.len())?;
+    let bytes: &[u8] = &file;
     if bytes.is_empty() {
         return Err(Error::new(ErrorKind::BadData, "file is empty"));
     }
@@ -223,7 +223,16 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
             Error::new(ErrorKind::UnknownFormat, "unknown scan format (neither its content nor its extension is recognised)")
         })?,
     };
-    let hf = read_bytes(format, bytes, opts)?;
+    // Large native float64 NPY files are read in place (zero-copy, `crate::heights`); every other case
+    // decodes into an owned buffer.
+    let mapped = match (&file, format) {
+        (FileBytes::Mapped(map), Format::Npy) => npy::read_npy_mapped(map, opts)?,
+        _ => None,
+    };
+    let hf = match mapped {
+        Some(hf) => hf,
+        None => read_bytes(format, bytes, opts)?,
+    };
     check_usable(&hf)?;
     Ok(hf)
 }
@@ -232,7 +241,7 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
 /// decode straight from the page cache).
 enum FileBytes {
     Owned(Vec<u8>),
-    Mapped(memmap2::Mmap),
+    Mapped(std::sync::Arc<memmap2::Mmap>),
 }
 
 /// Files at least this large are mapped rather than read.
@@ -250,7 +259,7 @@ impl FileBytes {
         // `populate` (MAP_POPULATE) maps every page in the one mmap call: no 4 KiB fault per page
         // while decoding (a `madvise(MADV_SEQUENTIAL)` afterwards would come too late to matter).
         let map = unsafe { memmap2::MmapOptions::new().populate().map(&file)? };
-        Ok(FileBytes::Mapped(map))
+        Ok(FileBytes::Mapped(std::sync::Arc::new(map)))
     }
 }
 

@@ -5,7 +5,12 @@
 //! `fortran_order` and `shape`, then the raw array. No units: heights need `--z-scale` and spacing
 //! `--dx`/`--dy`. NaN points are invalid.
 
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
 use crate::error::{Error, ErrorKind, Result};
+use crate::heights::Heights;
 use crate::heightfield::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, Cursor};
 use crate::io::heights;
@@ -15,8 +20,22 @@ use crate::io::ReadOptions;
 /// The NPY signature.
 pub const NPY_MAGIC: &[u8] = b"\x93NUMPY";
 
-/// Read an NPY file held in memory.
-pub fn read_npy(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
+/// What the NPY header says, with where the array's bytes start.
+struct Header {
+    descr: String,
+    endian: char,
+    kind: char,
+    size: usize,
+    fortran: bool,
+    nx: usize,
+    ny: usize,
+    /// Number of points (`nx ny`), checked against the bytes present.
+    n: usize,
+    /// Byte offset of the array in the file.
+    data: usize,
+}
+
+fn parse_header(bytes: &[u8]) -> Result<Header> {
     let mut c = Cursor::new(bytes);
     if c.take(6, "NPY magic")? != NPY_MAGIC {
         return Err(Error::corrupt("not an NPY file (bad magic)"));
@@ -44,7 +63,14 @@ pub fn read_npy(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
     };
     let (endian, kind, size) = parse_descr(&descr)?;
     let n = check_grid(nx, ny, size, c.remaining(), "NPY array")?;
-    let raw = c.take(n * size, "NPY data")?;
+    Ok(Header { descr, endian, kind, size, fortran, nx, ny, n, data: c.pos() })
+}
+
+/// Read an NPY file held in memory.
+pub fn read_npy(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
+    let h = parse_header(bytes)?;
+    let (endian, kind, size, n) = (h.endian, h.kind, h.size, h.n);
+    let raw = &bytes[h.data..h.data + n * size];
     let zs = z_scale(opts, "NPY")?;
     let (dx, dy) = spacing(opts, "NPY")?;
     let value = |b: &[u8]| -> f64 {
@@ -70,8 +96,9 @@ pub fn read_npy(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
     // One pass from the mapped file into the heights buffer (allocated once, huge pages): decode,
     // scale, and mask infinities as NaN (what `Heightfield::new` would do in a second pass).
     let fin = |v: f64| if v.is_infinite() { f64::NAN } else { v };
+    let (nx, ny) = (h.nx, h.ny);
     let mut z = heights::with_capacity(n);
-    if fortran {
+    if h.fortran {
         // Column-major: element (i, j) is stored at j * ny + i; written in row-major order.
         for i in 0..ny {
             z.extend((0..nx).map(|j| {
@@ -85,7 +112,32 @@ pub fn read_npy(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
     } else {
         z.extend(raw.chunks_exact(size).map(|b| fin(value(b) * zs)));
     }
-    let mut hf = Heightfield::new_finite_or_nan(nx, ny, dx, dy, z)?;
+    finish(Heightfield::new_finite_or_nan(nx, ny, dx, dy, z)?, h.descr)
+}
+
+/// The zero-copy read of a memory-mapped NPY file (see [`crate::heights`]): the heights are the file's
+/// bytes when the array is C-ordered little-endian float64, `--z-scale` is exactly 1 (heights already in
+/// metres), the data start is 8-byte aligned and no height is infinite (the heightfield masks those as
+/// NaN, which a read-only view cannot). `Ok(None)` when any of these fails: the caller decodes instead.
+///
+/// The infinity check is the one pass over the data, split over the rayon threads; it also touches
+/// every page the later stages read.
+pub fn read_npy_mapped(map: &Arc<memmap2::Mmap>, opts: &ReadOptions) -> Result<Option<Heightfield>> {
+    let h = parse_header(map)?;
+    let zs = z_scale(opts, "NPY")?;
+    let (dx, dy) = spacing(opts, "NPY")?;
+    if h.fortran || (h.endian, h.kind, h.size) != ('<', 'f', 8) || zs != 1.0 {
+        return Ok(None);
+    }
+    let Some(z) = Heights::mapped(map.clone(), h.data, h.n) else { return Ok(None) };
+    // Chunks of 64k values (512 KiB): enough to amortize the task, small enough to balance 2 threads.
+    if z.par_chunks(1 << 16).any(|c| c.iter().any(|v| v.is_infinite())) {
+        return Ok(None);
+    }
+    finish(Heightfield::new_finite_or_nan(h.nx, h.ny, dx, dy, z)?, h.descr).map(Some)
+}
+
+fn finish(mut hf: Heightfield, descr: String) -> Result<Heightfield> {
     hf.meta = ScanMeta { format: "npy".into(), ..Default::default() };
     hf.meta.instrument.insert("npy.descr".into(), descr);
     Ok(hf)

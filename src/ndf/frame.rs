@@ -192,6 +192,20 @@ impl SlopeFrame {
         if q > 0.0 { (self.det_unwhiten * ms[2] / (q * q), self.det_unwhiten / (q * q.sqrt())) } else { (0.0, 0.0) }
     }
 
+    /// [`SlopeFrame::densities`] without a branch (the guard is a select), so that loops over nodes
+    /// vectorize.
+    #[inline(always)]
+    pub fn densities_branch_free(&self, p: [f64; 2]) -> (f64, f64) {
+        let ms = Self::stretched_at(p);
+        let v = self.scan_vector(ms);
+        let q = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+        // Guard: q = 0 only by rounding on the rim, where both densities vanish (as in `densities`).
+        let ok = q > 0.0;
+        let qs = if ok { q } else { 1.0 };
+        let (dw, dom) = (self.det_unwhiten * ms[2] / (qs * qs), self.det_unwhiten / (qs * qs.sqrt()));
+        (if ok { dw } else { 0.0 }, if ok { dom } else { 0.0 })
+    }
+
     /// The rim zone of this frame for the bin quadrature ([`super::grid::RimShape`]).
     pub fn rim_shape(&self) -> super::grid::RimShape {
         let (a, b, c) = (self.cov[0][0], self.cov[0][1], self.cov[1][1]);

@@ -93,6 +93,12 @@ impl BinGrid {
         iy * self.n + ix
     }
 
+    /// `1 / h`: cells per unit of the Lambert coordinates.
+    #[inline(always)]
+    pub fn inv_h(&self) -> f64 {
+        self.inv_h
+    }
+
     /// `[x0, x1, y0, y1]` of cell `c`.
     pub fn bounds(&self, c: usize) -> [f64; 4] {
         let (ix, iy) = ((c % self.n) as f64, (c / self.n) as f64);

@@ -43,6 +43,7 @@ pub use quantum::HeightQuantum;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::heightfield::Heightfield;
+use frame::LAMBERT_RADIUS;
 
 /// One bin of the empirical NDF.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -143,18 +144,49 @@ impl NdfOptions {
 }
 
 /// Per-task accumulator: counts per cell and slope moments about the frame centre.
+///
+/// Counting goes through `lanes`: each cell has `2^shift` u32 counters side by side (one cache line),
+/// and consecutive samples alternate between them. Neighbouring normals of a smooth surface mostly
+/// fall in the same cell, and a single counter would chain every increment on the previous one's
+/// store (perf: 20% of the pass); interleaved counters let them overlap. They are folded into the u64
+/// `counts` at the end, or before a u32 could overflow.
 struct Acc {
     counts: Vec<u64>,
+    lanes: Vec<u32>,
+    shift: u32,
+    /// Samples counted into `lanes` since they were last folded.
+    pending: u64,
     n: u64,
     m1: [f64; 2],
     m2: [f64; 3],
 }
 
+/// Most cells for which counting uses 4 interleaved counters per cell (4 MiB of u32 per task at the
+/// 1023-cell maximum would leave the caches; the automatic grid has at most 255^2 = 65025 cells).
+const MAX_LANED_CELLS: usize = 1 << 16;
+
 impl Acc {
     fn new(cells: usize) -> Self {
-        Acc { counts: vec![0; cells], n: 0, m1: [0.0; 2], m2: [0.0; 3] }
+        let shift = if cells <= MAX_LANED_CELLS { 2 } else { 0 };
+        Acc { counts: vec![0; cells], lanes: vec![0; cells << shift], shift, pending: 0, n: 0, m1: [0.0; 2], m2: [0.0; 3] }
     }
-    fn merge(mut self, o: Acc) -> Acc {
+
+    /// Add the interleaved counters into `counts` and clear them.
+    fn fold(&mut self) {
+        if self.pending == 0 {
+            return;
+        }
+        let k = 1usize << self.shift;
+        for (c, l) in self.counts.iter_mut().zip(self.lanes.chunks_exact_mut(k)) {
+            *c += l.iter().map(|&v| v as u64).sum::<u64>();
+            l.fill(0);
+        }
+        self.pending = 0;
+    }
+
+    fn merge(mut self, mut o: Acc) -> Acc {
+        self.fold();
+        o.fold();
         for (a, b) in self.counts.iter_mut().zip(&o.counts) {
             *a += b;
         }
@@ -320,17 +352,21 @@ fn subsample<H: HeightRows>(hf: &H, scheme: NormalScheme, target: usize) -> (Vec
 /// the compiler vectorizes its square roots and divisions; counting follows in a scalar loop.
 const BLOCK: usize = 256;
 
+/// Independent partial sums of the slope moments in a block (a multiple of the widest vector, 4 f64).
+const LANES: usize = 8;
+
 struct Block {
     n: usize,
     sx: [f64; BLOCK],
     sy: [f64; BLOCK],
     px: [f64; BLOCK],
     py: [f64; BLOCK],
+    cell: [i32; BLOCK],
 }
 
 impl Block {
     fn new() -> Self {
-        Block { n: 0, sx: [0.0; BLOCK], sy: [0.0; BLOCK], px: [0.0; BLOCK], py: [0.0; BLOCK] }
+        Block { n: 0, sx: [0.0; BLOCK], sy: [0.0; BLOCK], px: [0.0; BLOCK], py: [0.0; BLOCK], cell: [0; BLOCK] }
     }
 
     /// Map the block's slopes to Lambert points (as [`SlopeFrame::to_lambert`]), count them, add the
@@ -362,7 +398,8 @@ impl Block {
         let (cx, cy) = (frame.center[0], frame.center[1]);
         let w = frame.whiten;
         let (sx, sy) = (&self.sx[..n], &self.sy[..n]);
-        let (px, py) = (&mut self.px[..n], &mut self.py[..n]);
+        let (px, py, cell) = (&mut self.px[..n], &mut self.py[..n], &mut self.cell[..n]);
+        let (r, inv_h, last, cols) = (LAMBERT_RADIUS, grid.inv_h(), (grid.n - 1) as f64, grid.n as i32);
         for k in 0..n {
             let (dx, dy) = (sx[k] - cx, sy[k] - cy);
             let (wx, wy) = (w[0][0] * dx + w[0][1] * dy, w[1][0] * dx + w[1][1] * dy);
@@ -370,29 +407,56 @@ impl Block {
             let f = (2.0 / (t + t.sqrt())).sqrt();
             px[k] = wx * f;
             py[k] = wy * f;
+            // The cell as [`BinGrid::cell_of`] finds it, in vector registers: clamped in f64 first
+            // (`max` drops a NaN), so the truncation to i32 is in range.
+            let ix = ((px[k] + r) * inv_h).max(0.0).min(last);
+            let iy = ((py[k] + r) * inv_h).max(0.0).min(last);
+            // SAFETY: ix, iy are finite and in [0, n - 1] with n <= 1023 (clamped just above).
+            cell[k] = unsafe { iy.to_int_unchecked::<i32>() * cols + ix.to_int_unchecked::<i32>() };
         }
-        let (mut a0, mut a1, mut b0, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        let (shift, mask) = (acc.shift, (1usize << acc.shift) - 1);
         for k in 0..n {
-            let mut p = [px[k], py[k]];
+            let mut c = cell[k] as usize;
             // Guard: |s'| > 1e150 overflows t (p = 0 or NaN); the exact map sends it to the rim.
-            if !(p[0] * p[0] + p[1] * p[1] > 0.0) {
-                p = frame.to_lambert(sx[k], sy[k]);
+            if !(px[k] * px[k] + py[k] * py[k] > 0.0) {
+                c = grid.cell_of(frame.to_lambert(sx[k], sy[k]));
             }
-            if let Some(c) = acc.counts.get_mut(grid.cell_of(p)) {
-                *c += 1;
-            }
-            let (dx, dy) = (sx[k] - cx, sy[k] - cy);
-            a0 += dx;
-            a1 += dy;
-            b0 += dx * dx;
-            b1 += dx * dy;
-            b2 += dy * dy;
+            acc.lanes[(c << shift) + (k & mask)] += 1;
         }
-        acc.m1[0] += a0;
-        acc.m1[1] += a1;
-        acc.m2[0] += b0;
-        acc.m2[1] += b1;
-        acc.m2[2] += b2;
+        acc.pending += n as u64;
+        // Fold long before a u32 counter could overflow (every sample in one cell and one lane).
+        if acc.pending >= u32::MAX as u64 - BLOCK as u64 {
+            acc.fold();
+        }
+        // The moments in LANES independent partial sums: a single running sum per moment would chain
+        // every addition on the previous one (latency-bound); lanes vectorize and are summed at the end.
+        let mut m = [[0.0f64; LANES]; 5];
+        let (hx, hy) = (sx.chunks_exact(LANES), sy.chunks_exact(LANES));
+        let (tx, ty) = (hx.remainder(), hy.remainder());
+        for (qx, qy) in hx.zip(hy) {
+            for l in 0..LANES {
+                let (dx, dy) = (qx[l] - cx, qy[l] - cy);
+                m[0][l] += dx;
+                m[1][l] += dy;
+                m[2][l] += dx * dx;
+                m[3][l] += dx * dy;
+                m[4][l] += dy * dy;
+            }
+        }
+        for (l, (x, y)) in tx.iter().zip(ty).enumerate() {
+            let (dx, dy) = (x - cx, y - cy);
+            m[0][l] += dx;
+            m[1][l] += dy;
+            m[2][l] += dx * dx;
+            m[3][l] += dx * dy;
+            m[4][l] += dy * dy;
+        }
+        let sum = |v: &[f64; LANES]| v.iter().sum::<f64>();
+        acc.m1[0] += sum(&m[0]);
+        acc.m1[1] += sum(&m[1]);
+        acc.m2[0] += sum(&m[2]);
+        acc.m2[1] += sum(&m[3]);
+        acc.m2[2] += sum(&m[4]);
         self.n = 0;
     }
 }
@@ -421,6 +485,7 @@ fn histogram<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame, gr
                 acc.n += valid;
             }
             blk.flush(frame, grid, &mut acc);
+            acc.fold();
             acc
         })
         .reduce(|| Acc::new(cells), Acc::merge)
@@ -504,23 +569,57 @@ fn cheap_rule(x0: f64, x1: f64, y0: f64, y1: f64, rim: &RimShape) -> Option<&'st
 }
 
 /// `[W, omega, int p_x dW, int p_y dW]` over a rectangle inside the disk by tensor Gauss-Legendre.
+///
+/// Most cells of a grid take this rule (all but the rim), so it runs in vector registers: the `K` nodes
+/// along x of one row of nodes are evaluated together with the branch-free densities, in `K` lanes of
+/// partial sums, and on x86-64 CPUs with AVX2 the loop is compiled 4 wide (IEEE operations, no FMA, so
+/// the same results as the default 2-wide build).
 #[inline]
 fn tensor_sums(frame: &SlopeFrame, x0: f64, x1: f64, y0: f64, y1: f64, rule: &[(f64, f64)]) -> [f64; 4] {
-    let (hx, hy) = (0.5 * (x1 - x0), 0.5 * (y1 - y0));
-    let (mx, my) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
-    let mut s = [0.0; 4];
-    for &(u, wu) in rule {
-        for &(v, wv) in rule {
-            let p = [mx + hx * u, my + hy * v];
-            let wt = wu * wv * hx * hy;
-            let (dw, dom) = frame.densities(p);
-            s[0] += dw * wt;
-            s[1] += dom * wt;
-            s[2] += p[0] * dw * wt;
-            s[3] += p[1] * dw * wt;
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+            return unsafe { tensor_sums_avx2(frame, x0, x1, y0, y1, rule) };
         }
     }
-    s
+    tensor_sums_any(frame, x0, x1, y0, y1, rule)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn tensor_sums_avx2(frame: &SlopeFrame, x0: f64, x1: f64, y0: f64, y1: f64, rule: &[(f64, f64)]) -> [f64; 4] {
+    tensor_sums_any(frame, x0, x1, y0, y1, rule)
+}
+
+#[inline(always)]
+fn tensor_sums_any(frame: &SlopeFrame, x0: f64, x1: f64, y0: f64, y1: f64, rule: &[(f64, f64)]) -> [f64; 4] {
+    match rule.len() {
+        4 => tensor_sums_k::<4>(frame, x0, x1, y0, y1, rule),
+        8 => tensor_sums_k::<8>(frame, x0, x1, y0, y1, rule),
+        k => unreachable!("the cheap rules are GL4 and GL8, not {k} points"),
+    }
+}
+
+#[inline(always)]
+fn tensor_sums_k<const K: usize>(frame: &SlopeFrame, x0: f64, x1: f64, y0: f64, y1: f64, rule: &[(f64, f64)]) -> [f64; 4] {
+    let (hx, hy) = (0.5 * (x1 - x0), 0.5 * (y1 - y0));
+    let (mx, my) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let xs: [f64; K] = std::array::from_fn(|i| mx + hx * rule[i].0);
+    let wxs: [f64; K] = std::array::from_fn(|i| rule[i].1 * hx);
+    let mut s = [[0.0f64; K]; 4];
+    for &(v, wv) in &rule[..K] {
+        let (y, wy) = (my + hy * v, wv * hy);
+        for i in 0..K {
+            let (dw, dom) = frame.densities_branch_free([xs[i], y]);
+            let wt = wxs[i] * wy;
+            s[0][i] += dw * wt;
+            s[1][i] += dom * wt;
+            s[2][i] += xs[i] * dw * wt;
+            s[3][i] += y * dw * wt;
+        }
+    }
+    s.map(|lanes| lanes.iter().sum())
 }
 
 /// Bins from per-cell counts: every cell that meets the disk or holds a count, with its exact `W`, solid
@@ -715,6 +814,22 @@ mod tests {
 
     /// The blocked, vectorized mapping agrees with the scalar `to_lambert` cell by cell, including
     /// slopes so large that `t = 1 + |s'|^2` overflows (they go to the rim, not to the centre).
+    #[test]
+    fn interleaved_counters_fold_into_counts() {
+        for cells in [9, MAX_LANED_CELLS + 1] {
+            let mut acc = Acc::new(cells);
+            let k = 1usize << acc.shift;
+            // 3 samples in cell 2 spread over lanes, 5 in the last cell in one lane.
+            for (c, lane, v) in [(2, 0, 1u32), (2, k - 1, 2), (cells - 1, 0, 5)] {
+                acc.lanes[c * k + lane] += v;
+            }
+            acc.pending = 8;
+            acc.fold();
+            assert_eq!((acc.counts[2], acc.counts[cells - 1], acc.counts.iter().sum::<u64>()), (3, 5, 8));
+            assert!(acc.lanes.iter().all(|&v| v == 0) && acc.pending == 0);
+        }
+    }
+
     #[test]
     fn blocked_mapping_matches_scalar() {
         let nx = 40;

@@ -7,6 +7,7 @@
 //! sub-micrometre roughness). NaN points take no part in the fit and stay NaN.
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::heightfield::Heightfield;
@@ -38,8 +39,19 @@ fn scaled(k: usize, n: usize) -> f64 {
     }
 }
 
+/// Rows per task of the parallel passes. Fixed (not derived from the thread count) and summed in row
+/// order, so the fit is bit-identical whatever the number of threads (batch results must be).
+const ROWS_PER_TASK: usize = 16;
+
+/// Most terms of a polynomial form (order 3: 10).
+const MAX_TERMS: usize = 10;
+
 /// The least-squares polynomial of total degree `order` (0..=3) fitted to the valid heights, evaluated
 /// on the whole grid (NaN where the input is NaN). Returns the residual heights.
+///
+/// Three passes over the heights, each split over the rayon threads by blocks of [`ROWS_PER_TASK`]
+/// rows: the count and mean of the valid heights, the normal equations (fixed-size, upper triangle),
+/// and the residuals.
 pub fn remove_polynomial(hf: &Heightfield, order: usize) -> Result<Vec<f64>> {
     if order > 3 {
         return Err(Error::invalid(format!("polynomial form order {order} is above 3")));
@@ -50,34 +62,60 @@ pub fn remove_polynomial(hf: &Heightfield, order: usize) -> Result<Vec<f64>> {
     let t: Vec<(usize, usize)> =
         all.into_iter().filter(|&(p, q)| (p == 0 || hf.nx > 1) && (q == 0 || hf.ny > 1)).collect();
     let m = t.len();
-    let valid = hf.valid_count();
+    let nx = hf.nx;
+    let blocks = |rows: std::ops::Range<usize>| rows.step_by(ROWS_PER_TASK).collect::<Vec<usize>>();
+    let starts = blocks(0..hf.ny);
+    let rows_of = |i0: usize| i0..(i0 + ROWS_PER_TASK).min(hf.ny);
+    let sums: Vec<(usize, f64)> = starts
+        .par_iter()
+        .map(|&i0| {
+            let z = &hf.z[i0 * nx..rows_of(i0).end * nx];
+            z.iter().filter(|h| !h.is_nan()).fold((0usize, 0.0), |(c, s), h| (c + 1, s + h))
+        })
+        .collect();
+    let valid: usize = sums.iter().map(|p| p.0).sum();
     if valid < m {
         return Err(Error::new(
             ErrorKind::BadData,
             format!("{valid} valid points cannot determine a {m}-term form of order {order}"),
         ));
     }
-    let mean = hf.z.iter().filter(|h| !h.is_nan()).sum::<f64>() / valid as f64;
+    let mean = sums.iter().map(|p| p.1).sum::<f64>() / valid as f64;
     let lu: Vec<[f64; 4]> = (0..hf.nx).map(|j| legendre(scaled(j, hf.nx))).collect();
     let lv: Vec<[f64; 4]> = (0..hf.ny).map(|i| legendre(scaled(i, hf.ny))).collect();
+    let partial: Vec<([[f64; MAX_TERMS]; MAX_TERMS], [f64; MAX_TERMS])> = starts
+        .par_iter()
+        .map(|&i0| {
+            let mut ata = [[0.0; MAX_TERMS]; MAX_TERMS];
+            let mut atb = [0.0; MAX_TERMS];
+            let mut row = [0.0; MAX_TERMS];
+            for i in rows_of(i0) {
+                for (j, &h) in hf.row(i).iter().enumerate() {
+                    if h.is_nan() {
+                        continue;
+                    }
+                    let r = h - mean;
+                    for (k, &(p, q)) in t.iter().enumerate() {
+                        row[k] = lu[j][p] * lv[i][q];
+                    }
+                    for a in 0..m {
+                        atb[a] += row[a] * r;
+                        for b in a..m {
+                            ata[a][b] += row[a] * row[b];
+                        }
+                    }
+                }
+            }
+            (ata, atb)
+        })
+        .collect();
     let mut ata = DMatrix::<f64>::zeros(m, m);
     let mut atb = DVector::<f64>::zeros(m);
-    let mut row = vec![0.0; m];
-    for i in 0..hf.ny {
-        for j in 0..hf.nx {
-            let h = hf.z[i * hf.nx + j];
-            if h.is_nan() {
-                continue;
-            }
-            let r = h - mean;
-            for (k, &(p, q)) in t.iter().enumerate() {
-                row[k] = lu[j][p] * lv[i][q];
-            }
-            for a in 0..m {
-                atb[a] += row[a] * r;
-                for b in a..m {
-                    ata[(a, b)] += row[a] * row[b];
-                }
+    for (pa, pb) in &partial {
+        for a in 0..m {
+            atb[a] += pb[a];
+            for b in a..m {
+                ata[(a, b)] += pa[a][b];
             }
         }
     }
@@ -93,21 +131,17 @@ pub fn remove_polynomial(hf: &Heightfield, order: usize) -> Result<Vec<f64>> {
     let coef = svd
         .solve(&atb, smax * 1e-12)
         .map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
-    let mut out = Vec::with_capacity(hf.z.len());
-    for i in 0..hf.ny {
-        for j in 0..hf.nx {
-            let h = hf.z[i * hf.nx + j];
-            if h.is_nan() {
-                out.push(f64::NAN);
-                continue;
-            }
+    let mut out = vec![0.0; hf.z.len()];
+    out.par_chunks_mut(nx.max(1)).enumerate().for_each(|(i, o)| {
+        for (j, (o, &h)) in o.iter_mut().zip(hf.row(i)).enumerate() {
             let mut f = 0.0;
             for (k, &(p, q)) in t.iter().enumerate() {
                 f += coef[k] * lu[j][p] * lv[i][q];
             }
-            out.push((h - mean) - f);
+            // NaN stays NaN (h - mean is NaN).
+            *o = (h - mean) - f;
         }
-    }
+    });
     Ok(out)
 }
 

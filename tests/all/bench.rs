@@ -132,23 +132,23 @@ fn presets_are_ordered() {
     }
     assert_eq!(Preset::Balanced.ndf_options(1_000_000).scheme, NormalScheme::Central);
     assert_eq!(Preset::Balanced.fit_options(), ndfit::fit::FitOptions::default());
-    // Fast coarsens: FIT_TARGET_COUNT samples per bin, at most FIT_MAX_CELLS across. 2e5 samples at 256
-    // per bin: sqrt(8e5 / (pi 256)) = 31.5 -> 32, made odd (33) by the grid; 1e8 would want 705, capped.
-    use ndfit::bench::presets::{FIT_MAX_CELLS, FIT_TARGET_COUNT};
-    assert_eq!(FIT_TARGET_COUNT, 256.0);
-    assert_eq!(ndfit::ndf::BinGrid::new(Preset::Fast.ndf_options(200_000).cells_across.expect("set")).n, 33);
-    assert_eq!(Preset::Fast.ndf_options(100_000_000).cells_across, Some(FIT_MAX_CELLS));
+    // Fast subsamples (every 4th point) and keeps the NDF's own binning for what is left.
+    assert_eq!(Preset::Fast.stride(), ndfit::bench::presets::FAST_STRIDE);
+    assert!(Preset::Fast.stride() > 1 && !Preset::Fast.needs_sample_count());
+    let (f, d) = (Preset::Fast.ndf_options(200_000), ndfit::ndf::NdfOptions::default());
+    assert_eq!((f.cells_across, f.target_count, f.scheme), (d.cells_across, d.target_count, d.scheme));
     assert!(Preset::Accurate.fit_options().extra_starts > Preset::Balanced.fit_options().extra_starts);
 }
 
-/// `ndfit fit --preset` recovers the truth of a synthetic ellipsoid scan: alphas within 5 %. A 512^2 scan
-/// has ~124k normals (~31k at the fast preset's stride 2), so the counting part of the error is ~1 %;
-/// the rest is the discretization bias of the slopes (O(dx) for the triangles' forward differences),
-/// which the sweep measures at 0.7 % (central) at this size.
+/// `ndfit fit --preset` recovers the truth of a synthetic ellipsoid scan: alphas within 5 %. A 1024^2 scan
+/// has ~500k normals (~31k at the fast preset's stride 4, i.e. the surface sampled on a 256^2 grid), so
+/// the counting part of the error is ~1 %; the rest is the discretization bias of the central slopes,
+/// O(dx^2): a fit error (NDF metric) of 7.7e-3 at 256^2 (`ndfit bench --quick`) and 4e-4 at
+/// 1024^2 (docs/PERFORMANCE.md).
 #[test]
 fn fit_cli_presets_recover_truth() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let s = SynthSettings { nx: 512, ny: 512, dx: 1e-6, dy: 1e-6, seed: 1, ..SynthSettings::default() };
+    let s = SynthSettings { nx: 1024, ny: 1024, dx: 1e-6, dy: 1e-6, seed: 1, ..SynthSettings::default() };
     let p = ndfit::bench::scene::truth_params();
     let (hf, _) = ellipsoid_surface(&s, &p).expect("synth");
     let scan = dir.path().join("e.npy");

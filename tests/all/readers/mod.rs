@@ -6,5 +6,6 @@ pub mod gen;
 mod peers;
 mod preprocess;
 mod npy_layouts;
+mod npy_zero_copy;
 mod robust;
 mod x3p;
