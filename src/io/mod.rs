@@ -231,10 +231,7 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
     };
     let hf = match mapped {
         Some(hf) => hf,
-        None => {
-            file.populate();
-            read_bytes(format, bytes, opts)?
-        }
+        None => read_bytes(format, bytes, opts)?,
     };
     check_usable(&hf)?;
     Ok(hf)
@@ -259,21 +256,10 @@ impl FileBytes {
         // SAFETY: the map is only read, and only while the caller holds it. Known limit: a file
         // truncated by another process during the read faults (SIGBUS) instead of failing
         // cleanly; scans are read at rest, and the zero-copy read is what keeps large files fast.
-        // No MAP_POPULATE here: the zero-copy NPY read faults the pages in from every rayon thread
-        // at once (its infinity scan), and the decoders ask for them all up front (`populate`).
-        let map = unsafe { memmap2::MmapOptions::new().map(&file)? };
+        // `populate` (MAP_POPULATE) maps every page in the one mmap call: no 4 KiB fault per page
+        // while decoding (a `madvise(MADV_SEQUENTIAL)` afterwards would come too late to matter).
+        let map = unsafe { memmap2::MmapOptions::new().populate().map(&file)? };
         Ok(FileBytes::Mapped(std::sync::Arc::new(map)))
-    }
-}
-
-impl FileBytes {
-    /// Map every page of a mapped file before a decoder walks it (`MADV_POPULATE_READ`, one call
-    /// instead of a fault per 4 KiB page while decoding). Advice only: kernels without it fault as usual.
-    fn populate(&self) {
-        #[cfg(target_os = "linux")]
-        if let FileBytes::Mapped(m) = self {
-            let _ = m.advise(memmap2::Advice::PopulateRead);
-        }
     }
 }
 
