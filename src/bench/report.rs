@@ -79,7 +79,7 @@ fn machine(s: &Value) -> String {
 
 fn presets(rows: &[Row]) -> String {
     let mut o = String::from(
-        "| preset | knobs | bins | total ms | read | NDF | fit | peak MiB | fit delta | alpha err | angle err (rad) |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| preset | knobs | bins | total ms | read | NDF | fit | peak MiB | fit delta | alpha err | angle err (rad) |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows.iter().filter(|r| r.group.starts_with("preset_")) {
         let _ = writeln!(
@@ -162,7 +162,7 @@ fn numpy(s: &Value) -> String {
     }
     let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
     let mut o = String::from(
-        "| task | ndfit settings | size | ndfit ms (read / NDF / fit) | numpy ms (load / gradient / histogram / fit) | bins across | ratio numpy/ndfit | target | fit delta ndfit | fit delta numpy |\n|---|---|---|---|---|---|---|---|---|\n",
+        "| task | ndfit settings | size | ndfit ms (read / NDF / fit) | numpy ms (load / gradient / histogram / fit) | bins across | ratio numpy/ndfit | target | fit delta ndfit | fit delta numpy |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for c in &cmp {
         let (n, p) = (&c["ndfit"], &c["numpy"]);
@@ -242,6 +242,31 @@ fn points(rows: &[Row]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every generated table of the committed run (`docs/bench.csv`, `docs/bench_summary.json`) is a
+    /// markdown table: its delimiter row and every body row have as many cells as its header (a row with
+    /// another count breaks the table on GitHub).
+    #[test]
+    fn generated_tables_have_one_cell_count() {
+        let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs");
+        let mut rd = csv::Reader::from_path(docs.join("bench.csv")).expect("docs/bench.csv");
+        let rows: Vec<Row> = rd.deserialize().collect::<std::result::Result<_, _>>().expect("rows");
+        let summary: Value = serde_json::from_slice(&std::fs::read(docs.join("bench_summary.json")).expect("summary")).expect("JSON");
+        let cells = |l: &str| l.trim().trim_matches('|').split('|').count();
+        let mut tables = 0;
+        for (name, md) in render(&rows, &summary) {
+            let lines: Vec<&str> = md.lines().collect();
+            for block in lines.split(|l| !l.starts_with('|')).filter(|b| !b.is_empty()) {
+                tables += 1;
+                let n = cells(block[0]);
+                assert!(block.len() >= 2 && block[1].starts_with("|---"), "{name}: no delimiter row");
+                for l in block {
+                    assert_eq!(cells(l), n, "{name}: {l}");
+                }
+            }
+        }
+        assert!(tables >= 5, "{tables} tables rendered");
+    }
 
     /// Markers are replaced in place, text outside them is kept byte for byte, absent sections are
     /// skipped, and an unterminated marker fails without touching the page.
