@@ -488,7 +488,10 @@ fn histogram<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame, gr
             acc.fold();
             acc
         })
-        .reduce(|| Acc::new(cells), Acc::merge)
+        // No identity accumulators (each would allocate and zero the interleaved counters): the chunks
+        // are merged pairwise, and there is at least one chunk (the caller checked for stencils).
+        .reduce_with(Acc::merge)
+        .unwrap_or_else(|| Acc::new(cells))
 }
 
 /// Integrals over one cell: projected solid angle, solid angle and the W-weighted centroid.
