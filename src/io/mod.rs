@@ -225,13 +225,9 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
     };
     // Large native float64 NPY files are read in place (zero-copy, `crate::heights`); every other case
     // decodes into an owned buffer.
-    let mapped = match (&file, format) {
+    let hf = match (&file, format) {
         (FileBytes::Mapped(map), Format::Npy) => npy::read_npy_mapped(map, opts)?,
-        _ => None,
-    };
-    let hf = match mapped {
-        Some(hf) => hf,
-        None => read_bytes(format, bytes, opts)?,
+        _ => read_bytes(format, bytes, opts)?,
     };
     check_usable(&hf)?;
     Ok(hf)

@@ -68,7 +68,11 @@ fn parse_header(bytes: &[u8]) -> Result<Header> {
 
 /// Read an NPY file held in memory.
 pub fn read_npy(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
-    let h = parse_header(bytes)?;
+    decode(bytes, parse_header(bytes)?, opts)
+}
+
+/// Decode the array described by `h` into an owned heights buffer.
+fn decode(bytes: &[u8], h: Header, opts: &ReadOptions) -> Result<Heightfield> {
     let (endian, kind, size, n) = (h.endian, h.kind, h.size, h.n);
     let raw = &bytes[h.data..h.data + n * size];
     let zs = z_scale(opts, "NPY")?;
@@ -118,23 +122,24 @@ pub fn read_npy(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
 /// The zero-copy read of a memory-mapped NPY file (see [`crate::heights`]): the heights are the file's
 /// bytes when the array is C-ordered little-endian float64, `--z-scale` is exactly 1 (heights already in
 /// metres), the data start is 8-byte aligned and no height is infinite (the heightfield masks those as
-/// NaN, which a read-only view cannot). `Ok(None)` when any of these fails: the caller decodes instead.
+/// NaN, which a read-only view cannot). When any of these fails the file is decoded as [`read_npy`] does
+/// (from the header already parsed).
 ///
 /// The infinity check is the one pass over the data, split over the rayon threads; it also touches
 /// every page the later stages read.
-pub fn read_npy_mapped(map: &Arc<memmap2::Mmap>, opts: &ReadOptions) -> Result<Option<Heightfield>> {
+pub fn read_npy_mapped(map: &Arc<memmap2::Mmap>, opts: &ReadOptions) -> Result<Heightfield> {
     let h = parse_header(map)?;
     let zs = z_scale(opts, "NPY")?;
     let (dx, dy) = spacing(opts, "NPY")?;
     if h.fortran || (h.endian, h.kind, h.size) != ('<', 'f', 8) || zs != 1.0 {
-        return Ok(None);
+        return decode(map, h, opts);
     }
-    let Some(z) = Heights::mapped(map.clone(), h.data, h.n) else { return Ok(None) };
+    let Some(z) = Heights::mapped(map.clone(), h.data, h.n) else { return decode(map, h, opts) };
     // Chunks of 64k values (512 KiB): enough to amortize the task, small enough to balance 2 threads.
     if z.par_chunks(1 << 16).any(|c| c.iter().any(|v| v.is_infinite())) {
-        return Ok(None);
+        return decode(map, h, opts);
     }
-    finish(Heightfield::new_finite_or_nan(h.nx, h.ny, dx, dy, z)?, h.descr).map(Some)
+    finish(Heightfield::new_finite_or_nan(h.nx, h.ny, dx, dy, z)?, h.descr)
 }
 
 fn finish(mut hf: Heightfield, descr: String) -> Result<Heightfield> {
