@@ -48,6 +48,18 @@ pub struct HeightQuantum {
 /// too few differences are nonzero to tell (fewer than 100), or when the lattice is immaterial
 /// ([`MATERIAL_STEP`]).
 pub fn detect<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame) -> Option<HeightQuantum> {
+    assess(lattice(hf)?, hf, scheme, frame)
+}
+
+/// A height step `q` and the fraction of the examined differences on its lattice.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Lattice {
+    q: f64,
+    on: f64,
+}
+
+/// The data half of [`detect`] (no frame needed, so it can run beside the frame's estimation).
+pub(crate) fn lattice<H: HeightRows>(hf: &H) -> Option<Lattice> {
     let (nx, ny) = (hf.nx(), hf.ny());
     if nx < 2 || ny < 1 {
         return None;
@@ -67,13 +79,13 @@ pub fn detect<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame) -
             break;
         }
     }
-    let nz: Vec<f64> = d.iter().copied().filter(|&v| v > 0.0).collect();
+    let mut nz: Vec<f64> = d.iter().copied().filter(|&v| v > 0.0).collect();
     if nz.len() < 100 {
         return None;
     }
-    let mut sorted = nz.clone();
-    let k90 = (0.9 * (sorted.len() - 1) as f64) as usize;
-    let p90 = *sorted.select_nth_unstable_by(k90, |a, b| a.total_cmp(b)).1;
+    // Selection reorders `nz`; the minimum below does not care about the order.
+    let k90 = (0.9 * (nz.len() - 1) as f64) as usize;
+    let p90 = *nz.select_nth_unstable_by(k90, |a, b| a.total_cmp(b)).1;
     let q = nz.iter().copied().filter(|&v| v >= 1e-6 * p90).fold(f64::INFINITY, f64::min);
     // A lattice needs several steps in the data: a plane (every difference equal) is not quantized.
     if !(q.is_finite() && q > 0.0 && p90 >= MIN_STEPS * q) {
@@ -83,6 +95,13 @@ pub fn detect<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame) -
     if on < ON_LATTICE {
         return None;
     }
+    Some(Lattice { q, on })
+}
+
+/// The frame half of [`detect`]: whether the lattice is material in the frame's whitened slopes, and
+/// the cap it puts on the grid.
+pub(crate) fn assess<H: HeightRows>(lat: Lattice, hf: &H, scheme: NormalScheme, frame: &SlopeFrame) -> Option<HeightQuantum> {
+    let Lattice { q, on } = lat;
     let step = scheme.slope_step(q, hf.dx(), hf.dy());
     let w = frame.whiten;
     let lx = w[0][0].hypot(w[1][0]) * step[0];
