@@ -69,12 +69,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut opts = opts;
 
     let t0 = Instant::now();
-    let mut hf = args.scan.load()?;
+    // The preset's stride subsamples as it reads (the form is then removed from the kept points).
+    let hf = args.scan.load_with_stride(args.preset.map_or(1, |p| p.stride()))?;
     if let Some(p) = args.preset {
         // The preset's knobs (src/bench/presets.rs); an explicit --ndf-cells still wins.
-        if p.stride() > 1 {
-            hf = ndfit::preprocess::subsample(&hf, p.stride()).map_err(|e| e.with_path(&args.scan.scan))?;
-        }
         let po = p.ndf_options(if p.needs_sample_count() { hf.valid_count() as u64 } else { 0 });
         ndf_opts = ndfit::ndf::NdfOptions { cells_across: args.ndf.ndf_cells.or(po.cells_across), ..po };
         let pf = p.fit_options();

@@ -53,8 +53,21 @@ impl ScanArgs {
 
     /// Read the scan AND preprocess it (crop, subsample, form removal), the way every command wants it.
     pub fn load(&self) -> anyhow::Result<ndfit::Heightfield> {
+        self.load_with_stride(1)
+    }
+
+    /// [`ScanArgs::load`] keeping only every `extra`-th of the points `--subsample` keeps (a preset's
+    /// stride). Without a crop the subsampled points are all that is read
+    /// ([`ndfit::io::read_scan_subsampled`]); the form is then removed from them.
+    pub fn load_with_stride(&self, extra: usize) -> anyhow::Result<ndfit::Heightfield> {
+        let pre = Preprocess { subsample: self.subsample.max(1) * extra.max(1), ..self.preprocess() };
+        if pre.crop.is_none() && pre.subsample > 1 {
+            let hf = ndfit::io::read_scan_subsampled(&self.scan, &self.read_options(), pre.subsample)?;
+            let rest = Preprocess { subsample: 1, ..pre };
+            return Ok(ndfit::preprocess::apply(hf, &rest).map_err(|e| e.with_path(&self.scan))?);
+        }
         let hf = self.load_raw()?;
-        Ok(ndfit::preprocess::apply(hf, &self.preprocess()).map_err(|e| e.with_path(&self.scan))?)
+        Ok(ndfit::preprocess::apply(hf, &pre).map_err(|e| e.with_path(&self.scan))?)
     }
 }
 

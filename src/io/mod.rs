@@ -199,15 +199,32 @@ fn looks_like_text(head: &[u8]) -> bool {
 
 /// Read any supported scan file. Errors name `path` and the problem in one line.
 pub fn read_scan(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
-    read_scan_inner(path, opts).map_err(|e| e.with_path(path))
+    read_scan_inner(path, opts, 1).map_err(|e| e.with_path(path))
 }
 
-fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
+/// Read a scan keeping every `stride`-th point along both axes (from the first): the heightfield of
+/// [`crate::preprocess::subsample`]`(&read_scan(path, opts)?, stride)`, without the points it would
+/// drop where the file allows. A large C-ordered float64 NPY file in metres (the zero-copy case of
+/// [`read_scan`]) copies only the kept points out of its memory map, and only their pages are read;
+/// every other file is read whole and then subsampled. A stride of 1 is [`read_scan`]. The one
+/// difference: a file whose kept points are all invalid is refused here, while [`read_scan`] refuses
+/// only a file with no valid point at all.
+///
+/// Errors: as [`read_scan`], and [`ErrorKind::InvalidInput`] for a stride of 0.
+pub fn read_scan_subsampled(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Heightfield> {
+    if stride == 0 {
+        return Err(Error::invalid("subsampling step must be at least 1").with_path(path));
+    }
+    read_scan_inner(path, opts, stride).map_err(|e| e.with_path(path))
+}
+
+fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Heightfield> {
     let md = std::fs::metadata(path)?;
     if md.is_dir() {
         return Err(Error::new(ErrorKind::InvalidInput, "is a directory, not a scan file"));
     }
-    let file = FileBytes::open(path, md.len())?;
+    // A subsampled read touches a fraction of the pages: map them as they are read, not all up front.
+    let file = FileBytes::open(path, md.len(), stride == 1)?;
     let bytes: &[u8] = &file;
     if bytes.is_empty() {
         return Err(Error::new(ErrorKind::BadData, "file is empty"));
@@ -225,9 +242,19 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
     };
     // Large native float64 NPY files are read in place (zero-copy, `crate::heights`); every other case
     // decodes into an owned buffer.
-    let hf = match (&file, format) {
-        (FileBytes::Mapped(map), Format::Npy) => npy::read_npy_mapped(map, opts)?,
-        _ => read_bytes(format, bytes, opts)?,
+    let strided = match (&file, format) {
+        (FileBytes::Mapped(map), Format::Npy) if stride > 1 => npy::read_npy_strided(map, opts, stride)?,
+        _ => None,
+    };
+    let hf = match strided {
+        Some(hf) => hf,
+        None => {
+            let whole = match (&file, format) {
+                (FileBytes::Mapped(map), Format::Npy) => npy::read_npy_mapped(map, opts)?,
+                _ => read_bytes(format, bytes, opts)?,
+            };
+            if stride > 1 { crate::preprocess::subsample(&whole, stride)? } else { whole }
+        }
     };
     check_usable(&hf)?;
     Ok(hf)
@@ -244,7 +271,8 @@ enum FileBytes {
 const MMAP_THRESHOLD: u64 = 4 << 20;
 
 impl FileBytes {
-    fn open(path: &Path, len: u64) -> Result<Self> {
+    /// `populate`: map every page in the one mmap call (for reads of the whole file).
+    fn open(path: &Path, len: u64, populate: bool) -> Result<Self> {
         if len < MMAP_THRESHOLD {
             return Ok(FileBytes::Owned(std::fs::read(path)?));
         }
@@ -254,7 +282,11 @@ impl FileBytes {
         // cleanly; scans are read at rest, and the zero-copy read is what keeps large files fast.
         // `populate` (MAP_POPULATE) maps every page in the one mmap call: no 4 KiB fault per page
         // while decoding (a `madvise(MADV_SEQUENTIAL)` afterwards would come too late to matter).
-        let map = unsafe { memmap2::MmapOptions::new().populate().map(&file)? };
+        let mut options = memmap2::MmapOptions::new();
+        if populate {
+            options.populate();
+        }
+        let map = unsafe { options.map(&file)? };
         Ok(FileBytes::Mapped(std::sync::Arc::new(map)))
     }
 }

@@ -77,26 +77,7 @@ fn decode(bytes: &[u8], h: Header, opts: &ReadOptions) -> Result<Heightfield> {
     let raw = &bytes[h.data..h.data + n * size];
     let zs = z_scale(opts, "NPY")?;
     let (dx, dy) = spacing(opts, "NPY")?;
-    let value = |b: &[u8]| -> f64 {
-        let mut a = [0u8; 8];
-        a[..size].copy_from_slice(b);
-        if endian == '>' {
-            a[..size].reverse();
-        }
-        match (kind, size) {
-            ('f', 8) => f64::from_le_bytes(a),
-            ('f', 4) => f32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
-            ('i', 1) => a[0] as i8 as f64,
-            ('u', 1) => a[0] as f64,
-            ('i', 2) => i16::from_le_bytes([a[0], a[1]]) as f64,
-            ('u', 2) => u16::from_le_bytes([a[0], a[1]]) as f64,
-            ('i', 4) => i32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
-            ('u', 4) => u32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
-            ('i', 8) => i64::from_le_bytes(a) as f64,
-            ('u', 8) => u64::from_le_bytes(a) as f64,
-            _ => f64::NAN,
-        }
-    };
+    let value = |b: &[u8]| value_of(b, endian, kind, size);
     // One pass from the mapped file into the heights buffer (allocated once, huge pages): decode,
     // scale, and mask infinities as NaN (what `Heightfield::new` would do in a second pass).
     let fin = |v: f64| if v.is_infinite() { f64::NAN } else { v };
@@ -117,6 +98,54 @@ fn decode(bytes: &[u8], h: Header, opts: &ReadOptions) -> Result<Heightfield> {
         z.extend(raw.chunks_exact(size).map(|b| fin(value(b) * zs)));
     }
     finish(Heightfield::new_finite_or_nan(nx, ny, dx, dy, z)?, h.descr)
+}
+
+/// One stored value of dtype `(endian, kind, size)` (checked by `parse_descr`) as f64.
+fn value_of(b: &[u8], endian: char, kind: char, size: usize) -> f64 {
+    let mut a = [0u8; 8];
+    a[..size].copy_from_slice(b);
+    if endian == '>' {
+        a[..size].reverse();
+    }
+    match (kind, size) {
+        ('f', 8) => f64::from_le_bytes(a),
+        ('f', 4) => f32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+        ('i', 1) => a[0] as i8 as f64,
+        ('u', 1) => a[0] as f64,
+        ('i', 2) => i16::from_le_bytes([a[0], a[1]]) as f64,
+        ('u', 2) => u16::from_le_bytes([a[0], a[1]]) as f64,
+        ('i', 4) => i32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+        ('u', 4) => u32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+        ('i', 8) => i64::from_le_bytes(a) as f64,
+        ('u', 8) => u64::from_le_bytes(a) as f64,
+        _ => f64::NAN,
+    }
+}
+
+/// Every `stride`-th point along both axes of a C-ordered NPY file, decoded straight from its memory
+/// map (only the kept rows' pages are read), exactly as [`decode`] and then
+/// [`crate::preprocess::subsample`] would give them; `None` for Fortran order (read whole instead).
+pub fn read_npy_strided(map: &memmap2::Mmap, opts: &ReadOptions, stride: usize) -> Result<Option<Heightfield>> {
+    let h = parse_header(map)?;
+    if h.fortran || stride == 0 {
+        return Ok(None);
+    }
+    let zs = z_scale(opts, "NPY")?;
+    let (dx, dy) = spacing(opts, "NPY")?;
+    let (nx, ny, size) = (h.nx, h.ny, h.size);
+    let raw = &map[h.data..h.data + h.n * size];
+    let fin = |v: f64| if v.is_infinite() { f64::NAN } else { v };
+    let mut z = Vec::with_capacity(nx.div_ceil(stride) * ny.div_ceil(stride));
+    for row in raw.chunks_exact(nx * size).step_by(stride) {
+        if (h.endian, h.kind, size) == ('<', 'f', 8) {
+            z.extend(row.chunks_exact(8).step_by(stride).map(|b| fin(f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * zs)));
+        } else {
+            z.extend(row.chunks_exact(size).step_by(stride).map(|b| fin(value_of(b, h.endian, h.kind, size) * zs)));
+        }
+    }
+    let (sx, sy) = (nx.div_ceil(stride), ny.div_ceil(stride));
+    let hf = Heightfield::new_finite_or_nan(sx, sy, dx * stride as f64, dy * stride as f64, z)?;
+    finish(hf, h.descr).map(Some)
 }
 
 /// The zero-copy read of a memory-mapped NPY file (see [`crate::heights`]): the heights are the file's

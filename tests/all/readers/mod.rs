@@ -6,6 +6,7 @@ pub mod gen;
 mod peers;
 mod preprocess;
 mod npy_layouts;
+mod npy_strided;
 mod npy_zero_copy;
 mod robust;
 mod x3p;
