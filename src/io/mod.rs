@@ -223,8 +223,11 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
     if md.is_dir() {
         return Err(Error::new(ErrorKind::InvalidInput, "is a directory, not a scan file"));
     }
-    // A subsampled read touches a fraction of the pages: map them as they are read, not all up front.
-    let file = FileBytes::open(path, md.len(), stride == 1)?;
+    // A read that keeps every row or every other row touches (within the kernel's fault-around window)
+    // every page: map them all in the one mmap call. Coarser strides touch a fraction of the rows: map
+    // pages as they are read (measured at stride 4: 8.0 against 9.7 ms at 4096^2, equal at 1024^2; at
+    // stride 2 and 2048^2 faulting them in took 10.7 ms against ~5 for the whole populated read).
+    let file = FileBytes::open(path, md.len(), stride <= 2)?;
     let bytes: &[u8] = &file;
     if bytes.is_empty() {
         return Err(Error::new(ErrorKind::BadData, "file is empty"));
