@@ -45,7 +45,8 @@ pub struct Args {
     #[command(flatten)]
     ndf: super::ndf::NdfArgs,
     /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` = the defaults). Sets the
-    /// subsampling stride, the NDF's normals and bins (unless --ndf-cells), the tolerance and the starts.
+    /// subsampling stride (on top of --subsample; the kept points are all that is read, and the form is
+    /// removed from them), the NDF's normals and bins (unless --ndf-cells), the tolerance and the starts.
     #[arg(long, value_enum)]
     preset: Option<ndfit::bench::Preset>,
 }

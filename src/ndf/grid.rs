@@ -390,7 +390,7 @@ fn polar(x0: f64, x1: f64, y0: f64, y1: f64, rim: &RimShape, f: &mut impl Nodes)
 /// axis: the frame's `ring`, clamped to `[0.02, 0.08]`. Narrow frames need short pieces: measured,
 /// GL8 over a 0.13 rad rim cell is off by 4e-5 of W for a tilted frame of slope scale 0.02, and 0.03 rad
 /// pieces bring it to 2e-8. Wide frames do not: for rings of 0.05 to 0.3, pieces from 0.04 to 0.16 rad
-/// gave each rim cell's integrals within a factor 4 of the error of 0.02 rad pieces (against pieces of
+/// kept each rim cell's integrals within about 4 times the error of 0.02 rad pieces (against pieces of
 /// 0.002 rad and half the radial length; worst 5.4e-8 against 1.3e-8 on 15 cells, 1.6e-5 against
 /// 1.2e-5 for a frame tilted by 0.9), at 2 to 3 times fewer nodes (test
 /// `wide_rings_take_long_angular_pieces`).
