@@ -60,7 +60,8 @@ impl ScanArgs {
     /// stride). Without a crop the subsampled points are all that is read
     /// ([`ndfit::io::read_scan_subsampled`]); the form is then removed from them.
     pub fn load_with_stride(&self, extra: usize) -> anyhow::Result<ndfit::Heightfield> {
-        let pre = Preprocess { subsample: self.subsample.max(1) * extra.max(1), ..self.preprocess() };
+        // A `--subsample 0` stays 0, for `preprocess::apply` to refuse with its message.
+        let pre = Preprocess { subsample: self.subsample.saturating_mul(extra.max(1)), ..self.preprocess() };
         if pre.crop.is_none() && pre.subsample > 1 {
             let hf = ndfit::io::read_scan_subsampled(&self.scan, &self.read_options(), pre.subsample)?;
             let rest = Preprocess { subsample: 1, ..pre };

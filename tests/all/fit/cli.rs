@@ -42,3 +42,25 @@ fn bad_input_is_one_line_and_no_output() {
     let st = Command::new(ndfit_bin()).arg("fit").arg(&bad).args(["--model", "nonsense"]).output().expect("runs");
     assert!(!st.status.success());
 }
+
+/// `--subsample 0` is refused with one line naming the file, with or without a preset (whose stride
+/// multiplies it, and must not turn the 0 into a silent 1).
+#[test]
+fn subsample_zero_is_refused_even_with_a_preset() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let scan = tmp.path().join("small.txt");
+    let text: String = (0..40).map(|i| (0..40).map(|j| format!("{:e}", 1e-7 * ((i * 7 + j * 3) % 11) as f64)).collect::<Vec<_>>().join(" ") + "\n").collect();
+    std::fs::write(&scan, text).expect("write");
+    for preset in [None, Some("fast")] {
+        let mut cmd = Command::new(ndfit_bin());
+        cmd.arg("fit").arg(&scan).args(["--dx", "1e-6", "--z-scale", "1", "--subsample", "0"]);
+        if let Some(p) = preset {
+            cmd.args(["--preset", p]);
+        }
+        let st = cmd.output().expect("runs");
+        assert!(!st.status.success(), "preset {preset:?}: --subsample 0 must fail");
+        let err = String::from_utf8_lossy(&st.stderr);
+        assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+        assert!(err.contains("small.txt") && err.contains("at least 1"), "preset {preset:?}: {err}");
+    }
+}
