@@ -258,24 +258,12 @@ fn polar(x0: f64, x1: f64, y0: f64, y1: f64, rim: &RimShape, f: &mut impl Nodes)
         d
     };
     let mut cuts: Vec<f64> = [(x0, y0), (x0, y1), (x1, y0), (x1, y1)].iter().map(|&(x, y)| rel(x, y)).collect();
-    // Cuts where a ray limit sweeps through the rim zone fast, with the angular width over which it
-    // does (see `edge_width`): where the circle crosses an edge, and corners inside the disk.
-    let mut edges: Vec<(f64, f64)> = Vec::new();
-    for &(x, y) in &[(x0, y0), (x0, y1), (x1, y0), (x1, y1)] {
-        let rc2 = x * x + y * y;
-        if rc2 < r2 && x != 0.0 && y != 0.0 {
-            let slope = rc2 * (y.abs() / x.abs()).max(x.abs() / y.abs());
-            edges.push((rel(x, y), (1.0 - 0.5 * rc2).hypot(ring) / slope));
-        }
-    }
     for x in [x0, x1] {
         if x * x < r2 {
             let y = (r2 - x * x).sqrt();
             for y in [y, -y] {
                 if y >= y0 && y <= y1 {
-                    let d = rel(x, y);
-                    cuts.push(d);
-                    edges.push((d, edge_width(ring, x, y)));
+                    cuts.push(rel(x, y));
                 }
             }
         }
@@ -285,9 +273,7 @@ fn polar(x0: f64, x1: f64, y0: f64, y1: f64, rim: &RimShape, f: &mut impl Nodes)
             let x = (r2 - y * y).sqrt();
             for x in [x, -x] {
                 if x >= x0 && x <= x1 {
-                    let d = rel(x, y);
-                    cuts.push(d);
-                    edges.push((d, edge_width(ring, y, x)));
+                    cuts.push(rel(x, y));
                 }
             }
         }
@@ -304,12 +290,8 @@ fn polar(x0: f64, x1: f64, y0: f64, y1: f64, rim: &RimShape, f: &mut impl Nodes)
         }
     }
     cuts.sort_by(|a, b| a.total_cmp(b));
-    // The narrowest sweep width at a cut (none: infinite).
-    let sweep = |d: f64| edges.iter().filter(|e| e.0 == d).map(|e| e.1).fold(f64::INFINITY, f64::min);
-    let cap = angular_piece(rim.ring);
-    // Angular nodes: Gauss-Legendre per piece, log-clustered towards an axis end of the piece when the
-    // concentration is narrower than the piece, or graded towards an end where a ray limit sweeps
-    // through the rim zone within less than a quarter of the piece.
+    // Angular nodes: Gauss-Legendre per piece, or log-clustered towards an axis end of the piece
+    // when the concentration is narrower than the piece.
     let mut angles: Vec<(f64, f64)> = Vec::new();
     for w in cuts.windows(2) {
         let (a, b) = (w[0], w[1]);
@@ -318,8 +300,6 @@ fn polar(x0: f64, x1: f64, y0: f64, y1: f64, rim: &RimShape, f: &mut impl Nodes)
         }
         let at_a = axes.iter().any(|&d| d == a);
         let at_b = axes.iter().any(|&d| d == b);
-        let (sweep_a, sweep_b) = (sweep(a), sweep(b));
-        let (fast_a, fast_b) = (sweep_a < 0.25 * (b - a), sweep_b < 0.25 * (b - a));
         if (at_a || at_b) && rim.width < 0.25 * (b - a) {
             let (end, dir) = if at_a { (a, 1.0) } else { (b, -1.0) };
             let floor = 1e-7 * rim.width;
@@ -336,17 +316,9 @@ fn polar(x0: f64, x1: f64, y0: f64, y1: f64, rim: &RimShape, f: &mut impl Nodes)
                     angles.push((end + dir * d, 0.5 * step * wg * d));
                 }
             }
-        } else if fast_a && fast_b {
-            let m = 0.5 * (a + b);
-            graded(a, 1.0, m - a, sweep_a, cap, &mut angles);
-            graded(b, -1.0, b - m, sweep_b, cap, &mut angles);
-        } else if fast_a {
-            graded(a, 1.0, b - a, sweep_a, cap, &mut angles);
-        } else if fast_b {
-            graded(b, -1.0, b - a, sweep_b, cap, &mut angles);
         } else {
             // Pieces of at most `angular_piece(ring)` rad (see there).
-            let m = ((b - a) / cap).ceil().max(1.0) as usize;
+            let m = ((b - a) / angular_piece(rim.ring)).ceil().max(1.0) as usize;
             for q in 0..m {
                 let (qa, qb) = (a + (b - a) * q as f64 / m as f64, a + (b - a) * (q + 1) as f64 / m as f64);
                 for &(g, wg) in &GL8 {
@@ -414,43 +386,14 @@ fn polar(x0: f64, x1: f64, y0: f64, y1: f64, rim: &RimShape, f: &mut impl Nodes)
     }
 }
 
-/// Angular width over which the ray limit set by an edge at distance `d` from the centre sweeps through
-/// the rim zone, where that edge crosses the circle (`e` is the other coordinate of the crossing). On
-/// the edge `u = 1 - d^2 / (2 cos^2 theta)` (`theta` from the edge's normal), so `|du/dphi| = r^2 |tan
-/// theta| = 2 |e| / d` on the circle; the integrand's singularity near `u = i ring` then sits about `ring
-/// / |du/dphi|` from the cut in the angle. An edge nearly along a ray (small `d`) sweeps the zone in
-/// a sliver of angle: measured on a 15-cell grid, one 8-point piece over such a window was off by
-/// 1.6e-5 of the cell's `W`, 1e-3 for a frame tilted by 2 (test `steep_ray_limits_are_resolved`).
-fn edge_width(ring: f64, d: f64, e: f64) -> f64 {
-    ring * d.abs() / (2.0 * e.abs()).max(f64::MIN_POSITIVE)
-}
-
-/// 8-point Gauss-Legendre nodes over `len` radians from `end` in direction `dir`, on pieces graded from
-/// the end: the first `w` long, each next one 0.8 times its distance from the end, none longer than
-/// `cap`. Against a singularity `w` off the end, the first piece sees it 2.2 half-lengths from its
-/// middle (Bernstein `rho` 4.7, GL8 error ~`rho^-16` = 2e-11) and every later one at least 3.5 (`rho`
-/// 7.1).
-fn graded(end: f64, dir: f64, len: f64, w: f64, cap: f64, out: &mut Vec<(f64, f64)>) {
-    let w = w.max(1e-12 * len).min(len);
-    let (mut s, mut piece) = (0.0f64, w);
-    while s < len {
-        let e = (s + piece).min(len);
-        for &(g, wg) in &GL8 {
-            out.push((end + dir * (0.5 * (s + e) + 0.5 * (e - s) * g), 0.5 * (e - s) * wg));
-        }
-        s = e;
-        piece = (0.8 * s).min(cap).max(w);
-    }
-}
-
 /// Longest angular piece (radians, 8-point Gauss-Legendre each) of the polar rule away from the small
 /// axis: the frame's `ring`, clamped to `[0.02, 0.08]`. Narrow frames need short pieces: measured,
 /// GL8 over a 0.13 rad rim cell is off by 4e-5 of W for a tilted frame of slope scale 0.02, and 0.03 rad
 /// pieces bring it to 2e-8. Wide frames do not: for rings of 0.05 to 0.3, pieces from 0.04 to 0.16 rad
 /// kept each rim cell's integrals within about 4 times the error of 0.02 rad pieces (against pieces of
-/// 0.002 rad and half the radial length; worst 5.4e-8 against 1.3e-8 on 15 cells), at 2 to 3 times
-/// fewer nodes (test `wide_rings_take_long_angular_pieces`: within 1e-6 of a 4x finer reference,
-/// measured 3.4e-7).
+/// 0.002 rad and half the radial length; worst 5.4e-8 against 1.3e-8 on 15 cells, 1.6e-5 against
+/// 1.2e-5 for a frame tilted by 0.9), at 2 to 3 times fewer nodes (test
+/// `wide_rings_take_long_angular_pieces`).
 fn angular_piece(ring: f64) -> f64 {
     ring.clamp(0.02, 0.08)
 }

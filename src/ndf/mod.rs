@@ -932,10 +932,9 @@ mod tests {
     /// of ring 0.05 and more (slope scales of 0.1 to 0.3, tilted and anisotropic), every rim cell's `W`
     /// and solid angle agree with an independent reference that resolves the angle 4 times finer in each
     /// direction (`QuadOrder::Fine(4)`: 4 x 4 sub-cells with their own polar pieces; `Fine(8)` agrees
-    /// with it to 1e-10) to 1e-6 relative. Measured worst: 3.4e-7 (with the grading towards steep ray
-    /// limits, `steep_ray_limits_are_resolved`; before it, 1.6e-5 on 15 cells of the frame tilted by
-    /// 0.9, and 1.2e-5 with 0.02 rad pieces everywhere: that error came from the steep ray limits, not
-    /// from the longer pieces). Far below a bin's counting error (1/sqrt(64)) either way.
+    /// with it to 1e-10) to 3e-5 relative. Measured worst: 1.6e-5, on the coarsest grid (15 cells) of
+    /// the tilted frame; 0.02 rad pieces everywhere gave 1.2e-5 there, so the rule's error on coarse
+    /// rim cells comes mostly from elsewhere. Either is far below a bin's counting error (1/sqrt(64)).
     #[test]
     fn wide_rings_take_long_angular_pieces() {
         let frames = [
@@ -965,60 +964,11 @@ mod tests {
                     // Slivers of the rim (W below 1e-12 of the hemisphere's pi) are compared absolutely.
                     let e = ((w - rw).abs() / rw.max(1e-12 * std::f64::consts::PI)).max((o - ro).abs() / ro.max(1e-12));
                     worst = worst.max(e);
-                    assert!(e <= 1e-6, "frame {:?} n {n} cell {c}: {w} vs {rw}, {o} vs {ro}", f.cov);
+                    assert!(e <= 3e-5, "frame {:?} n {n} cell {c}: {w} vs {rw}, {o} vs {ro}", f.cov);
                 }
             }
         }
         eprintln!("worst relative rim-cell difference from the 4x finer reference: {worst:.2e}");
-    }
-
-    /// Where a cell's edge crosses the circle nearly along a ray, the ray limit sweeps through the rim
-    /// zone within a sliver of angle (`grid::edge_width`); the polar rule grades its angular pieces
-    /// towards such cuts. Every accurate-rule cell of tilted, anisotropic and narrow frames on coarse
-    /// and medium grids agrees with an independent reference, `QuadOrder::Fine(8)` (8 x 8 sub-cells,
-    /// each with its own cuts, so its windows are 8 times narrower), to 5e-6 relative. Measured worst
-    /// per frame and grid, without the grading and with it: 5.7e-5 -> 2.5e-6 (centre (-0.2, 0.1), slope
-    /// scale ~0.025, 15 cells), 2.0e-5 -> 4e-9 (the same, 25 cells), 1.6e-5 -> 1.7e-7 (centre (0.8,
-    /// 0.4), 15 cells), 1.0e-3 -> 4.4e-6 (centre (2, 0.5), slope scale 0.1, 15 cells); the others were
-    /// below 6e-8 either way. Left out: the last frame on 25 cells, where a few cells near its
-    /// vertical-normal peak (the scan normal (0, 0, 1) lies close to the rim of so tilted a frame) differ
-    /// by up to 4.5e-4 with or without the grading: a different, still open limit of the rule.
-    #[test]
-    fn steep_ray_limits_are_resolved() {
-        let frames = [
-            SlopeFrame::new([0.8, 0.4], [[0.01, 0.0], [0.0, 0.04]]),
-            SlopeFrame::new([0.3, -0.2], [[0.04, 0.01], [0.01, 0.02]]),
-            SlopeFrame::new([-0.2, 0.1], [[4e-4, 3e-4], [3e-4, 9e-4]]),
-            SlopeFrame::new([0.0, 0.0], [[0.09, 0.0], [0.0, 0.09]]),
-            SlopeFrame::new([2.0, 0.5], [[0.01, 0.0], [0.0, 0.01]]),
-        ];
-        let mut worst = 0.0f64;
-        for (k, f) in frames.into_iter().enumerate() {
-            let rim = f.rim_shape();
-            for n in [15, 25] {
-                if k == 4 && n == 25 {
-                    continue;
-                }
-                let g = BinGrid::new(n);
-                for c in 0..g.cells() {
-                    let [x0, x1, y0, y1] = g.bounds(c);
-                    if !g.meets_disk(c) || cheap_rule(x0, x1, y0, y1, &rim).is_some() {
-                        continue;
-                    }
-                    let (w, o, _) = cell_integrals(&f, &rim, &g, c);
-                    let (mut rw, mut ro) = (0.0, 0.0);
-                    g.quadrature(c, QuadOrder::Fine(8), &rim, |p, wt| {
-                        let (dw, dom) = f.densities(p);
-                        rw += dw * wt;
-                        ro += dom * wt;
-                    });
-                    let e = ((w - rw).abs() / rw.max(1e-12 * std::f64::consts::PI)).max((o - ro).abs() / ro.max(1e-12));
-                    worst = worst.max(e);
-                    assert!(e <= 5e-6, "frame {:?} n {n} cell {c}: W {w} vs {rw}, omega {o} vs {ro}", f.center);
-                }
-            }
-        }
-        eprintln!("worst relative difference from Fine(8): {worst:.2e}");
     }
 
     /// The cost of the smaller frame subsample (2^15 instead of 2^17 normals): on the 1024^2 ellipsoid of
