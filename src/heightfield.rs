@@ -22,6 +22,10 @@ pub struct ScanMeta {
     /// Instrument and measurement metadata the file carries, as key/value text (manufacturer, model,
     /// serial, objective, date, comment ...). Kept verbatim; nothing is invented.
     pub instrument: BTreeMap<String, String>,
+    /// Step `q` of the height lattice `z0 + k q` the stored heights sit on, found before any form removal
+    /// (which shifts a lattice off `k q`); `None` for continuous heights. Crop and subsampling keep it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height_quantum: Option<f64>,
 }
 
 /// A regular grid of heights in metres with a validity mask (NaN = invalid).

@@ -61,6 +61,10 @@ pub fn apply(hf: Heightfield, pre: &Preprocess) -> Result<Heightfield> {
     if pre.subsample != 1 {
         hf = subsample(&hf, pre.subsample)?;
     }
+    if pre.form != FormRemoval::None && hf.meta.height_quantum.is_none() {
+        // The lattice is found on the heights as stored: a form removal shifts every height off `k q`.
+        hf.meta.height_quantum = crate::ndf::quantum::height_quantum(&hf);
+    }
     let z = match pre.form {
         FormRemoval::None => return Ok(hf),
         FormRemoval::Plane => form::remove_polynomial(&hf, 1)?,

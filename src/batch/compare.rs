@@ -66,6 +66,8 @@ pub struct BaselineEntry {
     pub stderr: BTreeMap<String, f64>,
     /// The baseline's own scoring (used when its model cannot be re-evaluated).
     pub quality: Option<Quality>,
+    /// The baseline fit's verdict was `unresolved`.
+    pub unresolved: bool,
 }
 
 impl BaselineEntry {
@@ -74,7 +76,8 @@ impl BaselineEntry {
         let model = fit.and_then(|f| f.get("model")).and_then(Value::as_str).map(str::to_string);
         let params = fit.map(|f| numbers(f.get("params"))).unwrap_or_default();
         let stderr = fit.map(stderr_of).unwrap_or_default();
-        BaselineEntry { status, model, params, stderr, quality }
+        let verdict = fit.and_then(|f| f.get("verdict").or_else(|| f.pointer("/quality/verdict"))).and_then(Value::as_str);
+        BaselineEntry { status, model, params, stderr, quality, unresolved: verdict == Some("unresolved") }
     }
 
     /// A fit JSON with just `model` and `params`, for re-evaluating the baseline model.
@@ -137,7 +140,8 @@ fn lite_fit<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Optio
     let v: Option<Value> = Option::deserialize(d)?;
     Ok(v.map(|f| {
         let stderr = stderr_of(&f);
-        LiteFit(serde_json::json!({"model": f.get("model"), "params": f.get("params"), "stderr": stderr}))
+        let verdict = f.pointer("/quality/verdict").cloned();
+        LiteFit(serde_json::json!({"model": f.get("model"), "params": f.get("params"), "stderr": stderr, "verdict": verdict}))
     }))
 }
 
@@ -179,6 +183,8 @@ pub enum Verdict {
     StillError,
     /// The baseline entry has no usable quality to compare with.
     Unscored,
+    /// The baseline's fit was `unresolved` (the scan cannot resolve its NDF): not a regression target.
+    BaselineUnresolved,
 }
 
 /// How the baseline's quality was obtained.
@@ -272,6 +278,10 @@ pub fn compare(cur: Current<'_>, base: Option<&BaselineEntry>, tol: &Tolerances)
         (Status::Ok, Status::Ok) => Verdict::Unscored,
     };
     if c.verdict != Verdict::Unscored {
+        return c;
+    }
+    if base.unresolved {
+        c.verdict = Verdict::BaselineUnresolved;
         return c;
     }
     let (kl_b, basis) = match (cur.baseline_on_same_bins, base.quality) {

@@ -60,6 +60,8 @@ pub struct Brief {
     pub evaluations: Option<u64>,
     /// The fit's reduced chi-square, when it reports it.
     pub reduced_chi2: Option<f64>,
+    /// The fit's verdict (`quality.verdict`: ok, misfit, unresolved), when it reports one.
+    pub fit_verdict: Option<String>,
     /// Whether this result was reused from an earlier run (`--resume`).
     pub reused: bool,
 }
@@ -101,10 +103,23 @@ pub struct Counts {
     pub params_changed: usize,
     /// In the baseline but not in this run.
     pub missing: usize,
+    /// Fits by verdict (`quality.verdict`).
+    pub verdicts: VerdictCounts,
     /// Reused by `--resume` (not written to `summary.json`: a resumed run's summary equals an
     /// uninterrupted one's).
     #[serde(skip)]
     pub reused: usize,
+}
+
+/// Fitted scans by the fit's verdict ([`crate::fit::verdict::Verdict`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct VerdictCounts {
+    /// The model describes the data within the data's own dispersion.
+    pub ok: usize,
+    /// The model does not describe the data.
+    pub misfit: usize,
+    /// The scan cannot resolve the NDF.
+    pub unresolved: usize,
 }
 
 impl RunOutcome {
@@ -122,6 +137,12 @@ impl RunOutcome {
                 c.params_changed += usize::from(!cmp.param_changes.is_empty());
             }
             c.reused += usize::from(b.reused);
+            match b.fit_verdict.as_deref() {
+                Some("ok") => c.verdicts.ok += 1,
+                Some("misfit") => c.verdicts.misfit += 1,
+                Some("unresolved") => c.verdicts.unresolved += 1,
+                _ => {}
+            }
         }
         c
     }
@@ -408,7 +429,8 @@ pub fn brief_of(mut entry: Entry, reused: bool) -> Brief {
         .map(|v| v.as_str().map(str::to_string).unwrap_or_else(|| v.to_string()));
     let evaluations = find(&["solver.evaluations", "evaluations"]).and_then(Value::as_u64);
     let reduced_chi2 = find(&["quality.reduced_chi2", "reduced_chi2"]).and_then(Value::as_f64);
-    Brief { entry, model, params, stderr, termination, evaluations, reduced_chi2, reused }
+    let fit_verdict = find(&["quality.verdict"]).and_then(Value::as_str).map(str::to_string);
+    Brief { entry, model, params, stderr, termination, evaluations, reduced_chi2, fit_verdict, reused }
 }
 
 /// Remove temporary files an interrupted run left (write_atomic names them `.<name>.<random>.tmp`).

@@ -84,7 +84,7 @@ pub fn write_summary_csv(out_dir: &Path, outcome: &RunOutcome) -> Result<()> {
         head.extend(PARAMS.iter().map(|p| format!("stderr_{p}")));
         head.extend(
             [
-                "kl", "deviance", "ndf_delta", "n_samples", "n_bins", "reduced_chi2", "termination", "evaluations", "time_s",
+                "kl", "deviance", "ndf_delta", "n_samples", "n_bins", "reduced_chi2", "fit_verdict", "termination", "evaluations", "time_s",
                 "verdict", "baseline_model", "kl_baseline", "delta_kl", "params_changed", "error_kind", "error",
             ]
             .map(String::from),
@@ -124,6 +124,7 @@ fn csv_row(b: &Brief) -> Vec<String> {
         q.map(|q| q.n_samples.to_string()).unwrap_or_default(),
         q.map(|q| q.n_bins.to_string()).unwrap_or_default(),
         num(b.reduced_chi2),
+        b.fit_verdict.clone().unwrap_or_default(),
         b.termination.clone().unwrap_or_default(),
         b.evaluations.map(|n| n.to_string()).unwrap_or_default(),
         format!("{:.6}", e.time_s),
@@ -149,6 +150,7 @@ pub fn verdict_str(v: Verdict) -> &'static str {
         Verdict::Broken => "broken",
         Verdict::StillError => "still_error",
         Verdict::Unscored => "unscored",
+        Verdict::BaselineUnresolved => "baseline_unresolved",
     }
 }
 
@@ -216,8 +218,8 @@ pub fn regression_table(outcome: &RunOutcome, all: bool) -> String {
     let c = outcome.counts();
     let _ = writeln!(
         out,
-        "{} scans: {} ok, {} error, {} regressed, {} improved, {} with parameter changes, {} missing from this run",
-        c.scans, c.ok, c.error, c.regressed, c.improved, c.params_changed, c.missing
+        "{} scans: {} ok, {} error, {} regressed, {} improved, {} with parameter changes, {} missing from this run; fits: {} ok, {} misfit, {} unresolved",
+        c.scans, c.ok, c.error, c.regressed, c.improved, c.params_changed, c.missing, c.verdicts.ok, c.verdicts.misfit, c.verdicts.unresolved
     );
     out
 }

@@ -49,6 +49,9 @@ pub struct Args {
     /// removed from them), the NDF's normals and bins (unless --ndf-cells), the tolerance and the starts.
     #[arg(long, value_enum)]
     preset: Option<ndfit::bench::Preset>,
+    /// No summary line on standard error (warnings and a verdict other than `ok` are still said).
+    #[arg(short = 'q', long)]
+    quiet: bool,
 }
 
 /// Run `ndfit fit`.
@@ -108,5 +111,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             stdout.write_all(json.as_bytes()).and_then(|_| stdout.flush()).map_err(|e| anyhow!("<stdout>: {e}"))?;
         }
     }
+    if !args.quiet {
+        eprintln!("ndfit: {path}: {}", summary_line(&report));
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// One line on a fit: the model, its main parameters and the verdict.
+pub fn summary_line(report: &ndfit::fit::FitReport) -> String {
+    let params: Vec<String> = report.model.param_names().iter().map(|n| format!("{n}={:.4}", report.params.get(*n).copied().unwrap_or(f64::NAN))).collect();
+    let q = &report.quality;
+    let chi = q.reduced_chi2.map_or(String::new(), |c| format!(", deviance/dof {c:.3}"));
+    let disp = q.dispersion.map_or(String::new(), |d| format!(" (data's own dispersion {d:.3})"));
+    // Walter et al. eq. 2-3: A = S Rz(theta_z) puts the alpha_x axis along (cos theta_z, -sin theta_z).
+    let axis = report.params.get("theta_z").map_or(String::new(), |t| format!(" (alpha_x axis at azimuth {:.4} rad from +x)", -t));
+    format!("{} {}{axis}{chi}{disp}: verdict {}", report.model, params.join(" "), q.verdict)
 }

@@ -24,6 +24,7 @@ pub mod report;
 pub mod solve;
 pub mod start;
 pub mod synthetic;
+pub mod verdict;
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -383,6 +384,25 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     if specular {
         warnings.push("specular: over half of the normals fall in one NDF bin; alpha is bounded by the bin size, not measured".into());
     }
+    let dispersion = verdict::data_dispersion(ndf, s.data.max_theta);
+    let delta_data = metric::delta_to_data(&model, ndf);
+    let delta_excess = delta_data.and_then(|d| verdict::excess_delta(d, dispersion, k, s.data.n));
+    let evidence = verdict::Evidence {
+        n_params: p,
+        n_samples: s.data.n,
+        n_samples_total: s.data.n_total,
+        n_bins_nonzero: k,
+        reduced_chi2: reduced,
+        dispersion,
+        delta_excess,
+        specular,
+        converged: fit.local.converged || fit.delta,
+    };
+    let (verdict, reasons) = verdict::judge(ndf, &evidence);
+    // Every warning of the NDF stage reaches the fit; a verdict other than ok says why there too.
+    let mut warnings: Vec<String> = ndf.warnings.iter().cloned().chain(warnings).collect();
+    let new: Vec<String> = reasons.iter().filter(|r| !warnings.contains(r)).map(|r| format!("{verdict}: {r}")).collect();
+    warnings.extend(new);
     let matrix_a = model.matrix_a().map(|a| [[a[(0, 0)], a[(0, 1)], a[(0, 2)]], [a[(1, 0)], a[(1, 1)], a[(1, 2)]], [a[(2, 0)], a[(2, 1)], a[(2, 2)]]]);
     Ok(FitReport {
         schema: report::SCHEMA.to_string(),
@@ -405,9 +425,13 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
             n_samples: s.data.n,
             n_samples_total: s.data.n_total,
             max_theta_deg: s.data.max_theta.to_degrees(),
-            delta_data: metric::delta_to_data(&model, ndf),
+            delta_data,
             rank: cov.rank,
             condition: cov.condition.is_finite().then_some(cov.condition),
+            dispersion,
+            delta_excess,
+            verdict,
+            reasons,
         },
         solver: SolverInfo {
             name: opts.solver.as_str().into(),

@@ -71,6 +71,21 @@ pub struct Quality {
     pub rank: usize,
     /// Condition number of the column-scaled `J^T J` (absent when rank deficient).
     pub condition: Option<f64>,
+    /// The data's own overdispersion of the region's bin counts, from two interleaved halves of the scan
+    /// ([`super::verdict::data_dispersion`]); `reduced_chi2` near it means the model explains the data
+    /// as well as the data explain themselves.
+    #[serde(default)]
+    pub dispersion: Option<f64>,
+    /// `delta_data` with the counting noise taken out (`sqrt(delta_data^2 - dispersion K / N)`): the
+    /// model's own NDF error against the data ([`super::verdict::excess_delta`]).
+    #[serde(default)]
+    pub delta_excess: Option<f64>,
+    /// `ok`, `misfit` or `unresolved` ([`super::verdict`]).
+    #[serde(default)]
+    pub verdict: super::verdict::Verdict,
+    /// Why the verdict is not `ok` (one line each; empty for `ok`).
+    #[serde(default)]
+    pub reasons: Vec<String>,
 }
 
 /// What the solver did.

@@ -26,6 +26,7 @@
 
 pub mod frame;
 pub mod grid;
+pub mod lattice;
 pub mod normals;
 pub mod output;
 pub mod plot;
@@ -39,7 +40,7 @@ pub use frame::SlopeFrame;
 pub use grid::{BinGrid, QuadOrder, RimShape};
 pub use normals::{HeightRows, NormalScheme};
 pub use precision::{F32Storage, HeightsF32, Precision};
-pub use quantum::HeightQuantum;
+pub use quantum::{HeightQuantum, SlopeLattice};
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::heightfield::Heightfield;
@@ -91,6 +92,10 @@ pub struct EmpiricalNdf {
     pub quantization: Option<HeightQuantum>,
     /// Set when the heights were read from f32 storage ([`empirical_ndf_f32`]): what it cost.
     pub f32_storage: Option<F32Storage>,
+    /// Per bin, the part of `count` from the odd row blocks of the dispersion split
+    /// ([`DISPERSION_BLOCKS`]); empty when the NDF was not counted from a scan. The fit compares the two
+    /// halves to estimate the overdispersion the data show ([`crate::fit::verdict`]).
+    pub counts_odd: Vec<u64>,
     /// Warnings for the user (one line each), e.g. a requested grid finer than the height lattice.
     pub warnings: Vec<String>,
 }
@@ -152,6 +157,10 @@ impl NdfOptions {
 /// `counts` at the end, or before a u32 could overflow.
 struct Acc {
     counts: Vec<u64>,
+    /// The part of `counts` from the odd row blocks of the dispersion split ([`DISPERSION_BLOCKS`]).
+    odd: Vec<u64>,
+    /// Whether the samples pending in `lanes` come from an odd row block.
+    odd_pending: bool,
     lanes: Vec<u32>,
     shift: u32,
     /// Samples counted into `lanes` since they were last folded.
@@ -168,7 +177,7 @@ const MAX_LANED_CELLS: usize = 1 << 16;
 impl Acc {
     fn new(cells: usize) -> Self {
         let shift = if cells <= MAX_LANED_CELLS { 2 } else { 0 };
-        Acc { counts: vec![0; cells], lanes: vec![0; cells << shift], shift, pending: 0, n: 0, m1: [0.0; 2], m2: [0.0; 3] }
+        Acc { counts: vec![0; cells], odd: vec![0; cells], odd_pending: false, lanes: vec![0; cells << shift], shift, pending: 0, n: 0, m1: [0.0; 2], m2: [0.0; 3] }
     }
 
     /// Add the interleaved counters into `counts` and clear them.
@@ -177,8 +186,12 @@ impl Acc {
             return;
         }
         let k = 1usize << self.shift;
-        for (c, l) in self.counts.iter_mut().zip(self.lanes.chunks_exact_mut(k)) {
-            *c += l.iter().map(|&v| v as u64).sum::<u64>();
+        for ((c, o), l) in self.counts.iter_mut().zip(self.odd.iter_mut()).zip(self.lanes.chunks_exact_mut(k)) {
+            let v = l.iter().map(|&v| v as u64).sum::<u64>();
+            *c += v;
+            if self.odd_pending {
+                *o += v;
+            }
             l.fill(0);
         }
         self.pending = 0;
@@ -188,6 +201,9 @@ impl Acc {
         self.fold();
         o.fold();
         for (a, b) in self.counts.iter_mut().zip(&o.counts) {
+            *a += b;
+        }
+        for (a, b) in self.odd.iter_mut().zip(&o.odd) {
             *a += b;
         }
         self.n += o.n;
@@ -263,30 +279,38 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
     // the exact count is known only after the full pass).
     let need_sample = opts.frame.is_none() || opts.cells_across.is_none();
     // The frame and the height lattice are independent passes over the data: side by side.
-    let ((sample_len, visited, frame), lattice) = rayon::join(
+    let ((mut sample, visited, frame), lattice) = rayon::join(
         || {
             let (mut sample, visited) = if need_sample { subsample(hf, scheme, FRAME_SUBSAMPLE) } else { (Vec::new(), 0) };
             let frame = match opts.frame {
                 Some(f) => f,
                 None => SlopeFrame::robust(&mut sample),
             };
-            (sample.len(), visited, frame)
+            (sample, visited, frame)
         },
-        || quantum::lattice(hf),
+        || hf.known_quantum().and_then(quantum::Lattice::known).or_else(|| quantum::lattice(hf)),
     );
-    if need_sample && sample_len == 0 {
+    if need_sample && sample.is_empty() {
         return Err(no_valid());
     }
-    let n_est = if visited > 0 { (stencils as f64 * sample_len as f64 / visited as f64).round() as u64 } else { stencils };
+    let n_est = if visited > 0 { (stencils as f64 * sample.len() as f64 / visited as f64).round() as u64 } else { stencils };
     let mut warnings = Vec::new();
     let mut quantization = lattice.and_then(|l| quantum::assess(l, hf, scheme, &frame));
     let mut cells = BinGrid::new(opts.cells_for(n_est)).n;
     if let Some(q) = quantization.as_mut() {
-        if cells > q.max_cells {
+        if sample.is_empty() {
+            sample = subsample(hf, scheme, FRAME_SUBSAMPLE).0;
+        }
+        let (offset, rigidity) = quantum::phase(&sample, q.slope_step);
+        q.rigidity = rigidity;
+        if rigidity[0].min(rigidity[1]) >= quantum::RIGID {
+            // Bins that respect the lattice (module `lattice`): any grid is free of a comb.
+            q.lattice = Some(SlopeLattice { offset, step: q.slope_step });
+        } else if cells > q.max_cells {
             if opts.cells_across.is_none() {
                 q.coarsened_from = Some(cells);
                 warnings.push(format!(
-                    "heights are quantized in steps of {:.3e} m (slope lattice {:.3e} x {:.3e}): automatic grid coarsened from {} to {} cells across",
+                    "heights are quantized in steps of {:.3e} m (slope lattice {:.3e} x {:.3e}, smeared by the form removal): automatic grid coarsened from {} to {} cells across",
                     q.quantum, q.slope_step[0], q.slope_step[1], cells, q.max_cells
                 ));
                 cells = q.max_cells;
@@ -297,6 +321,7 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
                 ));
             }
         }
+        warnings.extend(q.unresolved_reason());
     }
     let grid = BinGrid::new(cells);
 
@@ -312,7 +337,8 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
     ];
     let slope_mean = [frame.center[0] + mean[0], frame.center[1] + mean[1]];
 
-    let (bins, bin_cells) = build_bins(&frame, &grid, &acc.counts, acc.n);
+    let (bins, bin_cells) = build_bins(&frame, &grid, &acc.counts, acc.n, quantization.as_ref().and_then(|q| q.lattice.as_ref()));
+    let counts_odd = bin_cells.iter().map(|&c| acc.odd[c as usize]).collect();
     Ok(EmpiricalNdf {
         bins,
         n_samples: acc.n,
@@ -326,6 +352,7 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
         sample_area: scheme.sample_area(hf),
         quantization,
         f32_storage: None,
+        counts_odd,
         warnings,
     })
 }
@@ -468,6 +495,17 @@ impl Block {
     }
 }
 
+/// Row blocks of the dispersion split: the rows are cut into this many blocks of equal height, and the
+/// counts of the odd blocks are kept beside the total ([`Dispersion`]). Blocks many correlation lengths
+/// tall make the two halves' counts independent; sixteen alternate often enough to average the scan's
+/// large-scale variation into both halves.
+pub const DISPERSION_BLOCKS: usize = 16;
+
+#[inline(always)]
+fn dispersion_block(i: usize, rows: usize) -> usize {
+    i * DISPERSION_BLOCKS / rows.max(1)
+}
+
 /// The parallel pass: rows split into a few contiguous chunks per thread, one histogram per chunk.
 fn histogram<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame, grid: &BinGrid, rows: std::ops::Range<usize>) -> Acc {
     let cells = grid.cells();
@@ -475,12 +513,21 @@ fn histogram<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame, gr
     let len = rows.len().div_ceil(chunks).max(1);
     let starts: Vec<usize> = rows.clone().step_by(len).collect();
     let end = rows.end;
+    let rows = &rows;
     starts
         .into_par_iter()
         .map(|start| {
             let mut acc = Acc::new(cells);
             let mut blk = Block::new();
             for i in start..(start + len).min(end) {
+                // The dispersion split: samples of odd row blocks are also counted apart (flushed and
+                // folded where the parity changes, so no block of samples mixes the two).
+                let odd = dispersion_block(i - rows.start, rows.len()) % 2 == 1;
+                if odd != acc.odd_pending {
+                    blk.flush(frame, grid, &mut acc);
+                    acc.fold();
+                    acc.odd_pending = odd;
+                }
                 let valid = scheme.row_slopes(hf, i, 1, |sx, sy| {
                     blk.sx[blk.n] = sx;
                     blk.sy[blk.n] = sy;
@@ -726,16 +773,21 @@ fn tensor_sums_k<const K: usize>(frame: &SlopeFrame, x0: f64, x1: f64, y0: f64, 
 
 /// Bins from per-cell counts: every cell that meets the disk or holds a count, with its exact `W`, solid
 /// angle and W-weighted centroid. Shared with `scale`, which bins sampled slopes on the same grid.
-pub(crate) fn build_bins(frame: &SlopeFrame, grid: &BinGrid, counts: &[u64], n: u64) -> (Vec<NdfBin>, Vec<u32>) {
+pub(crate) fn build_bins(frame: &SlopeFrame, grid: &BinGrid, counts: &[u64], n: u64, lattice: Option<&quantum::SlopeLattice>) -> (Vec<NdfBin>, Vec<u32>) {
     let nf = n as f64;
     let cells: Vec<usize> = (0..grid.cells()).filter(|&c| grid.meets_disk(c) || counts[c] > 0).collect();
     let rim = frame.rim_shape();
+    let mut ints: Vec<(f64, f64, [f64; 2])> = cells.par_iter().map(|&c| cell_integrals(frame, &rim, grid, c)).collect();
+    if let Some(lat) = lattice {
+        lattice::respect_lattice(frame, grid, lat, &cells, &mut ints);
+    }
     let bins: Vec<NdfBin> = cells
-        .par_iter()
-        .map(|&c| {
-            let (w, o, centroid) = cell_integrals(frame, &rim, grid, c);
+        .iter()
+        .zip(&ints)
+        .map(|(&c, &(w, o, centroid))| {
             let count = counts[c];
-            // Guard: W = 0 only for a rim sliver of zero projected solid angle; D there is 0, not 0/0.
+            // Guard: W = 0 only for a rim sliver of zero projected solid angle, or a lattice cell that
+            // holds no node; D there is 0, not 0/0.
             let (d, stderr) = if w > 0.0 {
                 (count as f64 / (nf * w), (count.max(1) as f64).sqrt() / (nf * w))
             } else {
@@ -763,6 +815,7 @@ impl EmpiricalNdf {
             sample_area: f64::NAN,
             quantization: None,
             f32_storage: None,
+            counts_odd: Vec::new(),
             warnings: Vec::new(),
         }
     }

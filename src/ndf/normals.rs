@@ -22,6 +22,11 @@ pub trait HeightRows: Sync {
     fn dy(&self) -> f64;
     /// Row `i`.
     fn row(&self, i: usize) -> &[Self::T];
+    /// The height quantum found before form removal, when the heights were on a lattice then
+    /// ([`crate::heightfield::ScanMeta::height_quantum`]); `None` lets the NDF look for one itself.
+    fn known_quantum(&self) -> Option<f64> {
+        None
+    }
 }
 
 impl HeightRows for Heightfield {
@@ -41,6 +46,9 @@ impl HeightRows for Heightfield {
     #[inline(always)]
     fn row(&self, i: usize) -> &[f64] {
         Heightfield::row(self, i)
+    }
+    fn known_quantum(&self) -> Option<f64> {
+        self.meta.height_quantum
     }
 }
 

@@ -1,8 +1,12 @@
 //! Quantized heights: instruments that store heights as integers times a step `q` (or a coarse float)
 //! put the central-difference slopes on a lattice of step `q / (2 dx)`, `q / (2 dy)`
 //! ([`NormalScheme::slope_step`]). Bins finer than the lattice then alternate between full and empty (a
-//! comb) instead of estimating D. This module finds `q` from the data; [`super::empirical_ndf`] caps the
-//! automatic grid so that every central bin spans at least two lattice cells, and reports it.
+//! comb) instead of estimating D. This module finds `q` from the data (or takes it from the reader's
+//! pass before form removal, [`crate::heightfield::ScanMeta::height_quantum`]) and the lattice's offset
+//! from the slopes. A rigid lattice (a plane removal shifts it, nothing more) gets bins that respect it
+//! ([`super::lattice`]); a lattice smeared by a curved form removal caps the automatic grid so that every
+//! central bin spans at least two lattice cells. Derivation: `data_formats/objective.md` ("Quantized
+//! heights").
 
 use super::normals::{HeightRows, NormalScheme};
 use super::SlopeFrame;
@@ -20,6 +24,23 @@ const MIN_STEPS: f64 = 2.0;
 /// The quantum is reported only when the slope lattice step, whitened, is at least this fraction of the
 /// slope scale (an f32 file's ulp is a lattice too, but one far too fine to matter).
 pub const MATERIAL_STEP: f64 = 1e-3;
+/// Resultant length of the slopes' lattice phase (per axis) above which the lattice is rigid: every
+/// slope sits on `offset + k step` up to rounding (1), against ~0 for a lattice smeared by a curved form.
+pub const RIGID: f64 = 0.9;
+/// Largest whitened lattice step at which the scan resolves its NDF. Rounding puts the triangular kernel
+/// of two height roundings (variance `step^2 / 6`) on each slope axis where the bins model a box
+/// (`step^2 / 12`): the fitted slope variance grows by `step^2 / 12`, alpha by `step^2 / 24` relative,
+/// 1% at half the slope scale. Coarser lattices leave a fit the data cannot support (`unresolved`).
+pub const MAX_RESOLVED_STEP: f64 = 0.5;
+
+/// The slope lattice of a rigidly quantized scan: every slope is `offset + (i step_x, j step_y)`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SlopeLattice {
+    /// A node of the lattice (the phase of the slopes; a removed plane's slope moves it).
+    pub offset: [f64; 2],
+    /// Node spacing along x and y ([`NormalScheme::slope_step`]).
+    pub step: [f64; 2],
+}
 
 /// Heights found on a lattice `z0 + k q`, and what it does to the binning.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -39,6 +60,33 @@ pub struct HeightQuantum {
     pub max_cells: usize,
     /// Cells across the grid would have had without the cap (`None` when the cap did not bind).
     pub coarsened_from: Option<usize>,
+    /// Resultant length of the slopes' phase on the lattice, per axis (1: every slope on a node).
+    pub rigidity: [f64; 2],
+    /// The rigid slope lattice the bins respect (`None` when the lattice is smeared, and the grid is
+    /// capped instead).
+    pub lattice: Option<SlopeLattice>,
+}
+
+impl HeightQuantum {
+    /// Whether the lattice is fine enough against the slope scale to resolve the NDF
+    /// ([`MAX_RESOLVED_STEP`]).
+    pub fn resolves_ndf(&self) -> bool {
+        self.whitened_step[0].max(self.whitened_step[1]) <= MAX_RESOLVED_STEP
+    }
+
+    /// Why the scan cannot resolve its NDF, when the lattice is too coarse (one line).
+    pub fn unresolved_reason(&self) -> Option<String> {
+        (!self.resolves_ndf()).then(|| {
+            format!(
+                "heights are quantized in steps of {:.3e} m: the slope lattice ({:.3e} x {:.3e}) is {:.2} of the slope scale, above {}: the scan cannot resolve its NDF",
+                self.quantum,
+                self.slope_step[0],
+                self.slope_step[1],
+                self.whitened_step[0].max(self.whitened_step[1]),
+                MAX_RESOLVED_STEP
+            )
+        })
+    }
 }
 
 /// Find the height quantum of a scan: `q` is the smallest nonzero adjacent height difference (ignoring
@@ -56,6 +104,39 @@ pub fn detect<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame) -
 pub(crate) struct Lattice {
     q: f64,
     on: f64,
+}
+
+impl Lattice {
+    /// A quantum known from elsewhere (found on the heights before form removal).
+    pub(crate) fn known(q: f64) -> Option<Lattice> {
+        (q.is_finite() && q > 0.0).then_some(Lattice { q, on: 1.0 })
+    }
+}
+
+/// The height quantum of the raw heights, if they are on a lattice (the data half of [`detect`]).
+pub fn height_quantum<H: HeightRows>(hf: &H) -> Option<f64> {
+    lattice(hf).map(|l| l.q)
+}
+
+/// The lattice phase of a sample of slopes: per axis, the circular mean of `2 pi s / step` gives the
+/// offset of the nodes and its resultant length the rigidity (1 when every slope is on a node).
+pub(crate) fn phase(sample: &[[f64; 2]], step: [f64; 2]) -> ([f64; 2], [f64; 2]) {
+    let mut offset = [0.0; 2];
+    let mut rigidity = [0.0; 2];
+    for a in 0..2 {
+        let (mut c, mut s) = (0.0, 0.0);
+        for v in sample {
+            // Reduce first: s / step can be large, and the angle's rounding must stay far below a node.
+            let f = v[a] / step[a];
+            let t = std::f64::consts::TAU * (f - f.round());
+            c += t.cos();
+            s += t.sin();
+        }
+        let n = sample.len().max(1) as f64;
+        rigidity[a] = (c.hypot(s) / n).min(1.0);
+        offset[a] = s.atan2(c) / std::f64::consts::TAU * step[a];
+    }
+    (offset, rigidity)
 }
 
 /// The data half of [`detect`] (no frame needed, so it can run beside the frame's estimation).
@@ -113,5 +194,14 @@ pub(crate) fn assess<H: HeightRows>(lat: Lattice, hf: &H, scheme: NormalScheme, 
     // Odd, at least 3 (a finer lattice than the whole disk still gets the coarsest grid).
     let cap = if cap.is_finite() { (cap as usize).clamp(3, super::grid::MAX_CELLS_ACROSS) } else { 3 };
     let cap = if cap % 2 == 0 { cap - 1 } else { cap };
-    Some(HeightQuantum { quantum: q, slope_step: step, whitened_step: [lx, ly], on_lattice: on, max_cells: cap, coarsened_from: None })
+    Some(HeightQuantum {
+        quantum: q,
+        slope_step: step,
+        whitened_step: [lx, ly],
+        on_lattice: on,
+        max_cells: cap,
+        coarsened_from: None,
+        rigidity: [0.0; 2],
+        lattice: None,
+    })
 }

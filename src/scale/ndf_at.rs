@@ -180,7 +180,7 @@ fn bin_slopes_on(slopes: &[Vector2<f64>], cells_across: Option<usize>, frame: Op
     }
     let n = slopes.len() as u64;
     let m = slope_moments(slopes).ok();
-    let (bins, bin_cells) = crate::ndf::build_bins(&frame, &grid, &counts, n);
+    let (bins, bin_cells) = crate::ndf::build_bins(&frame, &grid, &counts, n, None);
     let mut ndf = EmpiricalNdf::from_bins(bins, n);
     ndf.frame = frame;
     ndf.grid = grid;

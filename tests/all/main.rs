@@ -9,6 +9,7 @@ mod fit;
 mod models;
 mod ndf;
 mod ndf_storage;
+mod quantized;
 mod readers;
 mod scale;
 mod synth;

@@ -1,5 +1,5 @@
-//! The NDF's storage guards: heights quantized on a coarse lattice (issue 4: the comb of empty bins,
-//! the st_plu-1 scan) and f32 storage of the heights (issue 8), against derived expectations.
+//! The NDF's storage guards: heights quantized on a coarse lattice (the comb of empty bins, the st_plu-1
+//! scan) and f32 storage of the heights, against derived expectations.
 
 use ndfit::ndf::{empirical_ndf, empirical_ndf_f32, EmpiricalNdf, HeightsF32, NdfOptions};
 use ndfit::synth::{gaussian_surface, GaussianParams, SynthSettings};
@@ -8,10 +8,11 @@ use ndfit::{ErrorKind, Heightfield};
 use crate::common::shared_scans;
 
 /// Bins whose W-weighted centre lies within `radius` of the centre of the Lambert disk (whitened
-/// slope radius about `radius`), and how many of them are empty.
+/// slope radius about `radius`) and that can hold data (`W > 0`: a bin that respects a height lattice
+/// and holds no node has `W = 0`), and how many of them are empty.
 fn core_bins(ndf: &EmpiricalNdf, radius: f64) -> (usize, usize) {
     let (mut all, mut empty) = (0, 0);
-    for b in &ndf.bins {
+    for b in ndf.bins.iter().filter(|b| b.proj_solid_angle > 0.0) {
         let s = [-b.m.x / b.m.z, -b.m.y / b.m.z];
         let p = ndf.frame.to_lambert(s[0], s[1]);
         if p[0].hypot(p[1]) < radius {
@@ -30,13 +31,14 @@ fn quantized(hf: &Heightfield, q: f64) -> Heightfield {
 /// A Gaussian surface (slope sigma 0.1 and 0.08) with heights rounded to q = 1e-8 m on a 1 um grid: the
 /// central-difference slopes lie on a lattice of step q / (2 dx) = 0.005, about sigma / 20 (whitened
 /// steps l ~ 0.05-0.06). The automatic grid for 260k samples (64 per bin) is 71 cells across, bins of
-/// h = 0.04 whitened, finer than the lattice: expected a comb, i.e. a fraction of empty central bins
-/// near 1 - (h / l)^2 ~ 0.4 where every bin expects hundreds of samples. The guard must find q exactly
-/// (up to the rounding of the products k q), cap the grid at 2 sqrt 2 / (2 (l_x + l_y)) (so that every
-/// central bin, of side at least the lattice's covering diameter, holds a lattice node), leave no
-/// central bin empty, and say so; the unquantized surface must not be flagged.
+/// h = 0.04 whitened, finer than the lattice: Lambert bins would show a comb, a fraction of empty
+/// central bins near 1 - (h / l)^2 ~ 0.4 where every bin expects hundreds of samples. The lattice must
+/// be found exactly (up to the rounding of the products k q), found rigid (no form removal), and the bins
+/// must respect it (data_formats/objective.md): the grid stays the continuous surface's, the cells that
+/// hold no node get W = 0, and no cell that holds a node is empty. An explicit grid twice as fine keeps
+/// that property, with more node-less cells. The unquantized surface must not be flagged.
 #[test]
-fn quantized_heights_coarsen_the_grid_instead_of_a_comb() {
+fn quantized_heights_get_bins_that_respect_the_lattice() {
     let s = SynthSettings { nx: 512, ny: 512, dx: 1e-6, dy: 1e-6, seed: 5, ..Default::default() };
     let p = GaussianParams { sigma_x: 0.1, sigma_y: 0.08, theta_z: 0.3, corr_length: 5e-6 };
     let (hf, _) = gaussian_surface(&s, &p).expect("valid");
@@ -50,47 +52,71 @@ fn quantized_heights_coarsen_the_grid_instead_of_a_comb() {
     let found = ndf.quantization.expect("the lattice is found");
     assert!((found.quantum / q - 1.0).abs() < 1e-6, "quantum {} vs {q}", found.quantum);
     assert!((found.slope_step[0] - 0.005).abs() < 1e-9 && (found.slope_step[1] - 0.005).abs() < 1e-9);
-    // The cap from the frame's own whitening (independent recomputation of the lattice step lengths).
-    let w = ndf.frame.whiten;
-    let (lx, ly) = (w[0][0].hypot(w[1][0]) * 0.005, w[0][1].hypot(w[1][1]) * 0.005);
-    let cap = (2.0 * std::f64::consts::SQRT_2 / (2.0 * (lx + ly))).floor() as usize;
-    let cap = if cap % 2 == 0 { cap - 1 } else { cap };
-    assert_eq!(ndf.grid.n, cap, "grid {} (lattice steps {lx:.4}, {ly:.4})", ndf.grid.n);
-    let from = found.coarsened_from.expect("the automatic grid was finer than the lattice");
-    assert_eq!(from, plain.grid.n, "the uncapped grid is the one the continuous surface gets");
-    assert!(ndf.warnings.iter().any(|w| w.contains("quantized")), "{:?}", ndf.warnings);
+    let lat = found.lattice.expect("no form removal: the lattice is rigid");
+    // Heights k q with no plane: the nodes sit on multiples of the step.
+    assert!(lat.offset[0].abs() < 1e-9 && lat.offset[1].abs() < 1e-9, "offset {:?}", lat.offset);
+    assert!(found.rigidity[0] > 0.999 && found.rigidity[1] > 0.999, "{:?}", found.rigidity);
+    assert_eq!(ndf.grid.n, plain.grid.n, "a rigid lattice does not cap the grid");
+    assert!(found.coarsened_from.is_none());
+    assert!(found.resolves_ndf() && ndf.warnings.is_empty(), "{:?}", ndf.warnings);
+    // Some central cells hold no node (W = 0) where Lambert bins would have been empty bins of the comb.
+    let nodeless = ndf.bins.iter().filter(|b| b.proj_solid_angle == 0.0).count();
+    assert!(nodeless > 0, "at 71 cells a central cell is finer than the lattice");
     let (all, empty) = core_bins(&ndf, 1.0);
-    eprintln!("quantized: q {:.3e}, grid {} (from {from}), core bins {all}, empty {empty}", found.quantum, ndf.grid.n);
-    assert!(all >= 9 && empty == 0, "core bins {all}, empty {empty}");
+    eprintln!("quantized: q {:.3e}, grid {}, core bins with a node {all}, empty {empty}, node-less {nodeless}", found.quantum, ndf.grid.n);
+    assert!(all >= 500 && empty == 0, "core bins {all}, empty {empty}");
     assert!((ndf.total() - 1.0).abs() < 1e-9);
 
-    // Without the cap (an explicit grid at the continuous surface's size) the comb is there, and the
-    // NDF says so in a warning. Within |p| < 0.3 the Lambert map magnifies whitened slope area by at
-    // most 1 / m'_z^3 = 1.15, so a cell holds on average at most 1.15 h^2 / (l_x l_y) ~ 0.55 lattice
-    // nodes: at least ~45% of those bins must be empty (assert a quarter).
-    let fine = empirical_ndf(&hq, &NdfOptions { cells_across: Some(plain.grid.n), ..Default::default() }).expect("valid");
-    let (all, empty) = core_bins(&fine, 0.3);
-    eprintln!("explicit {} cells: central bins {all}, empty {empty} (nodes per bin {:.2})", fine.grid.n, 1.15 * fine.grid.h.powi(2) / (lx * ly));
-    assert!(empty as f64 > 0.25 * all as f64, "the comb should show: {empty} of {all} empty");
-    assert!(fine.warnings.iter().any(|w| w.contains("comb")), "{:?}", fine.warnings);
+    let fine = empirical_ndf(&hq, &NdfOptions { cells_across: Some(2 * plain.grid.n + 1), ..Default::default() }).expect("valid");
+    let (all, empty) = core_bins(&fine, 0.5);
+    let nodeless_fine = fine.bins.iter().filter(|b| b.proj_solid_angle == 0.0).count();
+    assert!(all > 100 && empty == 0, "fine grid: core bins {all}, empty {empty}");
+    assert!(nodeless_fine > nodeless, "a finer grid leaves more cells without a node");
     let (all, empty) = core_bins(&plain, 1.0);
     assert_eq!(empty, 0, "the continuous surface has no empty central bin ({all})");
 }
 
-/// The real quantized scan (Sensofar PLU, st_plu-1): its lattice is found and the automatic grid has no
-/// empty central bin.
+/// A lattice smeared by a curved form removal: the heights of a strongly curved sample (a paraboloid whose
+/// slope sweeps 0.2 across the scan, 40 lattice steps) are quantized, then the poly2 form is removed. The
+/// quantum is still known (found before the form removal), but the slopes are no longer on rigid nodes:
+/// the automatic grid is capped and the NDF says so.
+#[test]
+fn a_smeared_lattice_caps_the_grid() {
+    let s = SynthSettings { nx: 512, ny: 512, dx: 1e-6, dy: 1e-6, seed: 5, ..Default::default() };
+    let p = GaussianParams { sigma_x: 0.1, sigma_y: 0.08, theta_z: 0.3, corr_length: 5e-6 };
+    let (mut hf, _) = gaussian_surface(&s, &p).expect("valid");
+    let c = 0.1 / (512e-6 * 512e-6);
+    let z: Vec<f64> = hf.z.iter().enumerate().map(|(k, h)| h + c * ((k % 512) as f64 * 1e-6 - 256e-6).powi(2)).collect();
+    hf.z = z.into();
+    let pre = ndfit::preprocess::Preprocess { form: ndfit::preprocess::FormRemoval::Polynomial(2), ..Default::default() };
+    let hq = ndfit::preprocess::apply(quantized(&hf, 1e-8), &pre).expect("valid");
+    assert_eq!(hq.meta.height_quantum.map(|v| (v / 1e-8 - 1.0).abs() < 1e-6), Some(true), "{:?}", hq.meta.height_quantum);
+    let ndf = empirical_ndf(&hq, &NdfOptions::default()).expect("valid");
+    let found = ndf.quantization.expect("the quantum is carried through the form removal");
+    assert!(found.lattice.is_none() && found.rigidity[0] < 0.5, "smeared along x: {:?}", found.rigidity);
+    assert!(found.coarsened_from.is_some() && ndf.grid.n == found.max_cells, "grid {} cap {}", ndf.grid.n, found.max_cells);
+    assert!(ndf.warnings.iter().any(|w| w.contains("smeared")), "{:?}", ndf.warnings);
+}
+
+/// The real quantized scan (Sensofar PLU, st_plu-1), as stored and with the default plane removal: its
+/// lattice is found (before the plane removal in the second case), rigid, and no bin that holds a node
+/// is empty in the core; its lattice is coarser than half the slope scale, which the NDF says.
 #[test]
 fn real_quantized_scan_has_no_comb() {
     let Some(dir) = shared_scans("real_quantized_scan_has_no_comb") else { return };
     let path = dir.join("st_plu-1.plu");
-    let hf = ndfit::io::read_scan(&path, &Default::default()).expect("st_plu-1 reads");
-    let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("valid");
-    let (all, empty) = core_bins(&ndf, 1.0);
-    eprintln!("st_plu-1: quantization {:?}, grid {}, core bins {all}, empty {empty}, warnings {:?}", ndf.quantization, ndf.grid.n, ndf.warnings);
-    let q = ndf.quantization.expect("st_plu-1 heights are on a lattice");
-    assert!(q.on_lattice >= 0.99);
-    assert_eq!(empty, 0, "no comb: {empty} of {all} central bins empty");
-    assert!((ndf.total() - 1.0).abs() < 1e-9);
+    let raw = ndfit::io::read_scan(&path, &Default::default()).expect("st_plu-1 reads");
+    for hf in [raw.clone(), ndfit::preprocess::apply(raw, &Default::default()).expect("plane removal")] {
+        let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("valid");
+        let (all, empty) = core_bins(&ndf, 1.0);
+        eprintln!("st_plu-1: quantization {:?}, grid {}, core bins {all}, empty {empty}, warnings {:?}", ndf.quantization, ndf.grid.n, ndf.warnings);
+        let q = ndf.quantization.expect("st_plu-1 heights are on a lattice");
+        assert!(q.on_lattice >= 0.99 && (q.quantum / 3.90625e-9 - 1.0).abs() < 1e-6, "{q:?}");
+        assert!(q.lattice.is_some(), "rigid: {:?}", q.rigidity);
+        assert!(all > 0 && empty == 0, "no comb: {empty} of {all} central bins empty");
+        assert!(!q.resolves_ndf() && ndf.warnings.iter().any(|w| w.contains("cannot resolve")), "{:?}", ndf.warnings);
+        assert!((ndf.total() - 1.0).abs() < 1e-9);
+    }
 }
 
 /// f32 storage with a 0.5 m height offset and ~100 nm of detail: the mean is removed in f64 before the

@@ -1,0 +1,154 @@
+//! Whether a fit deserves trust: `ok`, `misfit` (the model does not describe the data beyond the
+//! overdispersion the data show) or `unresolved` (the scan cannot resolve the NDF). The rules and their
+//! derivation are in `data_formats/objective.md` ("The verdict").
+
+use crate::ndf::EmpiricalNdf;
+
+/// The verdict on a fit (`quality.verdict`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// The model describes the data to within the data's own dispersion, and the data resolve the NDF.
+    #[default]
+    Ok,
+    /// The deviance per dof exceeds the data's own dispersion by more than [`MISFIT_RATIO`], or the
+    /// solver did not converge.
+    Misfit,
+    /// The scan cannot resolve the NDF (quantized heights, too few samples, a lobe inside one bin,
+    /// most normals outside the fitted region).
+    Unresolved,
+}
+
+impl Verdict {
+    /// The id as written in the JSON.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Verdict::Ok => "ok",
+            Verdict::Misfit => "misfit",
+            Verdict::Unresolved => "unresolved",
+        }
+    }
+}
+
+impl std::fmt::Display for Verdict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A fit is a misfit when its deviance per dof exceeds this multiple of the data's dispersion: more than
+/// half of what the model leaves is then the model's, not the data's.
+pub const MISFIT_RATIO: f64 = 2.0;
+/// Fewest normals in the fitted region for a verdict other than `unresolved`.
+pub const MIN_SAMPLES: f64 = 2000.0;
+/// Fewest populated bins per fitted parameter (plus the fixed total) for a verdict other than `unresolved`.
+pub const MIN_BINS_PER_PARAM: usize = 5;
+/// Smallest fraction of the normals inside the fitted region (`max_theta`) for a verdict other than
+/// `unresolved`: below it the instrument or the region hides most of the lobe.
+pub const MIN_REGION_FRACTION: f64 = 0.5;
+
+/// The data's own overdispersion of bin counts in the fitted region, from the dispersion split of the
+/// NDF ([`crate::ndf::DISPERSION_BLOCKS`]).
+///
+/// Given a bin's count `c_k`, its part `a_k` from the odd row blocks is binomial `(c_k, f)` (with `f` the
+/// odd blocks' share of all normals) when normals are independent, so `(a_k - f c_k)^2 / (f (1 - f) c_k)`
+/// has expectation 1 whatever D is; correlated normals inflate it by the same factor as they inflate the
+/// Poisson deviance. The mean over the populated bins of the region is returned (`None` without a split).
+pub fn data_dispersion(ndf: &EmpiricalNdf, max_theta: f64) -> Option<f64> {
+    if ndf.counts_odd.len() != ndf.bins.len() || ndf.n_samples == 0 {
+        return None;
+    }
+    let odd: u64 = ndf.counts_odd.iter().sum();
+    let f = odd as f64 / ndf.n_samples as f64;
+    if !(f > 0.0 && f < 1.0) {
+        return None;
+    }
+    let cos_max = max_theta.cos();
+    let (mut sum, mut k) = (0.0, 0usize);
+    for (b, &a) in ndf.bins.iter().zip(&ndf.counts_odd) {
+        let inside = b.proj_solid_angle > 0.0 && b.m.z >= cos_max * b.m.norm();
+        if inside && b.count > 0 {
+            let c = b.count as f64;
+            let e = a as f64 - f * c;
+            sum += e * e / (f * (1.0 - f) * c);
+            k += 1;
+        }
+    }
+    (k > 0).then(|| sum / k as f64)
+}
+
+/// `delta_data` without its counting noise: a bin's relative error has variance `phi / c_k` for a model
+/// that is right, so the noise adds `phi K / N` to `delta_data^2` (`K` populated bins, `N` normals).
+pub fn excess_delta(delta_data: f64, dispersion: Option<f64>, k: usize, n: f64) -> Option<f64> {
+    let noise2 = dispersion.unwrap_or(1.0).max(1.0) * k as f64 / n;
+    (delta_data.is_finite() && n > 0.0).then(|| (delta_data * delta_data - noise2).max(0.0).sqrt())
+}
+
+/// What the verdict looks at, gathered by the fit.
+#[derive(Debug, Clone, Copy)]
+pub struct Evidence {
+    /// Parameters fitted.
+    pub n_params: usize,
+    /// Normals in the fitted region, and in the whole NDF.
+    pub n_samples: f64,
+    /// Normals in the whole NDF.
+    pub n_samples_total: f64,
+    /// Populated bins of the region.
+    pub n_bins_nonzero: usize,
+    /// Deviance per dof of the fit.
+    pub reduced_chi2: Option<f64>,
+    /// The data's dispersion ([`data_dispersion`]).
+    pub dispersion: Option<f64>,
+    /// The NDF error beyond counting noise ([`excess_delta`]).
+    pub delta_excess: Option<f64>,
+    /// Over half of the normals in one bin.
+    pub specular: bool,
+    /// The solver reported convergence.
+    pub converged: bool,
+}
+
+/// The verdict and its reasons (one line each), from the evidence and the NDF's quantization.
+pub fn judge(ndf: &EmpiricalNdf, e: &Evidence) -> (Verdict, Vec<String>) {
+    let mut unresolved = Vec::new();
+    unresolved.extend(ndf.quantization.as_ref().and_then(|q| q.unresolved_reason()));
+    if e.specular {
+        unresolved.push("over half of the normals fall in one NDF bin: the lobe is narrower than a bin, alpha is only bounded".into());
+    }
+    if e.n_samples < MIN_SAMPLES {
+        unresolved.push(format!("only {} normals in the fitted region (fewer than {MIN_SAMPLES})", e.n_samples));
+    }
+    if e.n_bins_nonzero < MIN_BINS_PER_PARAM * (e.n_params + 1) {
+        unresolved.push(format!(
+            "only {} populated bins for {} parameters (fewer than {} per parameter)",
+            e.n_bins_nonzero, e.n_params, MIN_BINS_PER_PARAM
+        ));
+    }
+    if e.n_samples_total > 0.0 && e.n_samples < MIN_REGION_FRACTION * e.n_samples_total {
+        unresolved.push(format!(
+            "only {:.0}% of the normals lie within the fitted region (max_theta): the scan or the region hides most of the lobe",
+            100.0 * e.n_samples / e.n_samples_total
+        ));
+    }
+    if !unresolved.is_empty() {
+        return (Verdict::Unresolved, unresolved);
+    }
+    let mut misfit = Vec::new();
+    if !e.converged {
+        misfit.push("the solver stopped without converging".into());
+    }
+    if let Some(chi2) = e.reduced_chi2 {
+        let phi = e.dispersion.unwrap_or(1.0).max(1.0);
+        if chi2 > MISFIT_RATIO * phi {
+            misfit.push(format!(
+                "deviance per dof {chi2:.3} is {:.1} times the data's own dispersion {phi:.3} (above {MISFIT_RATIO}): the model does not describe the data{}",
+                chi2 / phi,
+                e.delta_excess.map_or(String::new(), |d| format!(" (NDF error {:.1}% beyond counting noise)", 100.0 * d))
+            ));
+        }
+    }
+    if misfit.is_empty() {
+        (Verdict::Ok, Vec::new())
+    } else {
+        (Verdict::Misfit, misfit)
+    }
+}

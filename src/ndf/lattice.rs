@@ -1,0 +1,144 @@
+//! Bins that respect a rigid slope lattice ([`super::quantum::SlopeLattice`]).
+//!
+//! Every slope of a quantized scan is a node `s_ij = o + (i step_x, j step_y)`, so a bin's count
+//! estimates the mass of the nodes it holds, each node standing for its own lattice cell (its Voronoi
+//! cell, `s_ij +- step / 2`), not the mass of the bin's Lambert cell: a bin that holds no node is empty
+//! whatever D is there, one that holds two nodes counts twice as much (the comb). The bin's projected
+//! solid angle is therefore the sum over its nodes of `integral of m.n dw = integral of (1 + |s|^2)^-2 d^2s`
+//! over each node's cell (Heitz eq. 64, `m.n dw = m_z^4 d^2 s`), its solid angle likewise with
+//! `(1 + |s|^2)^(-3/2)`, and its direction the image of their `W`-weighted centroid. Then
+//! `D_k = c_k / (N W_k)` estimates D without a comb for any grid, and the fit's midpoint rule models
+//! exactly the lattice cells the data can populate. The remaining rounding bias is second order
+//! ([`super::quantum::MAX_RESOLVED_STEP`]); derivation in `data_formats/objective.md`.
+//!
+//! Cells that hold many nodes (more than [`NODE_CAP`]) keep their exact Lambert integrals: there the
+//! node count follows the area to `~2 / sqrt(NODE_CAP)`, and summing every node would cost more than the
+//! histogram. Cells on the rim of the disk (slopes to infinity) always do.
+
+use rayon::prelude::*;
+
+use super::frame::{SlopeFrame, LAMBERT_RADIUS};
+use super::grid::BinGrid;
+use super::quantum::SlopeLattice;
+
+/// Most lattice nodes (estimated from the cell's slope-space area) for which a cell's integrals are
+/// summed node by node.
+pub const NODE_CAP: f64 = 1024.0;
+/// Most nodes enumerated in all (the bounding box of the lattice cells); beyond it every cell keeps its
+/// Lambert integrals (a lattice that fine holds more than [`NODE_CAP`] nodes per central bin anyway).
+const MAX_NODES: f64 = 3.0e7;
+/// Gauss-Legendre nodes on [-1, 1] for the 2 x 2 rule over a node's cell (exact for cubics; the
+/// integrands vary on the slope scale 1, the cell is a lattice step wide).
+const GL2: f64 = 0.577_350_269_189_625_8;
+
+/// Per-cell sums over the nodes of a lattice: `[W, Omega, W p_x, W p_y]`.
+type Sums = [f64; 4];
+
+/// Replace the integrals of the cells that hold few lattice nodes by sums over their nodes.
+///
+/// `cells` are the grid cells of the bins and `ints[k] = (W, Omega, centroid)` their Lambert integrals,
+/// replaced in place. Returns how many cells were replaced.
+pub(crate) fn respect_lattice(frame: &SlopeFrame, grid: &BinGrid, lat: &SlopeLattice, cells: &[usize], ints: &mut [(f64, f64, [f64; 2])]) -> usize {
+    let cell_area = lat.step[0] * lat.step[1];
+    if !(cell_area > 0.0 && cell_area.is_finite()) {
+        return 0;
+    }
+    // The cells to sum node by node: wholly inside the disk (off the rim zone of infinite slopes), and
+    // with few nodes (slope-space area W / m_z^4 at the centroid).
+    let inner = LAMBERT_RADIUS * 0.98;
+    let mut slot = vec![u32::MAX; grid.cells()];
+    let mut picked = Vec::new();
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for (k, &c) in cells.iter().enumerate() {
+        let [x0, x1, y0, y1] = grid.bounds(c);
+        let far = x0.abs().max(x1.abs()).hypot(y0.abs().max(y1.abs()));
+        let (w, _, p) = ints[k];
+        let mz = frame.normal_at(p).z;
+        if far >= inner || !(w > 0.0) || !(mz > 0.0) || w / mz.powi(4) / cell_area > NODE_CAP {
+            continue;
+        }
+        slot[c] = picked.len() as u32;
+        picked.push(k);
+        // The cell's extent in slope space, from its corners and edge midpoints (padded below: the
+        // edges are curved in slope space).
+        for (px, py) in [(x0, y0), (x1, y0), (x0, y1), (x1, y1), (0.5 * (x0 + x1), y0), (0.5 * (x0 + x1), y1), (x0, 0.5 * (y0 + y1)), (x1, 0.5 * (y0 + y1))] {
+            let m = frame.normal_at([px, py]);
+            let s = SlopeFrame::slope_of(m);
+            for a in 0..2 {
+                lo[a] = lo[a].min(s[a]);
+                hi[a] = hi[a].max(s[a]);
+            }
+        }
+    }
+    if picked.is_empty() {
+        return 0;
+    }
+    // Node index ranges of the padded box.
+    let mut range = [(0i64, 0i64); 2];
+    for a in 0..2 {
+        let pad = 0.05 * (hi[a] - lo[a]) + 2.0 * lat.step[a];
+        let i0 = ((lo[a] - pad - lat.offset[a]) / lat.step[a]).floor();
+        let i1 = ((hi[a] + pad - lat.offset[a]) / lat.step[a]).ceil();
+        if !(i0.is_finite() && i1.is_finite()) {
+            return 0;
+        }
+        range[a] = (i0 as i64, i1 as i64);
+    }
+    let count = |r: (i64, i64)| (r.1 - r.0 + 1) as f64;
+    if count(range[0]) * count(range[1]) > MAX_NODES {
+        return 0;
+    }
+    // Node rows in fixed chunks, summed in order: the result does not depend on the thread count.
+    const CHUNK: i64 = 64;
+    let (j0, j1) = range[1];
+    let starts: Vec<i64> = (j0..=j1).step_by(CHUNK as usize).collect();
+    let partial: Vec<Vec<Sums>> = starts
+        .par_iter()
+        .map(|&js| {
+            let mut acc = vec![[0.0; 4]; picked.len()];
+            for j in js..(js + CHUNK).min(j1 + 1) {
+                let sy = lat.offset[1] + j as f64 * lat.step[1];
+                for i in range[0].0..=range[0].1 {
+                    let sx = lat.offset[0] + i as f64 * lat.step[0];
+                    // The data at this node fall in the cell of the node itself.
+                    let s = slot[grid.cell_of(frame.to_lambert(sx, sy))];
+                    if s != u32::MAX {
+                        add_node(frame, lat, sx, sy, &mut acc[s as usize]);
+                    }
+                }
+            }
+            acc
+        })
+        .collect();
+    let mut total = vec![[0.0; 4]; picked.len()];
+    for part in &partial {
+        for (t, p) in total.iter_mut().zip(part) {
+            for v in 0..4 {
+                t[v] += p[v];
+            }
+        }
+    }
+    for (t, &k) in total.iter().zip(&picked) {
+        // A cell that holds no node has W = 0: no data can fall there, and the fit leaves it out.
+        let centroid = if t[0] > 0.0 { [t[2] / t[0], t[3] / t[0]] } else { ints[k].2 };
+        ints[k] = (t[0], t[1], centroid);
+    }
+    picked.len()
+}
+
+/// Add the integrals over the lattice cell of node `(sx, sy)` (2 x 2 Gauss-Legendre).
+#[inline]
+fn add_node(frame: &SlopeFrame, lat: &SlopeLattice, sx: f64, sy: f64, acc: &mut Sums) {
+    let (hx, hy) = (0.5 * lat.step[0], 0.5 * lat.step[1]);
+    let wt = hx * hy;
+    for (ux, uy) in [(-GL2, -GL2), (GL2, -GL2), (-GL2, GL2), (GL2, GL2)] {
+        let (x, y) = (sx + ux * hx, sy + uy * hy);
+        let t = 1.0 + x * x + y * y;
+        let dw = wt / (t * t);
+        let p = frame.to_lambert(x, y);
+        acc[0] += dw;
+        acc[1] += wt / (t * t.sqrt());
+        acc[2] += dw * p[0];
+        acc[3] += dw * p[1];
+    }
+}
