@@ -26,6 +26,9 @@ pub struct ScanMeta {
     /// (which shifts a lattice off `k q`); `None` for continuous heights. Crop and subsampling keep it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub height_quantum: Option<f64>,
+    /// The grid as stored in the file (columns, rows), before any crop or subsampling.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file_grid: Option<[usize; 2]>,
 }
 
 /// A regular grid of heights in metres with a validity mask (NaN = invalid).

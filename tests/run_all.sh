@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The whole test suite: Rust unit and integration tests, then the Python side (tests, the Rust-vs-nlopt
-# cross-check, the notebooks) in a venv it creates. Needs only cargo, Python 3.11 and pip.
+# cross-check, the notebooks) in a venv it creates. Needs only cargo, Python >= 3.9 (CI: 3.11) and pip.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

@@ -15,12 +15,12 @@ pub const FAST_STRIDE: usize = 4;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Preset {
-    /// Every [`FAST_STRIDE`]-th point along both axes (16x fewer normals), the NDF's own binning for
+    /// Every 4th point along both axes (16x fewer normals; `FAST_STRIDE`), the NDF's own binning for
     /// them, a looser solver tolerance.
     Fast,
-    /// What `ndfit fit` does without a preset: every point, the NDF's own binning
-    /// ([`crate::ndf::DEFAULT_TARGET_COUNT`] samples per bin up to [`crate::ndf::MAX_AUTO_CELLS`] cells
-    /// across), the default solver. The most accurate binning measured on the synthetic set.
+    /// What `ndfit fit` does without a preset: every point, the NDF's own binning (64 samples per bin up
+    /// to 255 cells across: `ndf::DEFAULT_TARGET_COUNT`, `ndf::MAX_AUTO_CELLS`), the default solver. The
+    /// most accurate binning measured on the synthetic set.
     #[default]
     Balanced,
     /// Balanced's binning with a tighter tolerance and four extra ellipsoid starts: a guard against

@@ -242,10 +242,7 @@ fn detect_by_content(path: &Path) -> bool {
 }
 
 fn check_model(m: &str) -> anyhow::Result<()> {
-    if m == "auto" {
-        return Ok(());
-    }
-    m.parse::<ndfit::models::ModelId>().map(|_| ()).map_err(|e| anyhow::anyhow!("{}", e.message()))
+    m.parse::<ndfit::models::ModelChoice>().map(|_| ()).map_err(|e| anyhow::anyhow!("{}", e.message()))
 }
 
 /// An indicatif bar on a terminal; `None` (plain lines) otherwise.

@@ -7,7 +7,6 @@ use std::time::Instant;
 
 use anyhow::anyhow;
 use ndfit::fit::{fit_auto, fit_model, FitOptions, InputInfo, Objective, Solver};
-use ndfit::models::ModelId;
 use ndfit::ndf::empirical_ndf;
 
 use super::scan_args::ScanArgs;
@@ -65,9 +64,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         ..FitOptions::default()
     };
     anyhow::ensure!(args.max_theta > 0.0 && args.max_theta <= 90.0, "--max-theta {} must be in (0, 90] degrees", args.max_theta);
-    let model = match args.model.as_str() {
-        "auto" => None,
-        m => Some(m.parse::<ModelId>().map_err(|e| anyhow!("--model: {}", e.message()))?),
+    let model = match args.model.parse::<ndfit::models::ModelChoice>().map_err(|e| anyhow!("--model: {}", e.message()))? {
+        ndfit::models::ModelChoice::Auto => None,
+        ndfit::models::ModelChoice::Model(id) => Some(id),
     };
     let mut ndf_opts = args.ndf.options()?;
     let mut opts = opts;

@@ -1,4 +1,5 @@
-//! `ndfit ndf SCAN -o NDF.csv|NDF.json [--exr D.exr] [--png PREFIX]`: the empirical NDF of a scan.
+//! `ndfit ndf SCAN [-o NDF.csv|NDF.json] [--exr D.exr] [--png PREFIX]`: the empirical NDF of a scan (CSV on
+//! standard output without `-o`).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -44,8 +45,9 @@ pub struct Args {
     #[command(flatten)]
     ndf: NdfArgs,
     /// Output file: `.csv` (one row per bin) or `.json` (`ndfit.ndf/1`); see data_formats/ndf_csv.md.
+    /// Without it the CSV goes to standard output.
     #[arg(short, long)]
-    output: PathBuf,
+    output: Option<PathBuf>,
     /// Also write an OpenEXR image of D over the orthographically projected hemisphere.
     #[arg(long)]
     exr: Option<PathBuf>,
@@ -80,14 +82,22 @@ pub fn write_ndf(out: &Path, ndf: &EmpiricalNdf, input: serde_json::Value) -> an
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let opts = args.ndf.options()?;
     // Check the output names before the work, so a typo fails fast and nothing is half-written.
-    let ext = args.output.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
-    anyhow::ensure!(matches!(ext.as_deref(), Some("csv" | "json")), "{}: output must end in .csv or .json", args.output.display());
+    if let Some(out) = &args.output {
+        let ext = out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
+        anyhow::ensure!(matches!(ext.as_deref(), Some("csv" | "json")), "{}: output must end in .csv or .json", out.display());
+    }
     let hf = args.scan.load()?;
     let ndf = empirical_ndf(&hf, &opts).map_err(|e| e.with_path(&args.scan.scan))?;
     for w in &ndf.warnings {
         eprintln!("ndfit: {}: warning: {w}", args.scan.scan.display());
     }
-    write_ndf(&args.output, &ndf, input_json(&args.scan.scan, &hf))?;
+    match &args.output {
+        Some(out) => write_ndf(out, &ndf, input_json(&args.scan.scan, &hf))?,
+        None => {
+            let mut stdout = std::io::BufWriter::new(std::io::stdout().lock());
+            output::write_csv_to(&mut stdout, &ndf).and_then(|_| std::io::Write::flush(&mut stdout).map_err(ndfit::Error::io)).map_err(|e| anyhow::anyhow!("<stdout>: {e}"))?;
+        }
+    }
     if let Some(exr) = &args.exr {
         output::write_exr(exr, &ndf, args.exr_size)?;
     }

@@ -27,6 +27,10 @@ pub struct InputInfo {
     pub dy: f64,
     /// Masked points.
     pub invalid: usize,
+    /// The file's own grid (columns, rows) when a crop, `--subsample` or a preset kept fewer points
+    /// (`nx`, `ny`, `dx`, `dy` are then those of the kept points).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file_grid: Option<[usize; 2]>,
 }
 
 impl InputInfo {
@@ -40,6 +44,7 @@ impl InputInfo {
             dx: hf.dx,
             dy: hf.dy,
             invalid: hf.invalid_count(),
+            file_grid: hf.meta.file_grid.filter(|g| *g != [hf.nx, hf.ny]),
         }
     }
 }

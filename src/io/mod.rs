@@ -249,16 +249,21 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
         (FileBytes::Mapped(map), Format::Npy) if stride > 1 => npy::read_npy_strided(map, opts, stride)?,
         _ => None,
     };
-    let hf = match strided {
+    let mut hf = match strided {
         Some(hf) => hf,
         None => {
-            let whole = match (&file, format) {
+            let mut whole = match (&file, format) {
                 (FileBytes::Mapped(map), Format::Npy) => npy::read_npy_mapped(map, opts)?,
                 _ => read_bytes(format, bytes, opts)?,
             };
+            whole.meta.file_grid = Some([whole.nx, whole.ny]);
             if stride > 1 { crate::preprocess::subsample(&whole, stride)? } else { whole }
         }
     };
+    // The strided NPY path knows the file's grid from its header; the rest set it above.
+    if hf.meta.file_grid.is_none() {
+        hf.meta.file_grid = npy::grid_of(bytes);
+    }
     check_usable(&hf)?;
     Ok(hf)
 }

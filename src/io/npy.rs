@@ -35,6 +35,11 @@ struct Header {
     data: usize,
 }
 
+/// The grid `[nx, ny]` an NPY file declares, if `bytes` hold a valid NPY header.
+pub(crate) fn grid_of(bytes: &[u8]) -> Option<[usize; 2]> {
+    bytes.starts_with(NPY_MAGIC).then(|| parse_header(bytes).ok()).flatten().map(|h| [h.nx, h.ny])
+}
+
 fn parse_header(bytes: &[u8]) -> Result<Header> {
     let mut c = Cursor::new(bytes);
     if c.take(6, "NPY magic")? != NPY_MAGIC {

@@ -118,6 +118,27 @@ impl std::fmt::Display for ModelId {
     }
 }
 
+/// What `--model` asks for: one model, or `auto` (fit the nested models and choose by the criterion).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModelChoice {
+    /// Choose among the candidates ([`crate::fit::fit_auto`]).
+    Auto,
+    /// Fit this model.
+    Model(ModelId),
+}
+
+impl std::str::FromStr for ModelChoice {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        if s == "auto" {
+            return Ok(ModelChoice::Auto);
+        }
+        s.parse::<ModelId>()
+            .map(ModelChoice::Model)
+            .map_err(|_| Error::invalid(format!("unknown model '{s}' (expected auto, ggx, ggx-aniso, beckmann, beckmann-aniso or ellipsoid)")))
+    }
+}
+
 impl std::str::FromStr for ModelId {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {

@@ -15,18 +15,17 @@ pub const CSV_HEADER: &str = "mx,my,mz,d,stderr,count,solid_angle,proj_solid_ang
 
 /// Write the NDF as CSV, one row per bin, empty bins included.
 pub fn write_csv(path: &Path, ndf: &EmpiricalNdf) -> Result<()> {
-    write_atomic(path, |w| {
-        writeln!(w, "{CSV_HEADER}")?;
-        for b in &ndf.bins {
-            let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
-            writeln!(
-                w,
-                "{},{},{},{},{},{},{},{},{},{}",
-                b.m.x, b.m.y, b.m.z, b.d, b.stderr, b.count, b.solid_angle, b.proj_solid_angle, sx, sy
-            )?;
-        }
-        Ok(())
-    })
+    write_atomic(path, |w| write_csv_to(w, ndf))
+}
+
+/// The CSV of [`write_csv`] into any writer (standard output).
+pub fn write_csv_to<W: std::io::Write + ?Sized>(w: &mut W, ndf: &EmpiricalNdf) -> Result<()> {
+    writeln!(w, "{CSV_HEADER}")?;
+    for b in &ndf.bins {
+        let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
+        writeln!(w, "{},{},{},{},{},{},{},{},{},{}", b.m.x, b.m.y, b.m.z, b.d, b.stderr, b.count, b.solid_angle, b.proj_solid_angle, sx, sy)?;
+    }
+    Ok(())
 }
 
 /// The NDF as a JSON value (`ndfit.ndf/1`); `input` describes the scan (path, format, grid).
