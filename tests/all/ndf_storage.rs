@@ -85,7 +85,7 @@ fn a_smeared_lattice_caps_the_grid() {
     let s = SynthSettings { nx: 512, ny: 512, dx: 1e-6, dy: 1e-6, seed: 5, ..Default::default() };
     let p = GaussianParams { sigma_x: 0.1, sigma_y: 0.08, theta_z: 0.3, corr_length: 5e-6 };
     let (mut hf, _) = gaussian_surface(&s, &p).expect("valid");
-    let c = 0.1 / (512e-6 * 512e-6);
+    let c = 0.1 / (2.0 * 256e-6);
     let z: Vec<f64> = hf.z.iter().enumerate().map(|(k, h)| h + c * ((k % 512) as f64 * 1e-6 - 256e-6).powi(2)).collect();
     hf.z = z.into();
     let pre = ndfit::preprocess::Preprocess { form: ndfit::preprocess::FormRemoval::Polynomial(2), ..Default::default() };
