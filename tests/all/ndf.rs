@@ -392,8 +392,8 @@ fn cli_synth_and_ndf() {
 
 /// The real scans of ../shared/data/scans give finite, normalized NDFs with both schemes.
 #[test]
-fn real_scans_give_normalized_ndfs() {
-    let Some(dir) = crate::common::shared_scans("real_scans_give_normalized_ndfs") else { return };
+fn real_scans_give_normalized_ndfs_needs_shared() {
+    let Some(dir) = crate::common::shared_scans("real_scans_give_normalized_ndfs_needs_shared") else { return };
     let mut n = 0;
     for e in std::fs::read_dir(&dir).expect("readable") {
         let p = e.expect("entry").path();

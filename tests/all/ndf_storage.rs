@@ -80,8 +80,8 @@ fn quantized_heights_coarsen_the_grid_instead_of_a_comb() {
 /// The real quantized scan (Sensofar PLU, st_plu-1): its lattice is found and the automatic grid has no
 /// empty central bin.
 #[test]
-fn real_quantized_scan_has_no_comb() {
-    let Some(dir) = shared_scans("real_quantized_scan_has_no_comb") else { return };
+fn real_quantized_scan_has_no_comb_needs_shared() {
+    let Some(dir) = shared_scans("real_quantized_scan_has_no_comb_needs_shared") else { return };
     let path = dir.join("st_plu-1.plu");
     let hf = ndfit::io::read_scan(&path, &Default::default()).expect("st_plu-1 reads");
     let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("valid");
