@@ -117,7 +117,8 @@ def fit_all(scan, name, bins, opts=()):
         py = nlopt_fit(bins, m)
         d_py = obj.model_delta(m, doc["params"], m, py.params, bins)
         rows.append((m, canonical.canonical(m, doc["params"]), f, f / k, d_py, t))
-    worst = max(r[4] for r in rows)f"{'model':15s} {'deviance':>12s} {'F/(K-p)':>9s} {'delta(rust,nlopt)':>18s} {'t_fit':>6s}  canonical parameters")
+    worst = max(r[4] for r in rows)
+    print(f"{'model':15s} {'deviance':>12s} {'F/(K-p)':>9s} {'delta(rust,nlopt)':>18s} {'t_fit':>6s}  canonical parameters")
     for m, p, f, rc, d, t in rows:
         ps = " ".join(f"{k}={v:.4g}" for k, v in p.items())
         print(f"{m:15s} {f:12.2f} {rc:9.3f} {d:18.2e} {t:5.2f}s  {ps}")
