@@ -62,7 +62,8 @@ fn quantized_heights_coarsen_the_grid_instead_of_a_comb() {
     let (all, empty) = core_bins(&ndf, 1.0);
     eprintln!("quantized: q {:.3e}, grid {} (from {from}), core bins {all}, empty {empty}", found.quantum, ndf.grid.n);
     assert!(all >= 9 && empty == 0, "core bins {all}, empty {empty}");
-    assert!((ndf.total() - 1.0).abs() < 1e-9);
+    let total = crate::common::reference_total(&ndf, 2);
+    assert!((total - 1.0).abs() < 1e-9, "sum d W_ref = {total}");
 
     // Without the cap (an explicit grid at the continuous surface's size) the comb is there, and the
     // NDF says so in a warning. Within |p| < 0.3 the Lambert map magnifies whitened slope area by at
@@ -90,7 +91,10 @@ fn real_quantized_scan_has_no_comb_needs_shared() {
     let q = ndf.quantization.expect("st_plu-1 heights are on a lattice");
     assert!(q.on_lattice >= 0.99);
     assert_eq!(empty, 0, "no comb: {empty} of {all} central bins empty");
-    assert!((ndf.total() - 1.0).abs() < 1e-9);
+    // Heitz eq. 9 against independent bin integrals; 3 cells across, so every bin is a rim cell of a
+    // narrow frame, where the polar rule errs most (data_formats/ndf_csv.md, step 4): measured 2e-5.
+    let total = crate::common::reference_total(&ndf, 2);
+    assert!((total - 1.0).abs() < 1e-4, "sum d W_ref = {total}");
 }
 
 /// f32 storage with a 0.5 m height offset and ~100 nm of detail: the mean is removed in f64 before the

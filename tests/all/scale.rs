@@ -144,14 +144,15 @@ fn bump_field_skew_fades_with_footprint() {
 
 #[test]
 fn binned_ndf_is_normalized() {
-    // Heitz eq. 9: sum d * proj_solid_angle = 1 when no sample is dropped (bin_slopes covers them all).
+    // Heitz eq. 9: sum d W = 1 when no sample is dropped (bin_slopes covers them all), with W integrated
+    // independently of the NDF's own rule (common::reference_total), not the W that d was divided by.
     let fs = gaussian_surface();
     let hf = fs.heightfield(0).unwrap();
     let (sx, sy) = slope_field(&hf);
     let ff = footprint_field(hf.nx, hf.ny, DX, DX, &sx, &sy, kernel_sigma(5.0 * DX)).unwrap();
     let ndf = bin_slopes(&sample_slopes(&ff, 2, true, 3), Some(49)).unwrap();
-    let total: f64 = ndf.bins.iter().map(|b| b.d * b.proj_solid_angle).sum();
-    assert!((total - 1.0).abs() < 1e-12, "{total}");
+    let total = crate::common::reference_total(&ndf, 2);
+    assert!((total - 1.0).abs() < 1e-9, "sum d W_ref = {total}");
     assert_eq!(ndf.bins.iter().map(|b| b.count).sum::<u64>(), ndf.n_samples);
 }
 
