@@ -13,9 +13,14 @@ relative, or when a command fails. The table shows canonical parameters (ndfitpy
 when every row passes, 1 otherwise; the last line sums it up.
 
 Scans: the real ones of ../shared/data/scans (relative to the repository root; a clear SKIP line when that
-folder is absent) and synthetic ones made with `ndfit synth`.
+folder is absent, a failure naming it when NDFIT_REQUIRE_SHARED=1) and synthetic ones made with `ndfit synth`.
 
-Usage: python fits/crosscheck.py --ndfit target/release/ndfit [--models ggx,ellipsoid] [--no-real]
+Then the end-to-end part (ndfitpy.endtoend, skipped with --no-e2e): the same scan files, synthetic (written
+as X3P by ndfit synth, and rewritten here as NPY and GSF) and the real X3P scans, go through the numpy pipeline
+(own reader, plane removal, slopes, bins, nlopt fit) and through ndfit; the samples, the empirical NDFs cell by
+cell, the two fits and the synthetic truth are compared.
+
+Usage: python fits/crosscheck.py --ndfit target/release/ndfit [--models ggx,ellipsoid] [--no-real] [--no-e2e]
 """
 
 from __future__ import annotations
@@ -38,7 +43,7 @@ sys.path.insert(0, HERE)  # run from a checkout without installing: the package 
 
 import numpy as np  # noqa: E402
 
-from ndfitpy import canonical, fitjson, models  # noqa: E402
+from ndfitpy import canonical, endtoend, fitjson, models, scanio  # noqa: E402
 from ndfitpy import objective as obj  # noqa: E402
 from ndfitpy.bins import read_ndf_csv  # noqa: E402
 from ndfitpy.fit import fit  # noqa: E402
@@ -244,6 +249,9 @@ def main(argv=None) -> int:
     ap.add_argument("--size", type=int, default=384, help="synthetic scan size in pixels (square)")
     ap.add_argument("--no-real", action="store_true", help="skip the real scans")
     ap.add_argument("--no-synth", action="store_true", help="skip the synthetic scans")
+    ap.add_argument("--no-e2e", action="store_true", help="skip the end-to-end part (numpy pipeline from the scan)")
+    ap.add_argument("--no-csv", action="store_true", help="skip the part that fits ndfit's NDF CSV with nlopt")
+    ap.add_argument("--e2e-real-model", default="ggx-aniso", help="model of the end-to-end check on real scans")
     ap.add_argument("--only", default="", help="comma-separated substrings: check only scans whose name has one")
     ap.add_argument("--ndf-args", default="", help="extra NDF options passed to both ndfit ndf and ndfit fit")
     ap.add_argument("--timeout", type=float, default=600.0, help="seconds per ndfit command")
@@ -267,10 +275,14 @@ def main(argv=None) -> int:
     work = args.work or tempfile.mkdtemp(prefix="ndfit-crosscheck-")
     os.makedirs(work, exist_ok=True)
     rows: List[Row] = []
+    e2e_rows: List[endtoend.E2ERow] = []
     skipped = []
+    missing = []
+    strict = os.environ.get("NDFIT_REQUIRE_SHARED", "") not in ("", "0")
     t0 = time.perf_counter()
     try:
         scans = []
+        synth = []
         if not args.no_synth:
             for name, synth_args, case_ndf_args in SYNTH_CASES:
                 if only and not any(s in name for s in only):
@@ -280,8 +292,10 @@ def main(argv=None) -> int:
                 ok, _, msg = run([ndfit, "synth", path, *synth_args, "--nx", size, "--ny", size], args.timeout)
                 if ok:
                     scans.append((path, name, case_ndf_args))
+                    synth.append((path, name))
                 else:
                     rows += [Row(scan=name, model=m, notes=[f"ndfit synth failed: {msg}"]) for m in model_list]
+        real = []
         if not args.no_real:
             if os.path.isdir(args.scans):
                 for p in real_scans(args.scans):
@@ -289,12 +303,19 @@ def main(argv=None) -> int:
                     if only and not any(s in name for s in only):
                         continue
                     scans.append((p, name, []))
+                    real.append((p, name))
+            elif strict:
+                print(f"FAIL real scans: {os.path.normpath(args.scans)} is absent and NDFIT_REQUIRE_SHARED is set")
+                missing.append(os.path.normpath(args.scans))
             else:
                 print(f"SKIP real scans: {os.path.normpath(args.scans)} is absent")
                 skipped.append("real scans")
-        for path, name, case_ndf_args in scans:
-            print(f"-- {name}", file=sys.stderr, flush=True)
-            rows += check_scan(ndfit, path, name, model_list, work, case_ndf_args + ndf_args, args.timeout)
+        if not args.no_csv:
+            for path, name, case_ndf_args in scans:
+                print(f"-- {name}", file=sys.stderr, flush=True)
+                rows += check_scan(ndfit, path, name, model_list, work, case_ndf_args + ndf_args, args.timeout)
+        if not args.no_e2e:
+            e2e_rows = run_e2e(ndfit, synth, real, work, args)
     finally:
         if not args.work:
             shutil.rmtree(work, ignore_errors=True)
@@ -324,9 +345,49 @@ def main(argv=None) -> int:
     if n_known:
         print(f"{n_known} known findings (listed in {os.path.relpath(args.known)}, shown as KNOWN above) are "
               "counted as skipped, not passed")
-    print(f"crosscheck: {passed} passed, {failed} failed" + (f", {n_known} skipped" if n_known else ""))
-    return 0 if failed == 0 and rows else 1
+    if e2e_rows:
+        print("\nend to end (scan file -> fit, numpy pipeline vs ndfit):")
+        endtoend.print_table(e2e_rows)
+    e2e_passed = sum(r.verdict == "ok" for r in e2e_rows)
+    e2e_failed = len(e2e_rows) - e2e_passed
+    print(f"crosscheck: {passed} passed, {failed} failed" + (f", {n_known} skipped" if n_known else "")
+          + ("" if args.no_e2e else f"; end to end: {e2e_passed} passed, {e2e_failed} failed")
+          + (f"; missing (NDFIT_REQUIRE_SHARED is set): {', '.join(missing)}" if missing else ""))
+    return 0 if failed == 0 and e2e_failed == 0 and not missing and (rows or e2e_rows) else 1
 
+
+def run_e2e(ndfit: str, synth, real, work: str, args) -> List["endtoend.E2ERow"]:
+    """The end-to-end rows: each synthetic scan with its truth's model (two of them rewritten as NPY and GSF so that
+    those readers are compared too), each real X3P scan with --e2e-real-model."""
+    out: List[endtoend.E2ERow] = []
+    as_format = {"synth-ggx": ".npy", "synth-mirror": ".gsf"}
+    for path, name in synth:
+        print(f"-- end to end: {name}", file=sys.stderr, flush=True)
+        try:
+            with open(os.path.splitext(path)[0] + ".truth.json", encoding="utf-8") as fh:
+                truth = json.load(fh)
+        except (OSError, ValueError) as e:
+            out.append(endtoend.E2ERow(scan=name, model="-", errors=[f"reading the truth: {e}"]))
+            continue
+        ext = as_format.get(name, ".x3p")
+        scan, rust_args, dx = path, [], None
+        if ext != ".x3p":
+            hm = scanio.read_scan(path)
+            scan = os.path.join(work, name + ext)
+            if ext == ".npy":
+                np.save(scan, hm.z)
+                dx = hm.dx
+                rust_args = ["--dx", repr(hm.dx), "--z-scale", "1"]
+            else:
+                scanio.write_gsf(scan, hm)
+        out += endtoend.check_scan(ndfit, scan, name + ext, [truth["model"]], work, "none", rust_args, truth,
+                                   args.timeout, dx=dx)
+    for path, name in real:
+        if not name.lower().endswith(".x3p"):
+            continue
+        print(f"-- end to end: {name}", file=sys.stderr, flush=True)
+        out += endtoend.check_scan(ndfit, path, name, [args.e2e_real_model], work, "plane", [], None, args.timeout)
+    return out
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -1,8 +1,11 @@
-"""A minimal ISO 25178-72 (X3P) height-map reader for the notebooks' pictures (stdlib zipfile/xml + numpy).
+"""An ISO 25178-72 (X3P) height-map reader (stdlib zipfile/xml + numpy), written from the standard's layout.
 
-Reads the main.xml grid description and the binary point data (Z data types I, L, F, D, little-endian, x varying
-fastest); NaN marks invalid points. Enough for `ndfit synth` output and the shared X3P scans; ndfit's own
-reader is the reference for anything else.
+Reads the main.xml grid description (namespace-agnostic, main.xml possibly in a sub-folder) and the point data:
+a binary ``DataLink`` (Z data types I, L, F, D, little-endian, x varying fastest) or an inline ``DataList`` of
+``Datum`` elements. ``z = Offset + Increment * stored`` on CZ. Invalid points become NaN: NaN or infinite values,
+empty ``<Datum/>`` entries, and 0 bits of the optional ``ValidPointsLink`` bit array (one bit per point, least
+significant bit first). It is the independent reader of the end-to-end cross-check (``endtoend.py``): the shared
+X3P scans and ``ndfit synth`` output.
 """
 
 from __future__ import annotations
@@ -73,13 +76,30 @@ def read_x3p(path: str) -> HeightMap:
         dx = float(_text(root, "Record1", "Axes", "CX", "Increment", default="nan"))
         dy = float(_text(root, "Record1", "Axes", "CY", "Increment", default="nan"))
         link = _text(root, "Record3", "DataLink", "PointDataLink")
+        valid_link = _text(root, "Record3", "ValidPointsLink")
         if link is None:
-            raise ValueError(f"{path}: no PointDataLink (inline data lists are not handled here)")
-        raw = zf.read(posixpath.join(base, link))
-    need = nx * ny * np.dtype(_DTYPES[dt]).itemsize
-    if len(raw) < need:
-        raise ValueError(f"{path}: point data has {len(raw)} bytes, the grid needs {need}")
-    z = np.frombuffer(raw[:need], dtype=_DTYPES[dt]).astype(float).reshape(ny, nx)
-    if dt in ("I", "L"):
+            lst = _find(root, "Record3", "DataList")
+            if lst is None:
+                raise ValueError(f"{path}: neither a PointDataLink nor a DataList in main.xml")
+            vals = [(d.text or "").strip() for d in lst if _local(d.tag) == "Datum"]
+            if len(vals) < nx * ny:
+                raise ValueError(f"{path}: DataList has {len(vals)} entries, the grid needs {nx * ny}")
+            z = np.array([float(v) if v else np.nan for v in vals[: nx * ny]], dtype=float).reshape(ny, nx)
+            raw = None
+        else:
+            raw = zf.read(posixpath.join(base, link))
+        valid = zf.read(posixpath.join(base, valid_link)) if valid_link else None
+    if raw is not None:
+        need = nx * ny * np.dtype(_DTYPES[dt]).itemsize
+        if len(raw) < need:
+            raise ValueError(f"{path}: point data has {len(raw)} bytes, the grid needs {need}")
+        z = np.frombuffer(raw[:need], dtype=_DTYPES[dt]).astype(float).reshape(ny, nx)
+    if inc != 1.0 or off != 0.0:
         z = z * inc + off
+    z = np.where(np.isfinite(z), z, np.nan)
+    if valid is not None:
+        bits = np.unpackbits(np.frombuffer(valid, dtype=np.uint8), bitorder="little")
+        if bits.size < nx * ny:
+            raise ValueError(f"{path}: valid-points bit array has {bits.size} bits, the grid needs {nx * ny}")
+        z = np.where(bits[: nx * ny].reshape(ny, nx) == 1, z, np.nan)
     return HeightMap(z=z, dx=dx, dy=dy)

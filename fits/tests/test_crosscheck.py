@@ -68,12 +68,14 @@ def fake(tmp_path):
 
 def _run(fake, tmp_path, env_extra=None, models="ggx,ellipsoid", known=None):
     env = dict(os.environ, **(env_extra or {}))
+    if "NDFIT_REQUIRE_SHARED" not in (env_extra or {}):
+        env.pop("NDFIT_REQUIRE_SHARED", None)  # these runs point --scans at an absent folder on purpose
     out = tmp_path / "rows.json"
     known_path = tmp_path / "known.json"
     known_path.write_text(json.dumps(known or []))
     r = subprocess.run(
         [sys.executable, CROSSCHECK, "--ndfit", fake, "--models", models, "--scans", str(tmp_path / "absent"),
-         "--size", "64", "--only", "ggx", "--json", str(out), "--known", str(known_path)],
+         "--size", "64", "--only", "ggx", "--json", str(out), "--known", str(known_path), "--no-e2e"],
         capture_output=True, text=True, env=env, timeout=600,
     )
     rows = json.loads(out.read_text()) if out.exists() else None
@@ -87,6 +89,16 @@ def test_agreement_passes(fake, tmp_path):
     assert lines[-1] == "crosscheck: 2 passed, 0 failed"
     assert any(ln.startswith("SKIP real scans") for ln in lines)
     assert all(row["verdict"] == "ok" and row["delta"] < 1e-3 for row in rows)
+
+
+def test_absent_shared_scans_fail_when_required(fake, tmp_path):
+    """NDFIT_REQUIRE_SHARED=1 turns the SKIP of absent real scans into a failure that names the folder."""
+    r, rows = _run(fake, tmp_path, {"NDFIT_REQUIRE_SHARED": "1"})
+    assert r.returncode == 1, r.stdout + r.stderr
+    lines = r.stdout.strip().splitlines()
+    assert any(ln.startswith("FAIL real scans") and "absent" in ln for ln in lines)
+    assert lines[-1].startswith("crosscheck: 2 passed, 0 failed; missing (NDFIT_REQUIRE_SHARED is set): ")
+    assert lines[-1].endswith("absent")
 
 
 def test_disagreement_fails(fake, tmp_path):

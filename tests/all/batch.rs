@@ -537,8 +537,8 @@ fn synthetic_results_are_bit_identical_for_1_and_2_jobs() {
 /// A manifest over a real scan: per-scan columns reach the reader (`subsample` halves the grid) and the
 /// per-scan `model` overrides `--model`.
 #[test]
-fn manifest_options_reach_the_pipeline_on_a_real_scan() {
-    let Some(scans) = crate::common::shared_scans("batch::manifest_options_reach_the_pipeline_on_a_real_scan") else { return };
+fn manifest_options_reach_the_pipeline_on_a_real_scan_needs_shared() {
+    let Some(scans) = crate::common::shared_scans("batch::manifest_options_reach_the_pipeline_on_a_real_scan_needs_shared") else { return };
     let scan = scans.join("hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p");
     let t = tempfile::tempdir().unwrap();
     let m = t.path().join("list.csv");

@@ -86,7 +86,8 @@ fn ellipsoid_ndf_matches_analytic_d() {
         let g = EllipsoidGeometry::new(&p, &s).expect("valid settings");
         for scheme in [NormalScheme::Central, NormalScheme::Triangles] {
             let ndf = empirical_ndf(&hf, &NdfOptions { scheme, ..Default::default() }).expect("ellipsoid has valid stencils");
-            assert!((ndf.total() - 1.0).abs() < 1e-12, "normalization {}", ndf.total());
+            let total = crate::common::reference_total(&ndf, 2);
+            assert!((total - 1.0).abs() < 1e-9, "sum d W_ref = {total}");
             let c = compare_ellipsoid(&ndf, &g, &s);
             let kf = c.k as f64;
             eprintln!(
@@ -390,11 +391,15 @@ fn cli_synth_and_ndf() {
     assert!(!o2.exists());
 }
 
-/// The real scans of ../shared/data/scans give finite, normalized NDFs with both schemes.
+/// The real scans of ../shared/data/scans give finite NDFs with both schemes, normalized (Heitz eq. 9)
+/// against bin integrals computed independently of the NDF's own (`common::reference_total`): to 1e-7
+/// (measured up to 3.8e-8), and to 2e-4 on near-delta frames (slope scale below 1e-3: st_sur-2 and
+/// st_metropro-1, measured 1.1e-4 and 2.4e-6), where steep outliers land in rim cells of a near-delta
+/// frame, whose polar rule is today's weak spot (`ndf::tests::rim_cells_of_tilted_and_near_delta_frames_stay_within_todays_error`).
 #[test]
-fn real_scans_give_normalized_ndfs() {
-    let Some(dir) = crate::common::shared_scans("real_scans_give_normalized_ndfs") else { return };
-    let mut n = 0;
+fn real_scans_give_normalized_ndfs_needs_shared() {
+    let Some(dir) = crate::common::shared_scans("real_scans_give_normalized_ndfs_needs_shared") else { return };
+    let (mut n, mut worst) = (0, 0.0f64);
     for e in std::fs::read_dir(&dir).expect("readable") {
         let p = e.expect("entry").path();
         let ext = p.extension().and_then(|x| x.to_str()).unwrap_or("");
@@ -405,13 +410,18 @@ fn real_scans_give_normalized_ndfs() {
         let hf = ndfit::preprocess::apply(hf, &Default::default()).expect("plane removal");
         for scheme in [NormalScheme::Central, NormalScheme::Triangles] {
             let ndf = empirical_ndf(&hf, &NdfOptions { scheme, ..Default::default() }).expect("valid stencils");
-            assert!((ndf.total() - 1.0).abs() < 1e-9, "{}: {}", p.display(), ndf.total());
+            let total = crate::common::reference_total(&ndf, 2);
+            let scale = ndf.frame.cov[0][0].max(ndf.frame.cov[1][1]).sqrt();
+            let bound = if scale < 1e-3 { 2e-4 } else { 1e-7 };
+            eprintln!("{} {scheme:?}: slope scale {scale:.2e}, sum d W_ref - 1 = {:.2e} (bound {bound:e})", p.display(), total - 1.0);
+            worst = worst.max((total - 1.0).abs() / bound);
             assert!(ndf.bins.iter().all(|b| b.d.is_finite() && b.m.iter().all(|v| v.is_finite())));
             assert!(ndf.frame.cov[0][0].is_finite() && ndf.slope_mean.iter().all(|v| v.is_finite()));
         }
         n += 1;
     }
     assert!(n >= 10);
+    assert!(worst <= 1.0, "sum d W_ref - 1 beyond its bound by {worst:.2} (see the lines above)");
 }
 
 /// Sparse valid data that the strided frame subsample misses (one valid 5 x 5 patch in a 2000 x 2000

@@ -102,8 +102,8 @@ fn a_smeared_lattice_caps_the_grid() {
 /// lattice is found (before the plane removal in the second case), rigid, and no bin that holds a node
 /// is empty in the core; its lattice is coarser than half the slope scale, which the NDF says.
 #[test]
-fn real_quantized_scan_has_no_comb() {
-    let Some(dir) = shared_scans("real_quantized_scan_has_no_comb") else { return };
+fn real_quantized_scan_has_no_comb_needs_shared() {
+    let Some(dir) = shared_scans("real_quantized_scan_has_no_comb_needs_shared") else { return };
     let path = dir.join("st_plu-1.plu");
     let raw = ndfit::io::read_scan(&path, &Default::default()).expect("st_plu-1 reads");
     for hf in [raw.clone(), ndfit::preprocess::apply(raw, &Default::default()).expect("plane removal")] {

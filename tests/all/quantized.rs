@@ -215,8 +215,8 @@ fn verdict_rules() {
 }
 
 #[test]
-fn every_shared_scan_gets_a_verdict_and_no_silent_comb() {
-    let Some(dir) = shared_scans("every_shared_scan_gets_a_verdict_and_no_silent_comb") else { return };
+fn every_shared_scan_gets_a_verdict_and_no_silent_comb_needs_shared() {
+    let Some(dir) = shared_scans("every_shared_scan_gets_a_verdict_and_no_silent_comb_needs_shared") else { return };
     let tmp = tempfile::tempdir().unwrap();
     let mut n = 0;
     let mut files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).collect();

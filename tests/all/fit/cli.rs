@@ -6,8 +6,8 @@ use std::process::Command;
 use crate::common::{ndfit_bin, shared_scans};
 
 #[test]
-fn fit_real_scan_writes_valid_json_and_plot() {
-    let Some(dir) = shared_scans("fit_real_scan_writes_valid_json_and_plot") else { return };
+fn fit_real_scan_writes_valid_json_and_plot_needs_shared() {
+    let Some(dir) = shared_scans("fit_real_scan_writes_valid_json_and_plot_needs_shared") else { return };
     let scan = dir.join("hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p");
     let tmp = tempfile::tempdir().expect("tempdir");
     let out = tmp.path().join("fit.json");

@@ -2,7 +2,7 @@
 //! synthetic truth, coverage of the reported standard errors, extremes, model selection, the JSON schema
 //! and the CLI.
 
-mod fixtures;
+pub(crate) mod fixtures;
 
 mod cli;
 mod jacobian;

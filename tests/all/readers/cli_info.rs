@@ -48,8 +48,8 @@ fn info_json_matches_the_library() {
 
 /// On a real scan, the JSON `sq` is SurfaceTopography's Sq_plane (peer_readings.json) in metres.
 #[test]
-fn info_json_sq_matches_the_peer_on_a_real_scan() {
-    let Some(dir) = shared_scans("info_json_sq_matches_the_peer_on_a_real_scan") else { return };
+fn info_json_sq_matches_the_peer_on_a_real_scan_needs_shared() {
+    let Some(dir) = shared_scans("info_json_sq_matches_the_peer_on_a_real_scan_needs_shared") else { return };
     let p = dir.join("hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p");
     let (code, out, err) = run(&["info", p.to_str().expect("utf8"), "--json"]);
     assert_eq!(code, 0, "{err}");
