@@ -410,6 +410,12 @@ fn real_scans_give_normalized_ndfs_needs_shared() {
         let hf = ndfit::preprocess::apply(hf, &Default::default()).expect("plane removal");
         for scheme in [NormalScheme::Central, NormalScheme::Triangles] {
             let ndf = empirical_ndf(&hf, &NdfOptions { scheme, ..Default::default() }).expect("valid stencils");
+            assert!(ndf.bins.iter().all(|b| b.d.is_finite() && b.m.iter().all(|v| v.is_finite())));
+            if ndf.quantization.is_some_and(|q| q.lattice.is_some()) {
+                // Bins that respect a height lattice integrate their nodes' cells, not their Lambert cells:
+                // checked against a per-node quadrature in `quantized::lattice_bins_integrate_their_nodes_cells`.
+                continue;
+            }
             let total = crate::common::reference_total(&ndf, 2);
             let scale = ndf.frame.cov[0][0].max(ndf.frame.cov[1][1]).sqrt();
             let bound = if scale < 1e-3 { 2e-4 } else { 1e-7 };
