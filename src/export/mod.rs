@@ -327,7 +327,7 @@ fn fit_lobe(reference: &Model, region: &RegionNodes, distribution: Distribution,
 
     let w: Vec<f64> = region.nodes.iter().map(|(m, wk)| reference.d(*m) * wk).collect();
     let wsum: f64 = w.iter().sum();
-    if !(wsum > 0.0) {
+    if !wsum.is_finite() || wsum <= 0.0 {
         return Err(Error::invalid("the fitted NDF has no weight in the fit region; nothing to approximate"));
     }
     struct Cost<'a> {

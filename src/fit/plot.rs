@@ -21,6 +21,9 @@ fn perr<E: std::fmt::Display>(e: E) -> Error {
     Error::new(ErrorKind::Io, format!("plot failed: {e}"))
 }
 
+/// The colour of map pixel `k` (`None` outside the disk).
+type Colourer<'a> = Box<dyn Fn(usize) -> Option<RGBColor> + 'a>;
+
 /// Pixels across each map.
 const RES: usize = 200;
 
@@ -111,7 +114,7 @@ pub fn plot_fit(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> 
         let (top, rest) = root.split_vertically(520);
         let (bottom, footer) = rest.split_vertically(rest.dim_in_pixel().1 - 60);
         let maps = top.split_evenly((1, 3));
-        let panels: [(&str, Box<dyn Fn(usize) -> Option<RGBColor>>); 3] = [
+        let panels: [(&str, Colourer); 3] = [
             ("data: log10 D", Box::new(|k| data[k].map(d_colour))),
             ("fit: log10 D (same scale)", Box::new(|k| fit[k].map(d_colour))),
             ("residual log10(D_data / D_fit)", Box::new(|k| resid[k])),
