@@ -408,3 +408,17 @@ fn cli_export() {
         assert!(err.contains(args[1]), "{err}");
     }
 }
+
+/// The `ndf --png` zoom (shared by `fit --plot`) holds 99% of the samples: for Beckmann alpha 0.05 the
+/// closed form `F(tan theta) = 1 - exp(-tan^2/alpha^2)` puts 99% within `tan = alpha sqrt(ln 100)`, so the
+/// half-width is 1.2 sin of that (to the bin size), far inside the disk.
+#[test]
+fn zoom_window_holds_the_data() {
+    use ndfit::fit::synthetic::{binned_ndf, Grid};
+    let truth = model(ModelId::Beckmann, &[0.05]);
+    let ndf = binned_ndf(&truth, &Grid::for_model(&truth, 63), 2e5, 3);
+    let half = ndfit::ndf::plot::zoom_half(&ndf, Vector3::z());
+    let t = 0.05 * 100f64.ln().sqrt();
+    let want = 1.2 * t / (1.0 + t * t).sqrt();
+    assert!((half - want).abs() < 0.1 * want, "{half} vs {want}");
+}
