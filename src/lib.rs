@@ -10,6 +10,7 @@
 //! - [`preprocess`], [`ndf`]: form removal, normals and the binned empirical NDF;
 //! - [`fit`]: least-squares fits, model selection and uncertainty;
 //! - [`synth`]: synthetic scans with known truth;
+//! - [`export`]: the parameters of renderers (Mitsuba 3, pbrt-v4, Blender, OpenPBR, MaterialX) for a fit;
 //! - [`batch`], [`scale`], [`bench`]: the batch regression runner, footprint filtering, measurements;
 //! - the `ndfit` binary (`src/cli/`) is a thin layer that parses arguments into these.
 
@@ -18,6 +19,7 @@
 pub mod batch;
 pub mod bench;
 pub mod error;
+pub mod export;
 pub mod fit;
 pub mod heightfield;
 pub mod heights;

@@ -27,7 +27,7 @@ if [ -f fits/pyproject.toml ]; then
     "$PY" -m venv fits/.venv
   fi
   fits/.venv/bin/python -m pip install --quiet --upgrade pip
-  fits/.venv/bin/python -m pip install --quiet -e "fits[test,notebooks]"
+  fits/.venv/bin/python -m pip install --quiet -e "fits[test,notebooks,render]"
   echo "== python tests"
   fits/.venv/bin/python -m pytest -q fits/tests
   if [ -z "${NDFIT:-}" ]; then

@@ -98,7 +98,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     if let Some(png) = &args.plot {
         let m = report.to_model()?;
-        let title = format!("{path}: {} fit", report.model);
+        let name = args.scan.scan.file_name().map_or(path.clone(), |n| n.to_string_lossy().into_owned());
+        let title = format!("{name}: {} fit", report.model);
         ndfit::fit::plot::plot_fit(png, &ndf, &m, &title)?;
     }
     let mut json = serde_json::to_string_pretty(&report).map_err(|e| anyhow!("{path}: cannot serialize the result ({e})"))?;

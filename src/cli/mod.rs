@@ -12,6 +12,7 @@ mod bench;
 mod convert;
 mod demo;
 mod eval;
+mod export;
 mod fit;
 mod info;
 mod ndf;
@@ -42,6 +43,8 @@ enum Command {
     Fit(fit::Args),
     /// Evaluate a fitted model's D (and G1) at directions read as CSV from standard input.
     Eval(eval::Args),
+    /// A fit as a renderer's material parameters (Mitsuba 3, pbrt-v4, Blender, OpenPBR, MaterialX).
+    Export(export::Args),
     /// Write a synthetic scan with known truth.
     Synth(synth::Args),
     /// Fit every scan in a folder and compare against a baseline.
@@ -62,6 +65,7 @@ pub fn main() -> ExitCode {
         Command::Ndf(a) => ndf::run(a),
         Command::Fit(a) => fit::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Export(a) => export::run(a),
         Command::Synth(a) => synth::run(a),
         Command::Batch(a) => batch::run(a),
         Command::Bench(a) => bench::run(a),

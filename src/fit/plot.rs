@@ -1,14 +1,18 @@
-//! `--plot FIT.png`: the data against the fit, with residuals.
+//! `--plot FIT.png`: the data against the fit.
 //!
-//! Top: `log10 D` of every non-empty bin (grey) and of the fitted model at the same bins (red) against
-//! the polar angle of the bin's direction. Bottom: the bins' deviance residuals (objective.md), which
-//! are about N(0, 1) where the model is right and the normals independent.
+//! Top row: three maps of the projected hemisphere `(m_x, m_y)` around the peak: the empirical `log10 D`,
+//! the fitted `log10 D` on the same colour scale (viridis, four decades below the larger maximum), and
+//! the residual `log10(D_data / D_fit)` on its own diverging scale (blue: data below the fit, red: above,
+//! +-1 decade). Bottom row: slices of D through the fit's peak along its two principal axes
+//! ([`crate::models::LobeAxes`]; the data's principal slope axes for an isotropic model): data as dots, the
+//! fit as a line through them. Legends are written under the panels, never over data.
 
 use std::path::Path;
 
+use nalgebra::Vector3;
 use plotters::prelude::*;
+use plotters::style::colors::colormaps::ViridisRGB;
 
-use super::objective::{residual, FitData, Objective};
 use crate::error::{Error, ErrorKind, Result};
 use crate::models::{Model, Ndf};
 use crate::ndf::EmpiricalNdf;
@@ -17,70 +21,162 @@ fn perr<E: std::fmt::Display>(e: E) -> Error {
     Error::new(ErrorKind::Io, format!("plot failed: {e}"))
 }
 
+/// The colour of map pixel `k` (`None` outside the disk).
+type Colourer<'a> = Box<dyn Fn(usize) -> Option<RGBColor> + 'a>;
+
+/// Pixels across each map.
+const RES: usize = 200;
+
+/// Blue - white - red for `t` in `[-1, 1]`.
+fn diverging(t: f64) -> RGBColor {
+    let t = t.clamp(-1.0, 1.0);
+    let k = |a: f64| (255.0 * (1.0 - a.abs() * 0.85)) as u8;
+    if t < 0.0 {
+        RGBColor(k(t), k(t), 255)
+    } else {
+        RGBColor(255, k(t), k(t))
+    }
+}
+
 /// Draw the plot to `path` (PNG, written atomically).
 pub fn plot_fit(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> Result<()> {
     crate::plot::ensure_font();
-    // The whole hemisphere: the plot shows every bin, those beyond the fit's max_theta too.
-    let data = FitData::new(ndf, Objective::Poisson, std::f64::consts::FRAC_PI_2)?;
-    let ln_s = data.ln_norm(&data.bins.iter().map(|b| model.d(b.m).max(f64::MIN_POSITIVE).ln()).collect::<Vec<_>>());
-    let mut pts_d = Vec::new();
-    let mut pts_f = Vec::new();
-    let mut pts_r = Vec::new();
-    for b in &data.bins {
-        let th = b.m.z.clamp(-1.0, 1.0).acos().to_degrees();
-        let dm = model.d(b.m);
-        if b.c > 0.0 {
-            pts_d.push((th, (b.c / (data.n * b.w)).log10()));
-        }
-        if dm > 0.0 {
-            pts_f.push((th, dm.log10()));
-        }
-        // Guard: a D of 0 (Beckmann far in its tail) has ln D = -inf; its residual is still finite.
-        let (r, _) = residual(Objective::Poisson, b, if dm > 0.0 { dm.ln() } else { -745.0 } - ln_s);
-        if b.c > 0.0 || r.abs() > 0.5 {
-            pts_r.push((th, r));
+    let axes = model.canonical().axes();
+    let peak = axes.map_or(Vector3::z(), |a| Vector3::from(a.peak));
+    let half = crate::ndf::plot::zoom_half(ndf, peak);
+    let c = [peak.x, peak.y];
+    let px = 2.0 * half / RES as f64;
+    let at = |row: usize, col: usize| -> Option<Vector3<f64>> {
+        let x = c[0] - half + (col as f64 + 0.5) * px;
+        let y = c[1] + half - (row as f64 + 0.5) * px;
+        let r2 = x * x + y * y;
+        (r2 < 1.0).then(|| Vector3::new(x, y, (1.0 - r2).sqrt()))
+    };
+    let mut data = vec![None; RES * RES];
+    let mut fit = vec![None; RES * RES];
+    for row in 0..RES {
+        for col in 0..RES {
+            if let Some(m) = at(row, col) {
+                data[row * RES + col] = Some(ndf.d_at(m));
+                fit[row * RES + col] = Some(model.d(m));
+            }
         }
     }
-    let th_max = pts_d.iter().map(|p| p.0).fold(1.0_f64, f64::max).min(90.0) * 1.05;
-    let y_hi = pts_d.iter().chain(&pts_f).map(|p| p.1).fold(f64::NEG_INFINITY, f64::max) + 0.3;
-    let y_lo = pts_d.iter().map(|p| p.1).fold(f64::INFINITY, f64::min) - 0.5;
-    let r_max = pts_r.iter().map(|p| p.1.abs()).fold(3.0_f64, f64::max).min(50.0);
-    let tmp = tempfile::Builder::new()
-        .suffix(".png")
-        .tempfile_in(path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")))
-        .map_err(|e| Error::io(e).with_path(path))?;
+    let dmax = data.iter().chain(&fit).flatten().cloned().fold(0.0f64, f64::max);
+    let (lo, hi) = if dmax > 0.0 { (dmax.log10() - 4.0, dmax.log10()) } else { (-1.0, 0.0) };
+    let d_colour = |d: f64| if d > 0.0 { ViridisRGB::get_color(((d.log10() - lo) / (hi - lo)).clamp(0.0, 1.0)) } else { RGBColor(200, 200, 200) };
+    let resid: Vec<Option<RGBColor>> = data
+        .iter()
+        .zip(&fit)
+        .map(|(d, f)| match (d, f) {
+            (Some(d), Some(f)) if *d > 0.0 && *f > 0.0 => Some(diverging((d / f).log10())),
+            (Some(_), Some(_)) => Some(RGBColor(200, 200, 200)),
+            _ => None,
+        })
+        .collect();
+
+    // Slices along the axes, parameterized by slope offset t from the peak.
+    let s0 = [-peak.x / peak.z, -peak.y / peak.z];
+    let (dirs, widths, names) = match axes {
+        Some(a) => ([[a.alpha_x[0], a.alpha_x[1]], [a.alpha_y[0], a.alpha_y[1]]], a.widths, ["alpha_x", "alpha_y"]),
+        None => {
+            let cv = ndf.frame.cov;
+            let phi = 0.5 * (2.0 * cv[0][1]).atan2(cv[0][0] - cv[1][1]);
+            let a = model.params()[0];
+            ([[phi.cos(), phi.sin()], [-phi.sin(), phi.cos()]], [a, a], ["major data axis", "minor data axis"])
+        }
+    };
+    let mut slices = Vec::new();
+    for (k, e) in dirs.iter().enumerate() {
+        let range = 5.0 * widths[k].max(1e-6);
+        let (mut pts_d, mut pts_f) = (Vec::new(), Vec::new());
+        for i in -300..=300 {
+            let t = range * i as f64 / 300.0;
+            let m = Vector3::new(-(s0[0] + t * e[0]), -(s0[1] + t * e[1]), 1.0).normalize();
+            let ang = m.angle(&peak).to_degrees() * t.signum();
+            let (d, f) = (ndf.d_at(m), model.d(m));
+            if d > 0.0 && i % 3 == 0 {
+                pts_d.push((ang, d.log10()));
+            }
+            if f > 0.0 {
+                pts_f.push((ang, f.log10()));
+            }
+        }
+        slices.push((pts_d, pts_f, names[k], (e[1]).atan2(e[0]).to_degrees()));
+    }
+
+    let (w, h) = (1500u32, 1060u32);
+    let mut buf = vec![0u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::new(tmp.path(), (1000, 800)).into_drawing_area();
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
-        let (top, bottom) = root.split_vertically(520);
-        let mut c = ChartBuilder::on(&top)
-            .caption(title, (crate::plot::FONT, 20))
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..th_max, y_lo..y_hi)
+        let root = root.titled(title, (crate::plot::FONT, 22)).map_err(perr)?;
+        let (top, rest) = root.split_vertically(520);
+        let (bottom, footer) = rest.split_vertically(rest.dim_in_pixel().1 - 60);
+        let maps = top.split_evenly((1, 3));
+        let panels: [(&str, Colourer); 3] = [
+            ("data: log10 D", Box::new(|k| data[k].map(d_colour))),
+            ("fit: log10 D (same scale)", Box::new(|k| fit[k].map(d_colour))),
+            ("residual log10(D_data / D_fit)", Box::new(|k| resid[k])),
+        ];
+        for (area, (label, colour)) in maps.iter().zip(panels.iter()) {
+            let mut chart = ChartBuilder::on(area)
+                .margin(10)
+                .caption(*label, (crate::plot::FONT, 16))
+                .x_label_area_size(30)
+                .y_label_area_size(55)
+                .build_cartesian_2d((c[0] - half)..(c[0] + half), (c[1] - half)..(c[1] + half))
+                .map_err(perr)?;
+            chart.configure_mesh().disable_mesh().x_desc("m_x").y_desc("m_y").label_style((crate::plot::FONT, 12)).draw().map_err(perr)?;
+            chart
+                .draw_series((0..RES * RES).filter_map(|k| {
+                    let (row, col) = (k / RES, k % RES);
+                    let x = c[0] - half + col as f64 * px;
+                    let y = c[1] + half - (row as f64 + 1.0) * px;
+                    colour(k).map(|col| Rectangle::new([(x, y), (x + px, y + px)], col.filled()))
+                }))
+                .map_err(perr)?;
+        }
+        let plots = bottom.split_evenly((1, 2));
+        for (area, (pts_d, pts_f, name, az)) in plots.iter().zip(&slices) {
+            let all = pts_d.iter().chain(pts_f.iter());
+            let (x0, x1) = all.clone().fold((0.0f64, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
+            let ymax = all.clone().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+            let ymin = pts_d.iter().map(|p| p.1).fold(f64::INFINITY, f64::min).max(ymax - 6.0);
+            let (x0, x1) = if x1 > x0 { (x0, x1) } else { (-1.0, 1.0) };
+            let (ymin, ymax) = if ymax > ymin { (ymin - 0.3, ymax + 0.3) } else { (-1.0, 1.0) };
+            let mut chart = ChartBuilder::on(area)
+                .margin(12)
+                .caption(format!("slice through the peak along {name} (azimuth {az:.1} deg)"), (crate::plot::FONT, 16))
+                .x_label_area_size(40)
+                .y_label_area_size(60)
+                .build_cartesian_2d(x0..x1, ymin..ymax)
+                .map_err(perr)?;
+            chart
+                .configure_mesh()
+                .x_desc("signed angle from the peak (deg)")
+                .y_desc("log10 D (1/sr)")
+                .label_style((crate::plot::FONT, 13))
+                .draw()
+                .map_err(perr)?;
+            chart.draw_series(pts_d.iter().filter(|p| p.1 >= ymin).map(|p| Circle::new(*p, 3, RGBColor(90, 90, 90).filled()))).map_err(perr)?;
+            chart
+                .draw_series(LineSeries::new(pts_f.iter().cloned().filter(|p| p.1 >= ymin), RGBColor(210, 30, 30).stroke_width(2)))
+                .map_err(perr)?;
+        }
+        footer
+            .draw(&Text::new(
+                format!(
+                    "maps: colour log10 D from {lo:.2} (dark) to {hi:.2} (yellow) 1/sr, grey = no sample; residual: blue data below the fit, red above, full colour at 1 decade.   slices: grey dots data, red line fit."
+                ),
+                (15, 10),
+                (crate::plot::FONT, 15),
+            ))
             .map_err(perr)?;
-        c.configure_mesh().x_desc("polar angle of m (deg)").y_desc("log10 D (1/sr)").label_style((crate::plot::FONT, 14)).draw().map_err(perr)?;
-        c.draw_series(pts_d.iter().map(|p| Circle::new(*p, 2, RGBColor(110, 110, 110).filled())))
-            .map_err(perr)?
-            .label("data (bins)")
-            .legend(|(x, y)| Circle::new((x, y), 3, RGBColor(110, 110, 110).filled()));
-        c.draw_series(pts_f.iter().filter(|p| p.1 >= y_lo).map(|p| Circle::new(*p, 1, RED.filled())))
-            .map_err(perr)?
-            .label("fit at the same bins")
-            .legend(|(x, y)| Circle::new((x, y), 3, RED.filled()));
-        c.configure_series_labels().border_style(BLACK).background_style(WHITE).label_font((crate::plot::FONT, 14)).draw().map_err(perr)?;
-        let mut c2 = ChartBuilder::on(&bottom)
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..th_max, -r_max..r_max)
-            .map_err(perr)?;
-        c2.configure_mesh().x_desc("polar angle of m (deg)").y_desc("deviance residual").label_style((crate::plot::FONT, 14)).draw().map_err(perr)?;
-        c2.draw_series(pts_r.iter().map(|p| Circle::new((p.0, p.1.clamp(-r_max, r_max)), 2, BLUE.mix(0.5).filled()))).map_err(perr)?;
-        c2.draw_series(LineSeries::new([(0.0, 0.0), (th_max, 0.0)], BLACK)).map_err(perr)?;
         root.present().map_err(perr)?;
     }
-    tmp.persist(path).map_err(|e| Error::io(e.error).with_path(path))?;
-    Ok(())
+    let mut out = std::io::Cursor::new(Vec::new());
+    image::write_buffer_with_format(&mut out, &buf, w, h, image::ExtendedColorType::Rgb8, image::ImageFormat::Png)
+        .map_err(|e| Error::new(ErrorKind::Io, format!("PNG encoding failed: {e}")).with_path(path))?;
+    crate::io::write_bytes_atomic(path, out.get_ref())
 }

@@ -176,6 +176,10 @@ pub struct FitReport {
     /// Row-major A in the scan frame, for models that are ellipsoid special cases.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub matrix_a: Option<[[f64; 3]; 3]>,
+    /// The anisotropic models' axes in the scan frame (the `alpha_x` direction lies at azimuth `-theta_z`,
+    /// along `(cos theta_z, -sin theta_z)`); see [`crate::models::axes`].
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub axes: Option<crate::models::LobeAxes>,
     /// The input scan (set by the caller that read it).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub input: Option<InputInfo>,

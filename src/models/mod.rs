@@ -24,6 +24,7 @@
 // The `!(x > 0.0)` guards are deliberate: they also catch NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod axes;
 pub mod beckmann;
 pub mod brdf;
 pub mod canonical;
@@ -35,6 +36,7 @@ pub mod sampling;
 pub mod sel;
 pub mod spec;
 
+pub use axes::LobeAxes;
 pub use beckmann::Beckmann;
 pub use brdf::{MaskingShadowing, MicrofacetBrdf};
 pub use ellipsoid::Ellipsoid;

@@ -30,8 +30,27 @@ fn peak(ndf: &EmpiricalNdf) -> Vector3<f64> {
     best.or_else(|| ndf.bins.iter().max_by(|a, b| a.d.total_cmp(&b.d))).map_or(Vector3::z(), |b| b.m)
 }
 
+/// Half-width (in `m_x`, `m_y`) of a window around `pk` that holds the data: 1.2 times the distance from
+/// `pk` within which 99% of the samples lie, at most 0.5 (a quarter of the disk's width, so the window is
+/// always a zoom) and at least 1e-4.
+pub fn zoom_half(ndf: &EmpiricalNdf, pk: Vector3<f64>) -> f64 {
+    let mut d: Vec<(f64, u64)> = ndf.bins.iter().filter(|b| b.count > 0).map(|b| (((b.m.x - pk.x).powi(2) + (b.m.y - pk.y).powi(2)).sqrt(), b.count)).collect();
+    d.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: u64 = d.iter().map(|x| x.1).sum();
+    let mut acc = 0u64;
+    let mut r = 0.5;
+    for (dist, c) in d {
+        acc += c;
+        if acc as f64 >= 0.99 * total as f64 {
+            r = dist;
+            break;
+        }
+    }
+    (1.2 * r).clamp(1e-4, 0.5)
+}
+
 /// The false-colour map: left the whole projected hemisphere `(m_x, m_y)`, right a window around the
-/// peak holding the data (6 robust standard deviations of the slopes). Colour is `log10 D` over four
+/// peak holding 99% of the samples ([`zoom_half`]). Colour is `log10 D` over four
 /// decades below the maximum; grey where D = 0.
 pub fn plot_map(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
     crate::plot::ensure_font();
@@ -39,9 +58,7 @@ pub fn plot_map(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
     let mut buf = vec![0u8; (w * h * 3) as usize];
     let res = 480usize;
     let pk = peak(ndf);
-    let sig = ndf.frame.cov[0][0].max(ndf.frame.cov[1][1]).sqrt();
-    // Half-width of the zoom window in (m_x, m_y): 6 sigma of slope, projected (dm ~ ds m_z^2 ... ~ ds).
-    let half = (6.0 * sig * pk.z.powi(2)).clamp(1e-6, 1.0);
+    let half = zoom_half(ndf, pk);
     let full = raster(ndf, res, [0.0, 0.0], 1.0);
     let zoom = raster(ndf, res, [pk.x, pk.y], half);
     let dmax = full.iter().chain(&zoom).cloned().fold(0.0f64, f64::max);

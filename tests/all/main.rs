@@ -5,6 +5,7 @@ mod common;
 mod batch;
 mod bench;
 mod cli;
+mod export;
 mod fit;
 mod models;
 mod ndf;

@@ -1,0 +1,94 @@
+//! The export as text in each renderer's own syntax: Mitsuba 3 scene XML, pbrt-v4 scene text, Blender
+//! Python, and MaterialX 1.39 documents for OpenPBR Surface and `conductor_bsdf`.
+
+use std::fmt::Write;
+
+use super::{Export, Target};
+
+impl Export {
+    /// The snippet for the renderer; `source` names the fit file in its header comment.
+    pub fn snippet(&self, source: &str) -> String {
+        let p = self.lobe.params(self.target);
+        let num = |k: &str| p.get(k).and_then(|v| v.as_f64()).unwrap_or(f64::NAN);
+        let t = self.lobe.tangent_angle;
+        let (tc, ts) = (t.cos(), t.sin());
+        let mut head = format!("ndfit export of {source} to {}", self.target.as_str());
+        if let Some(n) = &self.note {
+            let _ = write!(head, "\n{n}");
+        }
+        let tangent = format!(
+            "tangent (u) axis at azimuth {t:.6} rad from the scan's +x towards +y, i.e. along ({tc:.6}, {ts:.6}, 0) in the scan frame"
+        );
+        match self.target {
+            Target::Mitsuba => format!(
+                "<!-- {}\n     alpha_u lies along the shading frame's s axis (dp/du): put the {tangent}. -->\n\
+                 <bsdf type=\"roughconductor\">\n    <string name=\"distribution\" value=\"{}\"/>\n    \
+                 <float name=\"alpha_u\" value=\"{}\"/>\n    <float name=\"alpha_v\" value=\"{}\"/>\n</bsdf>\n",
+                xml_comment(&head),
+                self.lobe.distribution.as_str(),
+                num("alpha_u"),
+                num("alpha_v")
+            ),
+            Target::Pbrt => format!(
+                "{}\n# uroughness lies along dpdu: put the {tangent}.\nMaterial \"conductor\"\n    \"float uroughness\" [ {} ]\n    \
+                 \"float vroughness\" [ {} ]\n    \"bool remaproughness\" false\n",
+                comment(&head, "# "),
+                num("uroughness"),
+                num("vroughness")
+            ),
+            Target::Blender => format!(
+                "{}\n# Principled BSDF (GGX): alpha_x = roughness^2 / sqrt(1 - 0.9 anisotropic) along the Tangent input,\n\
+                 # turned about the normal by anisotropic_rotation turns; the Tangent must be the UV map's U direction\n\
+                 # with the scan's +x along U.\nimport bpy\n\nmat = bpy.data.materials.new(\"ndfit\")\nmat.use_nodes = True\n\
+                 nodes, links = mat.node_tree.nodes, mat.node_tree.links\nbsdf = nodes[\"Principled BSDF\"]\n\
+                 bsdf.inputs[\"Metallic\"].default_value = 1.0\nbsdf.inputs[\"Roughness\"].default_value = {}\n\
+                 bsdf.inputs[\"Anisotropic\"].default_value = {}\nbsdf.inputs[\"Anisotropic Rotation\"].default_value = {}\n\
+                 tangent = nodes.new(\"ShaderNodeTangent\")\ntangent.direction_type = \"UV_MAP\"\n\
+                 links.new(tangent.outputs[\"Tangent\"], bsdf.inputs[\"Tangent\"])\n",
+                comment(&head, "# "),
+                num("roughness"),
+                num("anisotropic"),
+                num("anisotropic_rotation")
+            ),
+            Target::OpenPbr => format!(
+                "<?xml version=\"1.0\"?>\n<!-- {} -->\n<materialx version=\"1.39\">\n  \
+                 <!-- alpha_t lies along geometry_tangent: the {tangent}. -->\n  \
+                 <open_pbr_surface name=\"ndfit_surface\" type=\"surfaceshader\">\n    \
+                 <input name=\"base_metalness\" type=\"float\" value=\"1.0\"/>\n    \
+                 <input name=\"specular_roughness\" type=\"float\" value=\"{}\"/>\n    \
+                 <input name=\"specular_roughness_anisotropy\" type=\"float\" value=\"{}\"/>\n  </open_pbr_surface>\n  \
+                 <surfacematerial name=\"ndfit\" type=\"material\">\n    \
+                 <input name=\"surfaceshader\" type=\"surfaceshader\" nodename=\"ndfit_surface\"/>\n  </surfacematerial>\n</materialx>\n",
+                xml_comment(&head),
+                num("specular_roughness"),
+                num("specular_roughness_anisotropy")
+            ),
+            Target::MaterialX => {
+                let r = [self.lobe.alpha_u, self.lobe.alpha_v];
+                format!(
+                    "<?xml version=\"1.0\"?>\n<!-- {} -->\n<materialx version=\"1.39\">\n  \
+                     <!-- roughness = (alpha_x, alpha_y), alpha_x along the tangent input: the {tangent}. -->\n  \
+                     <conductor_bsdf name=\"ndfit_conductor\" type=\"BSDF\">\n    \
+                     <input name=\"roughness\" type=\"vector2\" value=\"{}, {}\"/>\n  </conductor_bsdf>\n  \
+                     <surface name=\"ndfit_surface\" type=\"surfaceshader\">\n    \
+                     <input name=\"bsdf\" type=\"BSDF\" nodename=\"ndfit_conductor\"/>\n  </surface>\n  \
+                     <surfacematerial name=\"ndfit\" type=\"material\">\n    \
+                     <input name=\"surfaceshader\" type=\"surfaceshader\" nodename=\"ndfit_surface\"/>\n  </surfacematerial>\n</materialx>\n",
+                    xml_comment(&head),
+                    r[0],
+                    r[1]
+                )
+            }
+        }
+    }
+}
+
+/// Every line of `text` behind `prefix`.
+fn comment(text: &str, prefix: &str) -> String {
+    text.lines().map(|l| format!("{prefix}{l}")).collect::<Vec<_>>().join("\n")
+}
+
+/// Text safe inside an XML comment (no `--`).
+fn xml_comment(text: &str) -> String {
+    text.replace("--", "- -")
+}
