@@ -17,6 +17,7 @@
 
 pub mod batch;
 pub mod bench;
+pub mod budget;
 pub mod error;
 pub mod fit;
 pub mod heightfield;

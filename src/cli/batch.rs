@@ -201,11 +201,16 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     summary::write_summary_json(&out, &header, &outcome)?;
     summary::write_summary_csv(&out, &outcome)?;
 
-    if baseline.is_some() {
-        print!("{}", summary::regression_table(&outcome, args.table_all));
+    // The summary is written: a closed standard output only loses the table, never the exit status.
+    let table = if baseline.is_some() {
+        summary::regression_table(&outcome, args.table_all)
     } else {
         let c = outcome.counts();
-        println!("{} scans: {} ok, {} error", c.scans, c.ok, c.error);
+        format!("{} scans: {} ok, {} error\n", c.scans, c.ok, c.error)
+    };
+    match super::write_stdout(table.as_bytes()) {
+        Err(e) if e.downcast_ref::<super::StdoutClosed>().is_none() => return Err(e),
+        _ => {}
     }
     for b in outcome.briefs.iter().filter(|b| b.entry.error.is_some()) {
         eprintln!("ndfit: {}", b.entry.error.as_deref().unwrap_or_default());

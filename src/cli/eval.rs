@@ -1,6 +1,6 @@
 //! `ndfit eval FIT.json`: a fitted model's D(m) (and G1(u, m)) at directions read as CSV from stdin.
 
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -28,8 +28,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut input = String::new();
     std::io::stdin().read_to_string(&mut input).map_err(|e| anyhow!("<stdin>: cannot read ({e})"))?;
     let out = eval_csv(&model, &input).map_err(|e| anyhow!("<stdin>: {e}"))?;
-    let mut stdout = std::io::stdout().lock();
-    stdout.write_all(out.as_bytes()).and_then(|_| stdout.flush()).map_err(|e| anyhow!("<stdout>: {e}"))?;
+    super::write_stdout(out.as_bytes())?;
     Ok(ExitCode::SUCCESS)
 }
 

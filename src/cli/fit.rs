@@ -1,6 +1,5 @@
 //! `ndfit fit SCAN`: read, preprocess, build the empirical NDF, fit, write `ndfit.fit/1` JSON.
 
-use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -103,10 +102,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     json.push('\n');
     match &args.output {
         Some(out) => ndfit::io::write_bytes_atomic(out, json.as_bytes())?,
-        None => {
-            let mut stdout = std::io::stdout().lock();
-            stdout.write_all(json.as_bytes()).and_then(|_| stdout.flush()).map_err(|e| anyhow!("<stdout>: {e}"))?;
-        }
+        None => super::write_stdout(json.as_bytes())?,
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -129,13 +129,15 @@ pub fn checked_size(dims: &[usize], what: &str) -> Result<usize> {
 }
 
 /// Check that a grid of `nx * ny` samples of `bytes_per` bytes fits in `available` bytes, returning
-/// the number of samples. Used before any allocation sized from a header.
+/// the number of samples, and that the grid is within the memory budget ([`crate::budget`]). Used
+/// before any allocation sized from a header.
 pub fn check_grid(nx: usize, ny: usize, bytes_per: usize, available: usize, what: &str) -> Result<usize> {
     if nx == 0 || ny == 0 {
         return Err(Error::corrupt(format!("{what}: empty grid {nx} x {ny}")));
     }
     let n = checked_size(&[nx, ny], what)?;
     let need = checked_size(&[n, bytes_per], what)?;
+    crate::budget::check_points(nx, ny, what)?;
     if need > available {
         return Err(Error::corrupt(format!(
             "{what}: header claims {nx} x {ny} points ({need} bytes) but only {available} bytes are present"

@@ -27,6 +27,7 @@ pub fn read_exr(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
     if samples.saturating_mul(2) > (bytes.len() as u64).saturating_mul(MAX_RATIO) {
         return Err(Error::corrupt(format!("OpenEXR header claims {w} x {h} pixels, more than the file can hold")));
     }
+    crate::budget::check_points(w as usize, h as usize, "OpenEXR header")?;
     let (dx, dy) = spacing(opts, "OpenEXR")?;
     let zs = z_scale(opts, "OpenEXR")?;
     // A third-party decoder must not take the process down on hostile bytes: a panic inside it is
@@ -71,9 +72,14 @@ pub fn read_exr(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
 
 /// Read a 16-bit grayscale PNG or TIFF held in memory.
 pub fn read_image16(bytes: &[u8], opts: &ReadOptions, format: image::ImageFormat, id: &str) -> Result<Heightfield> {
+    // The header's dimensions against the memory budget before any pixel is decoded.
+    let (w, h) = image::ImageReader::with_format(std::io::Cursor::new(bytes), format)
+        .into_dimensions()
+        .map_err(|e| Error::corrupt(format!("{id} header is not readable ({e})")))?;
+    crate::budget::check_points(w as usize, h as usize, &format!("{id} header"))?;
     let mut reader = image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
     let mut limits = image::Limits::default();
-    limits.max_alloc = Some((bytes.len() as u64).saturating_mul(MAX_RATIO).clamp(1 << 20, 1 << 34));
+    limits.max_alloc = Some((bytes.len() as u64).saturating_mul(MAX_RATIO).clamp(1 << 20, 1 << 34).min(crate::budget::max_memory()));
     reader.limits(limits);
     let (dx, dy) = spacing(opts, id)?;
     let zs = z_scale(opts, id)?;
