@@ -68,6 +68,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut ndf_opts = args.ndf.options()?;
     let mut opts = opts;
 
+    args.scan.check_outputs(args.output.iter().chain(&args.plot).map(|p| p.as_path()))?;
     let t0 = Instant::now();
     // The preset's stride subsamples as it reads (the form is then removed from the kept points).
     let hf = args.scan.load_with_stride(args.preset.map_or(1, |p| p.stride()))?;

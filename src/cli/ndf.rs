@@ -82,6 +82,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     // Check the output names before the work, so a typo fails fast and nothing is half-written.
     let ext = args.output.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
     anyhow::ensure!(matches!(ext.as_deref(), Some("csv" | "json")), "{}: output must end in .csv or .json", args.output.display());
+    let pngs: Vec<PathBuf> = args.png.iter().flat_map(|p| ["map", "slices"].map(|s| PathBuf::from(format!("{}.{s}.png", p.display())))).collect();
+    args.scan.check_outputs(std::iter::once(args.output.as_path()).chain(args.exr.as_deref()).chain(pngs.iter().map(|p| p.as_path())))?;
     let hf = args.scan.load()?;
     let ndf = empirical_ndf(&hf, &opts).map_err(|e| e.with_path(&args.scan.scan))?;
     for w in &ndf.warnings {
