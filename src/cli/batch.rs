@@ -114,6 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     };
     if let Some(t) = args.timeout {
         anyhow::ensure!(t.is_finite() && t > 0.0, "--timeout must be a positive number of seconds");
+        anyhow::ensure!(Duration::try_from_secs_f64(t).is_ok_and(|d| d.as_secs() < 1 << 40), "--timeout {t} is too long a time");
         anyhow::ensure!(args.isolate == Isolate::Process, "--timeout needs --isolate process");
     }
     let tolerances = Tolerances {
@@ -130,6 +131,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 
     let specs = collect_specs(&input, &out)?;
     anyhow::ensure!(!specs.is_empty(), "{}: no scans found", input.display());
+    batch::runner::check_output_names(&specs)?;
+    let _lock = batch::runner::lock_out_dir(&out)?;
     let cfg = JobConfig {
         model: model.clone(),
         scan_options: args.scan_options.clone(),
