@@ -89,7 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     for w in &ndf.warnings {
         eprintln!("ndfit: {}: warning: {w}", args.scan.scan.display());
     }
-    write_ndf(&args.output, &ndf, input_json(&args.scan.scan, &hf))?;
+    // The optional outputs first: a plot that fails leaves no NDF file behind that looks like success.
     if let Some(exr) = &args.exr {
         output::write_exr(exr, &ndf, args.exr_size)?;
     }
@@ -101,6 +101,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         plot::plot_slices(&p("slices"), &ndf, &format!("{name}: D through the peak"))
             .with_context(|| format!("{}", p("slices").display()))?;
     }
+    write_ndf(&args.output, &ndf, input_json(&args.scan.scan, &hf))?;
     eprintln!(
         "ndfit ndf: {} samples ({} skipped) in {} bins ({} x {} Lambert cells, {} normals)",
         ndf.n_samples,
