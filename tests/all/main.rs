@@ -6,6 +6,7 @@ mod batch;
 mod bench;
 mod cli;
 mod fit;
+mod hostile;
 mod models;
 mod ndf;
 mod ndf_storage;
