@@ -137,12 +137,14 @@ pub fn check_grid(nx: usize, ny: usize, bytes_per: usize, available: usize, what
     }
     let n = checked_size(&[nx, ny], what)?;
     let need = checked_size(&[n, bytes_per], what)?;
-    crate::budget::check_points(nx, ny, what)?;
     if need > available {
         return Err(Error::corrupt(format!(
             "{what}: header claims {nx} x {ny} points ({need} bytes) but only {available} bytes are present"
         )));
     }
+    // A header that lies about the bytes present is corrupt (above); one that tells the truth may still
+    // be beyond the budget.
+    crate::budget::check_points(nx, ny, what)?;
     Ok(n)
 }
 

@@ -298,3 +298,37 @@ fn huge_heights_special_files_and_bad_arguments_fail_in_one_line() {
     assert_refused(&run(d.path(), &["fit", "--bogus"]), &["--bogus"]);
     assert_refused(&run(d.path(), &["batch", "x", "-o", "y", "--isolate", "process", "--timeout", "1e20"]), &["--timeout"]);
 }
+
+#[test]
+fn a_tiff_strip_shorter_than_its_rows_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let (nx, ny) = (64u32, 64u32);
+    let px: Vec<u16> = (0..nx * ny).map(|k| (k % 977) as u16 + 1000).collect();
+    let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(nx, ny, px).unwrap();
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut bytes, image::ImageFormat::Tiff).unwrap();
+    let mut bytes = bytes.into_inner();
+    std::fs::write(d.path().join("ok.tif"), &bytes).unwrap();
+    let out = run(d.path(), &["info", "ok.tif", "--dx", "1e-6", "--z-scale", "1e-9"]);
+    assert!(out.status.success(), "the intact TIFF reads: {}", String::from_utf8_lossy(&out.stderr));
+    // Little-endian classic TIFF: find StripByteCounts (279) in the first directory and shorten the
+    // last strip by one row.
+    assert_eq!(&bytes[..4], b"II*\0");
+    let u16at = |b: &[u8], o: usize| u16::from_le_bytes([b[o], b[o + 1]]) as usize;
+    let u32at = |b: &[u8], o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap()) as usize;
+    let ifd = u32at(&bytes, 4);
+    let entry = (0..u16at(&bytes, ifd)).map(|k| ifd + 2 + 12 * k).find(|&e| u16at(&bytes, e) == 279).expect("StripByteCounts");
+    let (typ, count) = (u16at(&bytes, entry + 2), u32at(&bytes, entry + 4));
+    let size = if typ == 3 { 2 } else { 4 };
+    let at = if count * size <= 4 { entry + 8 } else { u32at(&bytes, entry + 8) } + (count - 1) * size;
+    let last = if size == 2 { u16at(&bytes, at) } else { u32at(&bytes, at) };
+    let short = last - 2 * nx as usize;
+    if size == 2 {
+        bytes[at..at + 2].copy_from_slice(&(short as u16).to_le_bytes());
+    } else {
+        bytes[at..at + 4].copy_from_slice(&(short as u32).to_le_bytes());
+    }
+    std::fs::write(d.path().join("short.tif"), &bytes).unwrap();
+    let out = run(d.path(), &["info", "short.tif", "--dx", "1e-6", "--z-scale", "1e-9"]);
+    assert_refused(&out, &["short.tif", "strip", &format!("holds {short} bytes")]);
+}
