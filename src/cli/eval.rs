@@ -72,9 +72,15 @@ fn eval_csv(model: &Model, input: &str) -> Result<String, String> {
 }
 
 fn unit(v: Vector3<f64>) -> Option<Vector3<f64>> {
-    let n = v.norm();
-    // A zero (or overflowing) vector has no direction.
-    (n > 0.0 && n.is_finite()).then(|| v / n)
+    // Scaled by its largest component first, so a tiny (denormal) or huge vector keeps its direction;
+    // only the zero vector has none.
+    let s = v.amax();
+    if !(s > 0.0 && s.is_finite()) {
+        return None;
+    }
+    let w = v / s;
+    let n = w.norm();
+    (n > 0.0 && n.is_finite()).then(|| w / n)
 }
 
 /// Shortest round-trip decimal; exponent form outside `[1e-5, 1e16)` so tiny values stay short.

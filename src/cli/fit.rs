@@ -56,10 +56,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let opts = FitOptions {
         objective: args.objective.parse::<Objective>().map_err(|e| anyhow!("--objective: {}", e.message()))?,
         solver: args.solver.parse::<Solver>().map_err(|e| anyhow!("--solver: {}", e.message()))?,
-        extra_starts: args.extra_starts.min(4),
+        extra_starts: args.extra_starts,
         max_theta: args.max_theta.to_radians(),
         ..FitOptions::default()
     };
+    anyhow::ensure!(args.extra_starts <= 4, "--extra-starts {} must be between 0 and 4", args.extra_starts);
     anyhow::ensure!(args.max_theta > 0.0 && args.max_theta <= 90.0, "--max-theta {} must be in (0, 90] degrees", args.max_theta);
     let model = match args.model.as_str() {
         "auto" => None,

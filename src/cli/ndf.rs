@@ -30,6 +30,7 @@ impl NdfArgs {
         let scheme: NormalScheme = self.normals.parse()?;
         if let Some(c) = self.ndf_cells {
             anyhow::ensure!((3..=ndfit::ndf::grid::MAX_CELLS_ACROSS).contains(&c), "--ndf-cells {c} must be between 3 and {}", ndfit::ndf::grid::MAX_CELLS_ACROSS);
+            anyhow::ensure!(c % 2 == 1, "--ndf-cells {c} must be odd (the grid has a centre cell): use {} or {}", c - 1, c + 1);
         }
         anyhow::ensure!(self.target_count.is_finite() && self.target_count >= 1.0, "--target-count {} must be at least 1", self.target_count);
         Ok(NdfOptions { scheme, cells_across: self.ndf_cells, target_count: self.target_count, frame: None })

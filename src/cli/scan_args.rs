@@ -17,7 +17,7 @@ pub struct ScanArgs {
     #[arg(long)]
     pub dy: Option<f64>,
     /// Metres per stored height unit, for formats that carry no height unit.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub z_scale: Option<f64>,
     /// Force the format instead of detecting it (x3p, plu, sur, opd, metropro, al3d, tmd, ascii, xyz,
     /// csv, gsf, npy, exr, png, tiff).
