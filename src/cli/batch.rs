@@ -216,7 +216,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         _ => {}
     }
     for b in outcome.briefs.iter().filter(|b| b.entry.error.is_some()) {
-        eprintln!("ndfit: {}", b.entry.error.as_deref().unwrap_or_default());
+        eprintln!("ndfit: {}", super::one_line(b.entry.error.as_deref().unwrap_or_default()));
     }
     if !allow_missing && !outcome.missing.is_empty() {
         eprintln!("ndfit batch: {} baseline scan(s) missing from this run (--allow-missing to accept)", outcome.missing.len());
