@@ -297,6 +297,13 @@ fn run_one(
     let rec_path = record_path(&opts.out_dir, spec);
     if opts.resume {
         if let Some(entry) = read_record(&rec_path).filter(|e| e.resume.as_ref() == Some(&key) && e.path == spec.key) {
+            // The record holds the fit: a per-scan fit file deleted since is written again from it.
+            if let Some(fit) = &entry.fit {
+                let p = fit_path(&opts.out_dir, spec);
+                if !p.exists() {
+                    write_fit(&p, fit)?;
+                }
+            }
             return Ok(brief_of(entry, true));
         }
     }
@@ -339,17 +346,20 @@ fn run_one(
         entry.baseline = Some(compare(cur, base, &opts.tolerances));
     }
     if let Some(fit) = &entry.fit {
-        let p = fit_path(&opts.out_dir, spec);
-        make_parent(&p)?;
-        write_atomic(&p, |w| {
-            serde_json::to_writer_pretty(&mut *w, fit).map_err(|e| Error::io(e.into()))?;
-            w.write_all(b"\n").map_err(Error::io)
-        })?;
+        write_fit(&fit_path(&opts.out_dir, spec), fit)?;
     }
     make_parent(&rec_path)?;
     // The record goes last: its presence means the scan's files are complete (what --resume trusts).
     write_atomic(&rec_path, |w| serde_json::to_writer(&mut *w, &entry).map_err(|e| Error::io(e.into())))?;
     Ok(brief_of(entry, false))
+}
+
+fn write_fit(p: &Path, fit: &Value) -> Result<()> {
+    make_parent(p)?;
+    write_atomic(p, |w| {
+        serde_json::to_writer_pretty(&mut *w, fit).map_err(|e| Error::io(e.into()))?;
+        w.write_all(b"\n").map_err(Error::io)
+    })
 }
 
 fn make_parent(p: &Path) -> Result<()> {

@@ -297,6 +297,34 @@ fn huge_heights_special_files_and_bad_arguments_fail_in_one_line() {
     // Argument errors are one line; a timeout beyond any Duration is refused, not a panic.
     assert_refused(&run(d.path(), &["fit", "--bogus"]), &["--bogus"]);
     assert_refused(&run(d.path(), &["batch", "x", "-o", "y", "--isolate", "process", "--timeout", "1e20"]), &["--timeout"]);
+    // Values out of range are refused, not silently changed.
+    synth(d.path(), "s.x3p", 32);
+    assert_refused(&run(d.path(), &["fit", "s.x3p", "--ndf-cells", "4"]), &["--ndf-cells 4", "odd"]);
+    assert_refused(&run(d.path(), &["fit", "s.x3p", "--extra-starts", "100"]), &["--extra-starts 100"]);
+}
+
+#[test]
+fn eval_gives_tiny_directions_their_value() {
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(d.path().join("f.json"), r#"{"model": "ggx", "params": {"alpha": 0.3}}"#).unwrap();
+    let eval = |input: &str| {
+        let mut child = Command::new(ndfit_bin())
+            .args(["eval", "f.json"])
+            .current_dir(d.path())
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
+        child.wait_with_output().unwrap()
+    };
+    // (1e-310, 0, 1e-310) is the direction (1, 0, 1)/sqrt(2): the same D, not "the zero vector".
+    let tiny = eval("mx,my,mz\n1e-310,0,1e-310\n");
+    let unit = eval("mx,my,mz\n1,0,1\n");
+    assert!(tiny.status.success(), "{}", String::from_utf8_lossy(&tiny.stderr));
+    assert_eq!(String::from_utf8_lossy(&tiny.stdout), String::from_utf8_lossy(&unit.stdout));
+    assert_refused(&eval("mx,my,mz\n0,0,0\n"), &["line 2", "zero vector"]);
 }
 
 #[test]
@@ -331,4 +359,20 @@ fn a_tiff_strip_shorter_than_its_rows_is_refused() {
     std::fs::write(d.path().join("short.tif"), &bytes).unwrap();
     let out = run(d.path(), &["info", "short.tif", "--dx", "1e-6", "--z-scale", "1e-9"]);
     assert_refused(&out, &["short.tif", "strip", &format!("holds {short} bytes")]);
+}
+
+#[test]
+fn resume_writes_a_deleted_fit_file_again() {
+    let d = tempfile::tempdir().unwrap();
+    let scans = d.path().join("scans");
+    std::fs::create_dir(&scans).unwrap();
+    synth(&scans, "a.x3p", 48);
+    let out = run(d.path(), &["batch", "scans", "-o", "out", "--model", "ggx"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let fit = d.path().join("out/fits/a.x3p.fit.json");
+    let first = std::fs::read_to_string(&fit).unwrap();
+    std::fs::remove_file(&fit).unwrap();
+    let out = run(d.path(), &["batch", "scans", "-o", "out", "--model", "ggx", "--resume"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(std::fs::read_to_string(&fit).expect("the fit file is back"), first);
 }
