@@ -227,11 +227,22 @@ mod tests {
         assert!(e.to_string().contains("refusing to overwrite"), "{e}");
         assert_eq!(std::fs::read_to_string(&input).unwrap(), "scan");
 
-        // A replaced file keeps its mode; /dev/null stays a device.
+        // A replaced file keeps its mode.
         std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o640)).unwrap();
         write_bytes_atomic(&real, b"again").unwrap();
         assert_eq!(std::fs::metadata(&real).unwrap().permissions().mode() & 0o777, 0o640);
-        write_bytes_atomic(Path::new("/dev/null"), b"x").unwrap();
-        assert!(!std::fs::metadata("/dev/null").unwrap().is_file());
+
+        // A FIFO is written into and stays a FIFO (as a device such as /dev/null would).
+        let fifo = d.path().join("pipe");
+        let c = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+        // SAFETY: mkfifo on a NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0);
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(fifo).unwrap())
+        };
+        write_bytes_atomic(&fifo, b"through").unwrap();
+        assert_eq!(reader.join().unwrap(), b"through");
+        assert!(std::os::unix::fs::FileTypeExt::is_fifo(&std::fs::metadata(&fifo).unwrap().file_type()));
     }
 }
