@@ -56,6 +56,7 @@ fn rlimits() -> Vec<u64> {
         let mut r = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
         // SAFETY: getrlimit writes only into the struct it is given.
         if unsafe { libc::getrlimit(res, &mut r) } == 0 && r.rlim_cur != libc::RLIM_INFINITY {
+            #[allow(clippy::unnecessary_cast)] // rlim_t is u32 on some targets
             out.push(r.rlim_cur as u64);
         }
     }

@@ -52,7 +52,7 @@ fn parse_bytes(s: &str) -> Result<u64, String> {
     };
     let v: f64 = num.trim().parse().map_err(|_| format!("{s:?} is not a size such as 4G or 512M"))?;
     let bytes = v * mult as f64;
-    if !(bytes.is_finite() && bytes >= 1.0 && bytes < 1.8e19) {
+    if !(1.0..1.8e19).contains(&bytes) {
         return Err(format!("{s:?} is not a size between 1 byte and 16 EiB"));
     }
     Ok(bytes as u64)
