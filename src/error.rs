@@ -26,6 +26,8 @@ pub enum ErrorKind {
     InvalidInput,
     /// A numerical procedure produced no usable result.
     Numerical,
+    /// The file declares more data than the memory budget allows (`crate::budget`).
+    TooLarge,
 }
 
 /// The one error type of the `ndfit` library.

@@ -18,6 +18,7 @@
 
 pub mod batch;
 pub mod bench;
+pub mod budget;
 pub mod error;
 pub mod export;
 pub mod fit;

@@ -20,7 +20,8 @@ pub fn is_scan(path: &Path, detect: &dyn Fn(&Path) -> bool) -> bool {
 
 /// Every scan below `root`, recursively, sorted by key. Hidden files and folders (leading `.`) and the
 /// folders in `exclude` (e.g. the batch's own output folder) are skipped; symbolic links to folders are
-/// not followed (no cycles). `detect` recognises scans by content for files without a scan extension.
+/// not followed (no cycles). A subfolder that cannot be listed is returned as a spec of its own, which
+/// fails as an `error` entry naming the folder. `detect` recognises scans by content for files without a scan extension.
 pub fn walk(root: &Path, exclude: &[PathBuf], detect: &dyn Fn(&Path) -> bool) -> Result<Vec<ScanSpec>> {
     let meta = std::fs::metadata(root).map_err(|e| Error::io(e).with_path(root))?;
     if !meta.is_dir() {
@@ -35,7 +36,16 @@ pub fn walk(root: &Path, exclude: &[PathBuf], detect: &dyn Fn(&Path) -> bool) ->
                 continue;
             }
         }
-        let rd = std::fs::read_dir(&dir).map_err(|e| Error::io(e).with_path(&dir))?;
+        let rd = match std::fs::read_dir(&dir) {
+            Ok(rd) => rd,
+            Err(e) if dir == root => return Err(Error::io(e).with_path(&dir)),
+            // A subfolder that cannot be listed becomes an entry of its own (its read fails with the
+            // reason), so the run goes on and reports it instead of aborting or losing it silently.
+            Err(_) => {
+                out.push(ScanSpec::new(key_of(root, &dir), dir.clone()));
+                continue;
+            }
+        };
         for entry in rd {
             let entry = entry.map_err(|e| Error::io(e).with_path(&dir))?;
             let name = entry.file_name();

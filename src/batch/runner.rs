@@ -201,6 +201,7 @@ pub fn run(
     if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
         return Err(Error::invalid(format!("scan '{}' is listed twice", w[0])));
     }
+    check_output_names(specs)?;
     std::fs::create_dir_all(&opts.out_dir).map_err(|e| Error::io(e).with_path(&opts.out_dir))?;
     if opts.resume {
         remove_stale_temps(&opts.out_dir);
@@ -317,6 +318,13 @@ fn run_one(
     let rec_path = record_path(&opts.out_dir, spec);
     if opts.resume {
         if let Some(entry) = read_record(&rec_path).filter(|e| e.resume.as_ref() == Some(&key) && e.path == spec.key) {
+            // The record holds the fit: a per-scan fit file deleted since is written again from it.
+            if let Some(fit) = &entry.fit {
+                let p = fit_path(&opts.out_dir, spec);
+                if !p.exists() {
+                    write_fit(&p, fit)?;
+                }
+            }
             return Ok(brief_of(entry, true));
         }
     }
@@ -359,17 +367,20 @@ fn run_one(
         entry.baseline = Some(compare(cur, base, &opts.tolerances));
     }
     if let Some(fit) = &entry.fit {
-        let p = fit_path(&opts.out_dir, spec);
-        make_parent(&p)?;
-        write_atomic(&p, |w| {
-            serde_json::to_writer_pretty(&mut *w, fit).map_err(|e| Error::io(e.into()))?;
-            w.write_all(b"\n").map_err(Error::io)
-        })?;
+        write_fit(&fit_path(&opts.out_dir, spec), fit)?;
     }
     make_parent(&rec_path)?;
     // The record goes last: its presence means the scan's files are complete (what --resume trusts).
     write_atomic(&rec_path, |w| serde_json::to_writer(&mut *w, &entry).map_err(|e| Error::io(e.into())))?;
     Ok(brief_of(entry, false))
+}
+
+fn write_fit(p: &Path, fit: &Value) -> Result<()> {
+    make_parent(p)?;
+    write_atomic(p, |w| {
+        serde_json::to_writer_pretty(&mut *w, fit).map_err(|e| Error::io(e.into()))?;
+        w.write_all(b"\n").map_err(Error::io)
+    })
 }
 
 fn make_parent(p: &Path) -> Result<()> {
@@ -434,6 +445,60 @@ pub fn brief_of(mut entry: Entry, reused: bool) -> Brief {
 }
 
 /// Remove temporary files an interrupted run left (write_atomic names them `.<name>.<random>.tmp`).
+/// Refuse distinct keys whose output files would be the same (`a:b.x3p` and `a_b.x3p`, `x/../y` and
+/// `x/_/y`, `a//b` and `a/b`): one scan's results would overwrite the other's. Both scans are named.
+pub fn check_output_names(specs: &[ScanSpec]) -> Result<()> {
+    let mut seen: std::collections::HashMap<PathBuf, &ScanSpec> = std::collections::HashMap::with_capacity(specs.len());
+    for s in specs {
+        if let Some(other) = seen.insert(s.out_rel(), s) {
+            return Err(Error::invalid(format!(
+                "scans '{}' ({}) and '{}' ({}) would write the same output files ({}); rename one (or give distinct ids in a manifest)",
+                other.key,
+                other.file.display(),
+                s.key,
+                s.file.display(),
+                s.out_rel().display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The name of the lock file a batch holds in its output folder.
+pub const LOCK_FILE: &str = ".ndfit-batch.lock";
+
+/// An exclusive lock on a batch output folder, held until dropped: two batches never write one folder.
+#[derive(Debug)]
+pub struct OutDirLock {
+    _file: std::fs::File,
+}
+
+/// Create `dir` if needed and lock it for this batch; a second batch on the same folder is refused with
+/// one line instead of mixing its results into the first one's.
+pub fn lock_out_dir(dir: &Path) -> Result<OutDirLock> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(e).with_path(dir))?;
+    let path = dir.join(LOCK_FILE);
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|e| Error::io(e).with_path(&path))?;
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        // SAFETY: flock on the descriptor of a file this function owns; the lock ends when it is closed.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            return Err(Error::new(
+                crate::ErrorKind::Io,
+                "another ndfit batch is writing this output folder (it holds .ndfit-batch.lock); wait for it or choose another -o",
+            )
+            .with_path(dir));
+        }
+    }
+    Ok(OutDirLock { _file: file })
+}
+
 fn remove_stale_temps(dir: &Path) {
     let Ok(rd) = std::fs::read_dir(dir) else { return };
     for e in rd.flatten() {

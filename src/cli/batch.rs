@@ -114,6 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     };
     if let Some(t) = args.timeout {
         anyhow::ensure!(t.is_finite() && t > 0.0, "--timeout must be a positive number of seconds");
+        anyhow::ensure!(Duration::try_from_secs_f64(t).is_ok_and(|d| d.as_secs() < 1 << 40), "--timeout {t} is too long a time");
         anyhow::ensure!(args.isolate == Isolate::Process, "--timeout needs --isolate process");
     }
     let tolerances = Tolerances {
@@ -130,6 +131,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 
     let specs = collect_specs(&input, &out)?;
     anyhow::ensure!(!specs.is_empty(), "{}: no scans found", input.display());
+    batch::runner::check_output_names(&specs)?;
+    let _lock = batch::runner::lock_out_dir(&out)?;
     let cfg = JobConfig {
         model: model.clone(),
         scan_options: args.scan_options.clone(),
@@ -201,14 +204,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     summary::write_summary_json(&out, &header, &outcome)?;
     summary::write_summary_csv(&out, &outcome)?;
 
-    if baseline.is_some() {
-        print!("{}", summary::regression_table(&outcome, args.table_all));
+    // The summary is written: a closed standard output only loses the table, never the exit status.
+    let table = if baseline.is_some() {
+        summary::regression_table(&outcome, args.table_all)
     } else {
         let c = outcome.counts();
-        println!("{} scans: {} ok, {} error", c.scans, c.ok, c.error);
+        format!("{} scans: {} ok, {} error\n", c.scans, c.ok, c.error)
+    };
+    match super::write_stdout(table.as_bytes()) {
+        Err(e) if e.downcast_ref::<super::StdoutClosed>().is_none() => return Err(e),
+        _ => {}
     }
     for b in outcome.briefs.iter().filter(|b| b.entry.error.is_some()) {
-        eprintln!("ndfit: {}", b.entry.error.as_deref().unwrap_or_default());
+        eprintln!("ndfit: {}", super::one_line(b.entry.error.as_deref().unwrap_or_default()));
     }
     if !allow_missing && !outcome.missing.is_empty() {
         eprintln!("ndfit batch: {} baseline scan(s) missing from this run (--allow-missing to accept)", outcome.missing.len());

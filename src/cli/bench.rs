@@ -125,7 +125,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if let Some(json) = &args.child_point {
         let p: sweep::ChildPoint = serde_json::from_str(json).context("--child-point: unreadable point")?;
         let row = sweep::run_child_point(&p)?;
-        println!("{}", serde_json::to_string(&row).context("row JSON")?);
+        super::write_stdout((serde_json::to_string(&row).context("row JSON")? + "\n").as_bytes())?;
         return Ok(ExitCode::SUCCESS);
     }
     if let Some(csv_in) = &args.from_csv {

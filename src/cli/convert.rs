@@ -28,6 +28,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if args.scan.form.is_none() {
         pre.form = ndfit::preprocess::FormRemoval::None;
     }
+    args.scan.check_outputs([args.out.as_path()])?;
     let hf = args.scan.load_raw()?;
     let hf = ndfit::preprocess::apply(hf, &pre).map_err(|e| e.with_path(&args.scan.scan))?;
     ndfit::io::write_x3p(&args.out, &hf)?;

@@ -59,7 +59,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let nodes = ndf.bins.iter().map(|b| (b.m, b.proj_solid_angle));
     let delta = metric::delta(|m| fitted.d(*m), |m| truth.d(*m), nodes);
 
-    let mut out = std::io::stdout().lock();
+    // Built in memory and written at the end: a closed or full standard output ends the command cleanly.
+    let mut out: Vec<u8> = Vec::new();
     let w = &mut out;
     let _ = writeln!(w, "ndfit demo: a synthetic {n} x {n} scan of an ellipsoid surface (Walter et al. 2014),", n = args.size);
     let _ = writeln!(w, "whose NDF is exactly the ellipsoid NDF below; ndfit measures it and fits it back.\n");
@@ -98,5 +99,6 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let _ = writeln!(w, "fit JSON: {}", path.display());
     }
     let _ = writeln!(w, "\nNext: `ndfit fit YOUR_SCAN.x3p --model auto -o fit.json` (see README).");
+    super::write_stdout(&out)?;
     Ok(ExitCode::SUCCESS)
 }

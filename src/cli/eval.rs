@@ -1,6 +1,6 @@
 //! `ndfit eval FIT.json`: a fitted model's D(m) (and G1(u, m)) at directions read as CSV from stdin.
 
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -28,8 +28,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut input = String::new();
     std::io::stdin().read_to_string(&mut input).map_err(|e| anyhow!("<stdin>: cannot read ({e})"))?;
     let out = eval_csv(&model, &input).map_err(|e| anyhow!("<stdin>: {e}"))?;
-    let mut stdout = std::io::stdout().lock();
-    stdout.write_all(out.as_bytes()).and_then(|_| stdout.flush()).map_err(|e| anyhow!("<stdout>: {e}"))?;
+    super::write_stdout(out.as_bytes())?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -73,9 +72,15 @@ fn eval_csv(model: &Model, input: &str) -> Result<String, String> {
 }
 
 fn unit(v: Vector3<f64>) -> Option<Vector3<f64>> {
-    let n = v.norm();
-    // A zero (or overflowing) vector has no direction.
-    (n > 0.0 && n.is_finite()).then(|| v / n)
+    // Scaled by its largest component first, so a tiny (denormal) or huge vector keeps its direction;
+    // only the zero vector has none.
+    let s = v.amax();
+    if !(s > 0.0 && s.is_finite()) {
+        return None;
+    }
+    let w = v / s;
+    let n = w.norm();
+    (n > 0.0 && n.is_finite()).then(|| w / n)
 }
 
 /// Shortest round-trip decimal; exponent form outside `[1e-5, 1e16)` so tiny values stay short.

@@ -1,6 +1,5 @@
 //! `ndfit fit SCAN`: read, preprocess, build the empirical NDF, fit, write `ndfit.fit/1` JSON.
 
-use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -59,10 +58,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let opts = FitOptions {
         objective: args.objective.parse::<Objective>().map_err(|e| anyhow!("--objective: {}", e.message()))?,
         solver: args.solver.parse::<Solver>().map_err(|e| anyhow!("--solver: {}", e.message()))?,
-        extra_starts: args.extra_starts.min(4),
+        extra_starts: args.extra_starts,
         max_theta: args.max_theta.to_radians(),
         ..FitOptions::default()
     };
+    anyhow::ensure!(args.extra_starts <= 4, "--extra-starts {} must be between 0 and 4", args.extra_starts);
     anyhow::ensure!(args.max_theta > 0.0 && args.max_theta <= 90.0, "--max-theta {} must be in (0, 90] degrees", args.max_theta);
     let model = match args.model.parse::<ndfit::models::ModelChoice>().map_err(|e| anyhow!("--model: {}", e.message()))? {
         ndfit::models::ModelChoice::Auto => None,
@@ -71,6 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut ndf_opts = args.ndf.options()?;
     let mut opts = opts;
 
+    args.scan.check_outputs(args.output.iter().chain(&args.plot).map(|p| p.as_path()))?;
     let t0 = Instant::now();
     // The preset's stride subsamples as it reads (the form is then removed from the kept points).
     let hf = args.scan.load_with_stride(args.preset.map_or(1, |p| p.stride()))?;
@@ -106,10 +107,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     json.push('\n');
     match &args.output {
         Some(out) => ndfit::io::write_bytes_atomic(out, json.as_bytes())?,
-        None => {
-            let mut stdout = std::io::stdout().lock();
-            stdout.write_all(json.as_bytes()).and_then(|_| stdout.flush()).map_err(|e| anyhow!("<stdout>: {e}"))?;
-        }
+        None => super::write_stdout(json.as_bytes())?,
     }
     if !args.quiet {
         eprintln!("ndfit: {path}: {}", summary_line(&report));

@@ -58,25 +58,29 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             "sdq_points": st.sdq_points,
             "instrument": m.instrument,
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        super::write_stdout((serde_json::to_string_pretty(&v)? + "\n").as_bytes())?;
     } else {
-        println!("file:       {}", args.scan.scan.display());
-        println!("format:     {}", m.format);
-        println!("grid:       {} x {} ({} points)", shaped.nx, shaped.ny, shaped.nx * shaped.ny);
-        println!("spacing:    dx = {:e} m, dy = {:e} m", shaped.dx, shaped.dy);
-        println!("origin:     x0 = {:e} m, y0 = {:e} m", shaped.x0, shaped.y0);
-        println!(
+        use std::fmt::Write as _;
+        let mut text = String::new();
+        let _ = writeln!(text, "file:       {}", args.scan.scan.display());
+        let _ = writeln!(text, "format:     {}", m.format);
+        let _ = writeln!(text, "grid:       {} x {} ({} points)", shaped.nx, shaped.ny, shaped.nx * shaped.ny);
+        let _ = writeln!(text, "spacing:    dx = {:e} m, dy = {:e} m", shaped.dx, shaped.dy);
+        let _ = writeln!(text, "origin:     x0 = {:e} m, y0 = {:e} m", shaped.x0, shaped.y0);
+        let _ = writeln!(
+            text,
             "file units: lateral {}, height {} (held in metres)",
             m.file_xy_unit.as_deref().unwrap_or("none"),
             m.file_z_unit.as_deref().unwrap_or("none")
         );
-        println!("invalid:    {} of {}", range.invalid, range.invalid + range.valid);
-        println!("heights:    {:e} .. {:e} m (mean {:e} m)", range.z_min, range.z_max, range.z_mean);
-        println!("Sq:         {:e} m (after {:?} removal)", st.sq, pre_form);
-        println!("Sdq:        {} (central differences, {} points with 4 valid neighbours)", st.sdq, st.sdq_points);
+        let _ = writeln!(text, "invalid:    {} of {}", range.invalid, range.invalid + range.valid);
+        let _ = writeln!(text, "heights:    {:e} .. {:e} m (mean {:e} m)", range.z_min, range.z_max, range.z_mean);
+        let _ = writeln!(text, "Sq:         {:e} m (after {:?} removal)", st.sq, pre_form);
+        let _ = writeln!(text, "Sdq:        {} (central differences, {} points with 4 valid neighbours)", st.sdq, st.sdq_points);
         for (k, v) in &m.instrument {
-            println!("meta:       {k} = {v}");
+            let _ = writeln!(text, "meta:       {k} = {}", super::one_line(v));
         }
+        super::write_stdout(text.as_bytes())?;
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -3,6 +3,7 @@
 //! Errors reach the user as one line on standard error, `ndfit: <file>: <problem>`, with a non-zero exit.
 //! Each subcommand lives in its own file with its `Args` and its `run`.
 
+use std::io::Write;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -27,6 +28,68 @@ mod synth;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Memory budget for what a file declares (bytes, or with a K/M/G/T suffix of 1024s); files that
+    /// need more are refused before anything is allocated [default: half of the available memory]
+    #[arg(long, global = true, value_name = "BYTES", value_parser = parse_bytes)]
+    max_memory: Option<u64>,
+}
+
+/// `--max-memory`: a byte count with an optional binary suffix (`512M`, `4G`).
+fn parse_bytes(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let (num, mult) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let m: u64 = match c.to_ascii_uppercase() {
+                'K' => 1 << 10,
+                'M' => 1 << 20,
+                'G' => 1 << 30,
+                'T' => 1 << 40,
+                'B' => 1,
+                _ => return Err(format!("{s:?}: unknown unit (use K, M, G or T)")),
+            };
+            (&t[..i], m)
+        }
+        _ => (t, 1),
+    };
+    let v: f64 = num.trim().parse().map_err(|_| format!("{s:?} is not a size such as 4G or 512M"))?;
+    let bytes = v * mult as f64;
+    if !(1.0..1.8e19).contains(&bytes) {
+        return Err(format!("{s:?} is not a size between 1 byte and 16 EiB"));
+    }
+    Ok(bytes as u64)
+}
+
+/// Standard output was closed by its reader (EPIPE): the command stops and exits 0, as Unix tools do.
+#[derive(Debug)]
+pub struct StdoutClosed;
+
+impl std::fmt::Display for StdoutClosed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("<stdout>: closed by the reader")
+    }
+}
+
+impl std::error::Error for StdoutClosed {}
+
+/// Write `bytes` to standard output and flush. A closed pipe becomes [`StdoutClosed`] (exit 0, nothing
+/// printed); any other failure (a full disk) one line naming standard output. Never panics, unlike
+/// `println!`.
+pub fn write_stdout(bytes: &[u8]) -> anyhow::Result<()> {
+    let mut out = std::io::stdout().lock();
+    match out.write_all(bytes).and_then(|_| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(StdoutClosed.into()),
+        Err(e) => Err(anyhow::anyhow!("<stdout>: cannot write ({e})")),
+    }
+}
+
+/// Escape control characters (newlines, escapes, NULs) so text taken from a file cannot break the one
+/// line an error message is.
+pub fn one_line(s: &str) -> String {
+    if !s.chars().any(char::is_control) {
+        return s.to_string();
+    }
+    s.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect()
 }
 
 #[derive(Debug, Subcommand)]
@@ -57,7 +120,11 @@ enum Command {
 
 /// Parse, run, and turn any error into one line and a non-zero exit.
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => return usage_error(e),
+    };
+    ndfit::budget::set_max_memory(cli.max_memory);
     let result = match cli.command {
         Command::Demo(a) => demo::run(a),
         Command::Info(a) => info::run(a),
@@ -73,10 +140,40 @@ pub fn main() -> ExitCode {
     };
     match result {
         Ok(code) => code,
+        Err(err) if err.downcast_ref::<StdoutClosed>().is_some() => ExitCode::SUCCESS,
         Err(err) => {
             // One line: the chain joined, so the file and the cause are both named.
             let msg = err.chain().map(|e| e.to_string()).collect::<Vec<_>>().join(": ");
-            eprintln!("ndfit: {msg}");
+            let _ = writeln!(std::io::stderr(), "ndfit: {}", one_line(&msg));
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// Help and version go to standard output as clap prints them; an argument error becomes one line
+/// (clap's first line, without its usage block) and exit status 2.
+fn usage_error(e: clap::Error) -> ExitCode {
+    use clap::error::ErrorKind as K;
+    match e.kind() {
+        K::DisplayHelp | K::DisplayVersion => {
+            // A closed pipe after `--help | head` is not an error; a full disk is.
+            match write_stdout(e.render().to_string().as_bytes()) {
+                Err(err) if err.downcast_ref::<StdoutClosed>().is_none() => {
+                    let _ = writeln!(std::io::stderr(), "ndfit: {err}");
+                    ExitCode::from(2)
+                }
+                _ => ExitCode::SUCCESS,
+            }
+        }
+        K::DisplayHelpOnMissingArgumentOrSubcommand => {
+            let _ = write!(std::io::stderr(), "{}", e.render());
+            ExitCode::from(2)
+        }
+        _ => {
+            let text = e.render().to_string();
+            let first = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("invalid arguments");
+            let first = first.trim_start_matches("error: ").trim();
+            let _ = writeln!(std::io::stderr(), "ndfit: {} (see --help)", one_line(first));
             ExitCode::from(2)
         }
     }

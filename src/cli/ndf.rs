@@ -31,6 +31,7 @@ impl NdfArgs {
         let scheme: NormalScheme = self.normals.parse()?;
         if let Some(c) = self.ndf_cells {
             anyhow::ensure!((3..=ndfit::ndf::grid::MAX_CELLS_ACROSS).contains(&c), "--ndf-cells {c} must be between 3 and {}", ndfit::ndf::grid::MAX_CELLS_ACROSS);
+            anyhow::ensure!(c % 2 == 1, "--ndf-cells {c} must be odd (the grid has a centre cell): use {} or {}", c - 1, c + 1);
         }
         anyhow::ensure!(self.target_count.is_finite() && self.target_count >= 1.0, "--target-count {} must be at least 1", self.target_count);
         Ok(NdfOptions { scheme, cells_across: self.ndf_cells, target_count: self.target_count, frame: None })
@@ -86,18 +87,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let ext = out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
         anyhow::ensure!(matches!(ext.as_deref(), Some("csv" | "json")), "{}: output must end in .csv or .json", out.display());
     }
+    let pngs: Vec<PathBuf> = args.png.iter().flat_map(|p| ["map", "slices"].map(|s| PathBuf::from(format!("{}.{s}.png", p.display())))).collect();
+    args.scan.check_outputs(args.output.as_deref().into_iter().chain(args.exr.as_deref()).chain(pngs.iter().map(|p| p.as_path())))?;
     let hf = args.scan.load()?;
     let ndf = empirical_ndf(&hf, &opts).map_err(|e| e.with_path(&args.scan.scan))?;
     for w in &ndf.warnings {
         eprintln!("ndfit: {}: warning: {w}", args.scan.scan.display());
     }
-    match &args.output {
-        Some(out) => write_ndf(out, &ndf, input_json(&args.scan.scan, &hf))?,
-        None => {
-            let mut stdout = std::io::BufWriter::new(std::io::stdout().lock());
-            output::write_csv_to(&mut stdout, &ndf).and_then(|_| std::io::Write::flush(&mut stdout).map_err(ndfit::Error::io)).map_err(|e| anyhow::anyhow!("<stdout>: {e}"))?;
-        }
-    }
+    // The optional outputs first: a plot that fails leaves no NDF file behind that looks like success.
     if let Some(exr) = &args.exr {
         output::write_exr(exr, &ndf, args.exr_size)?;
     }
@@ -108,6 +105,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             .with_context(|| format!("{}", p("map").display()))?;
         plot::plot_slices(&p("slices"), &ndf, &format!("{name}: D through the peak"))
             .with_context(|| format!("{}", p("slices").display()))?;
+    }
+    match &args.output {
+        Some(out) => write_ndf(out, &ndf, input_json(&args.scan.scan, &hf))?,
+        None => {
+            let mut csv = Vec::new();
+            output::write_csv_to(&mut csv, &ndf)?;
+            super::write_stdout(&csv)?;
+        }
     }
     eprintln!(
         "ndfit ndf: {} samples ({} skipped) in {} bins ({} x {} Lambert cells, {} normals)",

@@ -112,7 +112,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let report = report_json(input, options, &results, Some(&rec));
     let text = serde_json::to_string_pretty(&report)? + "\n";
     match &args.out {
-        None => print!("{text}"),
+        None => super::write_stdout(text.as_bytes())?,
         Some(dir) => {
             std::fs::create_dir_all(dir).map_err(|e| anyhow!("{}: cannot create directory ({e})", dir.display()))?;
             ndfit::io::write_bytes_atomic(&dir.join("scale.json"), text.as_bytes())?;

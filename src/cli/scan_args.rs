@@ -17,7 +17,7 @@ pub struct ScanArgs {
     #[arg(long)]
     pub dy: Option<f64>,
     /// Metres per stored height unit, for formats that carry no height unit.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub z_scale: Option<f64>,
     /// Force the format instead of detecting it (x3p, plu, sur, opd, metropro, al3d, tmd, ascii, xyz,
     /// csv, gsf, npy, exr, png, tiff).
@@ -46,8 +46,19 @@ impl ScanArgs {
         Preprocess { form: self.form.unwrap_or(FormRemoval::Plane), crop: self.crop, subsample: self.subsample }
     }
 
+    /// Record the scan as this process's input and refuse any of `outputs` that is a directory or the
+    /// scan itself, before any work (each write checks again).
+    pub fn check_outputs<'a>(&self, outputs: impl IntoIterator<Item = &'a std::path::Path>) -> anyhow::Result<()> {
+        ndfit::io::atomic::protect_input(&self.scan);
+        for o in outputs {
+            ndfit::io::atomic::check_output(o)?;
+        }
+        Ok(())
+    }
+
     /// Read the scan as stored (no preprocessing).
     pub fn load_raw(&self) -> anyhow::Result<ndfit::Heightfield> {
+        ndfit::io::atomic::protect_input(&self.scan);
         Ok(ndfit::io::read_scan(&self.scan, &self.read_options())?)
     }
 
@@ -63,6 +74,7 @@ impl ScanArgs {
         // A `--subsample 0` stays 0, for `preprocess::apply` to refuse with its message.
         let pre = Preprocess { subsample: self.subsample.saturating_mul(extra.max(1)), ..self.preprocess() };
         if pre.crop.is_none() && pre.subsample > 1 {
+            ndfit::io::atomic::protect_input(&self.scan);
             let hf = ndfit::io::read_scan_subsampled(&self.scan, &self.read_options(), pre.subsample)?;
             let rest = Preprocess { subsample: 1, ..pre };
             return Ok(ndfit::preprocess::apply(hf, &rest).map_err(|e| e.with_path(&self.scan))?);

@@ -40,7 +40,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0.0)]
     holes: f64,
     /// Constant added to every height (m).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     offset: f64,
     /// Ellipsoid: alpha_x.
     #[arg(long, default_value_t = 0.3)]

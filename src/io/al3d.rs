@@ -57,7 +57,7 @@ pub fn read_al3d(bytes: &[u8]) -> Result<Heightfield> {
     let dy = num("PixelSizeYMeter")?;
     let offset = count_tag("DepthImageOffset")?;
     let invalid = num("InvalidPixelValue")? as f32;
-    check_grid(nx, ny, 4, usize::MAX, "AL3D depth image")?;
+    check_grid(nx, ny, 4, bytes.len(), "AL3D depth image")?;
     if offset > bytes.len() {
         return Err(Error::corrupt(format!("AL3D DepthImageOffset {offset} is past the end of the file")));
     }

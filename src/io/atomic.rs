@@ -1,37 +1,248 @@
-//! Atomic output: write to a temporary file beside the target, then rename, so an interrupted or
-//! failed run never leaves a half-written file under the final name.
+//! Output that respects what is at the path: an interrupted or failed run never leaves a half-written
+//! file under the final name, and nothing but the file the user named is replaced.
+//!
+//! - A regular file (or a new name) is written to a temporary file beside it, then renamed over it;
+//!   a new file gets the mode `0666 & !umask`, a replaced one keeps its mode.
+//! - A symlink is followed: its final target is replaced the same way, the link stays.
+//! - A device or FIFO (`/dev/null`, `/dev/stdout`, a named pipe) is written directly, once the whole
+//!   output is ready in memory.
+//! - A path that is an input of this process ([`protect_input`]) is refused.
+//! - Temporary files of a run that was killed (`.NAME.XXXXXX.tmp`, no longer locked by a writer) are
+//!   removed by the next write of the same name.
 
 use std::io::{BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, ErrorKind, Result};
 
-/// Write `path` atomically: `fill` writes into a buffered temporary file in the same directory, which
-/// is flushed, synced and renamed over `path` only when `fill` succeeds. On error the temporary file is
-/// removed and `path` is untouched.
+/// The files this process reads as inputs, by (device, inode), with the name they were given.
+static INPUTS: Mutex<Vec<(u64, u64, PathBuf)>> = Mutex::new(Vec::new());
+
+/// Record `path` as an input: any later write whose target is the same file is refused.
+pub fn protect_input(path: &Path) {
+    if let Some(id) = file_id(path) {
+        if let Ok(mut v) = INPUTS.lock() {
+            if !v.iter().any(|(d, i, _)| (*d, *i) == id) {
+                v.push((id.0, id.1, path.to_path_buf()));
+            }
+        }
+    }
+}
+
+#[cfg(unix)]
+fn file_id(path: &Path) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()))
+}
+
+#[cfg(not(unix))]
+fn file_id(path: &Path) -> Option<(u64, u64)> {
+    // Without inode numbers the canonical path stands in for the file's identity.
+    use std::hash::{Hash, Hasher};
+    let c = std::fs::canonicalize(path).ok()?;
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    c.hash(&mut h);
+    Some((0, h.finish()))
+}
+
+/// The file a write to `path` lands in: `path` itself, or the final target of a chain of symlinks.
+fn resolve(path: &Path) -> Result<PathBuf> {
+    let mut p = path.to_path_buf();
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&p) {
+            Ok(md) if md.file_type().is_symlink() => {
+                let link = std::fs::read_link(&p).map_err(|e| Error::io(e).with_path(path))?;
+                p = match p.parent() {
+                    Some(dir) if link.is_relative() => dir.join(link),
+                    _ => link,
+                };
+            }
+            _ => return Ok(p),
+        }
+    }
+    Err(Error::new(ErrorKind::Io, "too many levels of symbolic links").with_path(path))
+}
+
+/// Check that `path` can take an output: not a directory, not an input of this process. Commands
+/// call this before their work so a wrong `-o` fails at once; every write checks again.
+pub fn check_output(path: &Path) -> Result<()> {
+    let target = resolve(path)?;
+    if target.is_dir() {
+        return Err(Error::new(ErrorKind::InvalidInput, "is a directory, not a file to write").with_path(path));
+    }
+    if let Some(id) = file_id(&target) {
+        if let Ok(v) = INPUTS.lock() {
+            if let Some((_, _, input)) = v.iter().find(|(d, i, _)| (*d, *i) == id) {
+                return Err(Error::new(
+                    ErrorKind::InvalidInput,
+                    format!("is the input {}; refusing to overwrite it with an output", input.display()),
+                )
+                .with_path(path));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Write `path` as the module describes: `fill` writes the contents; only when it succeeds do they
+/// reach `path`. On error the temporary file is removed and `path` is untouched.
 pub fn write_atomic<F>(path: &Path, fill: F) -> Result<()>
 where
     F: FnOnce(&mut dyn Write) -> Result<()>,
 {
-    let dir = match path.parent() {
+    check_output(path)?;
+    let target = resolve(path)?;
+    let existing = match std::fs::metadata(&target) {
+        Ok(md) => Some(md),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(Error::io(e).with_path(path)),
+    };
+    if let Some(md) = existing.as_ref().filter(|m| !m.is_file()) {
+        return write_direct(path, &target, md, fill);
+    }
+    let dir = match target.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let tmp = tempfile::Builder::new()
-        .prefix(&format!(".{name}."))
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(|e| Error::io(e).with_path(path))?;
+    let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    remove_stale_temps(dir, &name);
+    let prefix = format!(".{name}.");
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".tmp");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        // Created with 0666: the kernel applies the umask, as for any file a command creates.
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let tmp = builder.tempfile_in(dir).map_err(|e| Error::io(e).with_path(path))?;
+    lock_exclusive(tmp.as_file());
+    if let Some(md) = &existing {
+        // A replaced file keeps its mode.
+        let _ = tmp.as_file().set_permissions(md.permissions());
+    }
     let mut w = BufWriter::new(tmp);
     fill(&mut w).map_err(|e| e.with_path(path))?;
     let tmp = w.into_inner().map_err(|e| Error::io(e.into_error()).with_path(path))?;
     tmp.as_file().sync_all().map_err(|e| Error::io(e).with_path(path))?;
-    tmp.persist(path).map_err(|e| Error::io(e.error).with_path(path))?;
+    tmp.persist(&target).map_err(|e| Error::io(e.error).with_path(path))?;
     Ok(())
 }
 
 /// [`write_atomic`] for bytes already in memory.
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(path, |w| w.write_all(bytes).map_err(Error::io))
+}
+
+/// A device, FIFO or socket: build the whole output first, then write it into the node (never
+/// replace the node by a regular file).
+fn write_direct<F>(path: &Path, target: &Path, md: &std::fs::Metadata, fill: F) -> Result<()>
+where
+    F: FnOnce(&mut dyn Write) -> Result<()>,
+{
+    if md.is_dir() {
+        return Err(Error::new(ErrorKind::InvalidInput, "is a directory, not a file to write").with_path(path));
+    }
+    let mut buf = Vec::new();
+    fill(&mut buf).map_err(|e| e.with_path(path))?;
+    let mut f = std::fs::OpenOptions::new().write(true).open(target).map_err(|e| Error::io(e).with_path(path))?;
+    f.write_all(&buf).and_then(|_| f.flush()).map_err(|e| Error::io(e).with_path(path))?;
+    Ok(())
+}
+
+/// Remove `.NAME.XXXXXX.tmp` files in `dir` that no live writer holds (a writer locks its temporary
+/// file for as long as it exists; a killed one leaves it unlocked).
+fn remove_stale_temps(dir: &Path, name: &str) {
+    let prefix = format!(".{name}.");
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for e in entries.flatten() {
+        let file_name = e.file_name();
+        let Some(n) = file_name.to_str() else { continue };
+        let Some(mid) = n.strip_prefix(&prefix).and_then(|r| r.strip_suffix(".tmp")) else { continue };
+        if mid.len() != 6 || !mid.bytes().all(|b| b.is_ascii_alphanumeric()) {
+            continue;
+        }
+        if !e.file_type().is_ok_and(|t| t.is_file()) {
+            continue;
+        }
+        let Ok(f) = std::fs::File::open(e.path()) else { continue };
+        if try_lock_exclusive(&f) {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
+#[cfg(target_os = "linux")]
+fn lock_exclusive(f: &std::fs::File) {
+    use std::os::fd::AsRawFd;
+    // SAFETY: flock on a descriptor this function borrows; the lock ends when the file is closed.
+    let _ = unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
+}
+
+#[cfg(target_os = "linux")]
+fn try_lock_exclusive(f: &std::fs::File) -> bool {
+    use std::os::fd::AsRawFd;
+    // SAFETY: as in lock_exclusive.
+    unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) == 0 }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn lock_exclusive(_f: &std::fs::File) {}
+
+/// Without flock no temporary file can be told stale: none is removed.
+#[cfg(not(target_os = "linux"))]
+fn try_lock_exclusive(_f: &std::fs::File) -> bool {
+    false
+}
+
+#[cfg(all(test, target_os = "linux"))]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::PermissionsExt;
+
+    #[test]
+    fn symlinks_are_followed_stale_temps_removed_inputs_refused() {
+        let d = tempfile::tempdir().unwrap();
+        let real = d.path().join("real.json");
+        std::fs::write(&real, "old").unwrap();
+        let link = d.path().join("link.json");
+        std::os::unix::fs::symlink("real.json", &link).unwrap();
+        let stale = d.path().join(".real.json.AbC123.tmp");
+        std::fs::write(&stale, "half").unwrap();
+        // A temporary file a live writer holds is left alone.
+        let held = d.path().join(".real.json.XyZ789.tmp");
+        let held_file = std::fs::File::create(&held).unwrap();
+        lock_exclusive(&held_file);
+        write_bytes_atomic(&link, b"new").unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the link stays a link");
+        assert_eq!(std::fs::read_to_string(&real).unwrap(), "new");
+        assert!(!stale.exists() && held.exists());
+        drop(held_file);
+
+        let input = d.path().join("scan.x3p");
+        std::fs::write(&input, "scan").unwrap();
+        protect_input(&input);
+        let e = write_bytes_atomic(&input, b"json").unwrap_err();
+        assert!(e.to_string().contains("refusing to overwrite"), "{e}");
+        assert_eq!(std::fs::read_to_string(&input).unwrap(), "scan");
+
+        // A replaced file keeps its mode.
+        std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o640)).unwrap();
+        write_bytes_atomic(&real, b"again").unwrap();
+        assert_eq!(std::fs::metadata(&real).unwrap().permissions().mode() & 0o777, 0o640);
+
+        // A FIFO is written into and stays a FIFO (as a device such as /dev/null would).
+        let fifo = d.path().join("pipe");
+        let c = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+        // SAFETY: mkfifo on a NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0);
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(fifo).unwrap())
+        };
+        write_bytes_atomic(&fifo, b"through").unwrap();
+        assert_eq!(reader.join().unwrap(), b"through");
+        assert!(std::os::unix::fs::FileTypeExt::is_fifo(&std::fs::metadata(&fifo).unwrap().file_type()));
+    }
 }

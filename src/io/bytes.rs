@@ -129,7 +129,8 @@ pub fn checked_size(dims: &[usize], what: &str) -> Result<usize> {
 }
 
 /// Check that a grid of `nx * ny` samples of `bytes_per` bytes fits in `available` bytes, returning
-/// the number of samples. Used before any allocation sized from a header.
+/// the number of samples, and that the grid is within the memory budget ([`crate::budget`]). Used
+/// before any allocation sized from a header.
 pub fn check_grid(nx: usize, ny: usize, bytes_per: usize, available: usize, what: &str) -> Result<usize> {
     if nx == 0 || ny == 0 {
         return Err(Error::corrupt(format!("{what}: empty grid {nx} x {ny}")));
@@ -141,6 +142,9 @@ pub fn check_grid(nx: usize, ny: usize, bytes_per: usize, available: usize, what
             "{what}: header claims {nx} x {ny} points ({need} bytes) but only {available} bytes are present"
         )));
     }
+    // A header that lies about the bytes present is corrupt (above); one that tells the truth may still
+    // be beyond the budget.
+    crate::budget::check_points(nx, ny, what)?;
     Ok(n)
 }
 

@@ -27,6 +27,7 @@ pub fn read_exr(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
     if samples.saturating_mul(2) > (bytes.len() as u64).saturating_mul(MAX_RATIO) {
         return Err(Error::corrupt(format!("OpenEXR header claims {w} x {h} pixels, more than the file can hold")));
     }
+    crate::budget::check_points(w as usize, h as usize, "OpenEXR header")?;
     let (dx, dy) = spacing(opts, "OpenEXR")?;
     let zs = z_scale(opts, "OpenEXR")?;
     // A third-party decoder must not take the process down on hostile bytes: a panic inside it is
@@ -71,9 +72,17 @@ pub fn read_exr(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
 
 /// Read a 16-bit grayscale PNG or TIFF held in memory.
 pub fn read_image16(bytes: &[u8], opts: &ReadOptions, format: image::ImageFormat, id: &str) -> Result<Heightfield> {
+    if format == image::ImageFormat::Tiff {
+        check_tiff_strips(bytes)?;
+    }
+    // The header's dimensions against the memory budget before any pixel is decoded.
+    let (w, h) = image::ImageReader::with_format(std::io::Cursor::new(bytes), format)
+        .into_dimensions()
+        .map_err(|e| Error::corrupt(format!("{id} header is not readable ({e})")))?;
+    crate::budget::check_points(w as usize, h as usize, &format!("{id} header"))?;
     let mut reader = image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
     let mut limits = image::Limits::default();
-    limits.max_alloc = Some((bytes.len() as u64).saturating_mul(MAX_RATIO).clamp(1 << 20, 1 << 34));
+    limits.max_alloc = Some((bytes.len() as u64).saturating_mul(MAX_RATIO).clamp(1 << 20, 1 << 34).min(crate::budget::max_memory()));
     reader.limits(limits);
     let (dx, dy) = spacing(opts, id)?;
     let zs = z_scale(opts, id)?;
@@ -103,4 +112,78 @@ pub fn read_image16(bytes: &[u8], opts: &ReadOptions, format: image::ImageFormat
     let mut hf = Heightfield::new(nx, ny, dx, dy, z)?;
     hf.meta = ScanMeta { format: id.to_ascii_lowercase(), ..Default::default() };
     Ok(hf)
+}
+
+/// Check a classic TIFF's first directory: every strip must lie inside the file and, uncompressed, hold
+/// the bytes its rows need. The decoder would otherwise fill a short strip from whatever bytes follow it
+/// (the directory itself). BigTIFF and tiled images are left to the decoder.
+fn check_tiff_strips(bytes: &[u8]) -> Result<()> {
+    let le = bytes.starts_with(b"II");
+    let u16at = |o: usize| -> Option<u64> {
+        let b = bytes.get(o..o + 2)?;
+        Some(if le { u16::from_le_bytes([b[0], b[1]]) } else { u16::from_be_bytes([b[0], b[1]]) } as u64)
+    };
+    let u32at = |o: usize| -> Option<u64> {
+        let b: [u8; 4] = bytes.get(o..o + 4)?.try_into().ok()?;
+        Some(if le { u32::from_le_bytes(b) } else { u32::from_be_bytes(b) } as u64)
+    };
+    let short = || Error::corrupt("TIFF directory is truncated");
+    if u16at(2) != Some(42) {
+        return Ok(());
+    }
+    let ifd = u32at(4).ok_or_else(short)? as usize;
+    let n = u16at(ifd).ok_or_else(short)? as usize;
+    // (type, count, offset of the value or of the inline value) per tag of interest.
+    let mut tags = std::collections::HashMap::new();
+    for k in 0..n {
+        let e = ifd + 2 + 12 * k;
+        let tag = u16at(e).ok_or_else(short)?;
+        let typ = u16at(e + 2).ok_or_else(short)?;
+        let count = u32at(e + 4).ok_or_else(short)?;
+        tags.insert(tag as u16, (typ, count, e + 8));
+    }
+    // The values of a SHORT or LONG tag.
+    let values = |tag: u16| -> Result<Option<Vec<u64>>> {
+        let Some(&(typ, count, at)) = tags.get(&tag) else { return Ok(None) };
+        let size = match typ {
+            3 => 2,
+            4 => 4,
+            _ => return Ok(None),
+        };
+        if count > bytes.len() as u64 {
+            return Err(Error::corrupt(format!("TIFF tag {tag} declares {count} values, more than the file holds")));
+        }
+        let start = if count * size <= 4 { at } else { u32at(at).ok_or_else(short)? as usize };
+        (0..count as usize)
+            .map(|i| if size == 2 { u16at(start + 2 * i) } else { u32at(start + 4 * i) })
+            .collect::<Option<Vec<u64>>>()
+            .map(Some)
+            .ok_or_else(|| Error::corrupt(format!("TIFF tag {tag} runs past the end of the file")))
+    };
+    let (Some(offsets), Some(counts)) = (values(273)?, values(279)?) else { return Ok(()) };
+    if offsets.len() != counts.len() {
+        return Err(Error::corrupt(format!("TIFF has {} strip offsets but {} strip byte counts", offsets.len(), counts.len())));
+    }
+    let first = |tag: u16| -> Result<Option<u64>> { Ok(values(tag)?.and_then(|v| v.first().copied())) };
+    let (width, height) = (first(256)?.unwrap_or(0), first(257)?.unwrap_or(0));
+    let bits: u64 = values(258)?.map_or(1, |v| v.iter().sum());
+    let rows_per_strip = first(278)?.unwrap_or(height).clamp(1, height.max(1));
+    let uncompressed = first(259)?.unwrap_or(1) == 1;
+    let row_bytes = (width.saturating_mul(bits)).div_ceil(8);
+    for (k, (&off, &count)) in offsets.iter().zip(&counts).enumerate() {
+        if off.saturating_add(count) > bytes.len() as u64 {
+            return Err(Error::corrupt(format!(
+                "TIFF strip {k} ({count} bytes at offset {off}) runs past the end of the file ({} bytes)",
+                bytes.len()
+            )));
+        }
+        if uncompressed {
+            let rows = rows_per_strip.min(height.saturating_sub(k as u64 * rows_per_strip));
+            let need = rows.saturating_mul(row_bytes);
+            if count < need {
+                return Err(Error::corrupt(format!("TIFF strip {k} holds {count} bytes, its {rows} rows of {width} pixels need {need}")));
+            }
+        }
+    }
+    Ok(())
 }

@@ -65,7 +65,7 @@ pub fn read_metropro(bytes: &[u8]) -> Result<Heightfield> {
     if cn_w == 0 || cn_h == 0 {
         return Err(Error::new(ErrorKind::BadData, "MetroPro file holds no phase (height) data"));
     }
-    let n = check_grid(cn_w, cn_h, 4, usize::MAX, "MetroPro phase data")?;
+    let n = check_grid(cn_w, cn_h, 4, bytes.len(), "MetroPro phase data")?;
     if cn_n_bytes != n * 4 {
         return Err(Error::corrupt(format!("MetroPro phase data: {cn_w} x {cn_h} points but {cn_n_bytes} bytes")));
     }

@@ -221,7 +221,15 @@ pub fn read_scan_subsampled(path: &Path, opts: &ReadOptions, stride: usize) -> R
 fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Heightfield> {
     let md = std::fs::metadata(path)?;
     if md.is_dir() {
+        if let Err(e) = std::fs::read_dir(path) {
+            return Err(Error::new(ErrorKind::Io, format!("is a folder that cannot be read ({e}); no scan in it was fitted")));
+        }
         return Err(Error::new(ErrorKind::InvalidInput, "is a directory, not a scan file"));
+    }
+    if !md.is_file() {
+        // A FIFO would block until a writer comes and a device such as /dev/zero never ends: scans are
+        // read from regular files only.
+        return Err(Error::new(ErrorKind::InvalidInput, "is not a regular file (a pipe, socket or device); scans are read from files"));
     }
     // A read that keeps every row or every other row touches (within the kernel's fault-around window)
     // every page: map them all in the one mmap call. Coarser strides touch a fraction of the rows: map

@@ -73,7 +73,7 @@ pub fn read_sur(bytes: &[u8]) -> Result<Heightfield> {
         32 => 4,
         b => return Err(Error::new(ErrorKind::Unsupported, format!("SUR with {b} bits per point (16 and 32 are read)"))),
     };
-    let n = check_grid(nx, ny, 1, usize::MAX, "SUR grid")?;
+    let n = check_grid(nx, ny, 1, if compressed { usize::MAX } else { c.remaining() }, "SUR grid")?;
     let need = checked_size(&[n, width], "SUR data")?;
     let data: std::borrow::Cow<'_, [u8]> = if compressed {
         std::borrow::Cow::Owned(decompress(&mut c, need, compressed_size)?)

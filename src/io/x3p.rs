@@ -78,7 +78,7 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
 
     let (main_name, prefix) = find_main_xml(&mut zip)?;
     let main_text = read_entry_text(&mut zip, &main_name)?;
-    let root = xml::parse(&main_text).map_err(|e| Error::corrupt(format!("{main_name}: {}", e.message())))?;
+    let root = xml::parse(&main_text).map_err(|e| Error::new(e.kind(), format!("{main_name}: {}", e.message())))?;
     let mut meta = ScanMeta { format: "x3p".into(), ..Default::default() };
     meta.file_xy_unit = Some("m".into());
     meta.file_z_unit = Some("m".into());
@@ -155,6 +155,7 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
         return Err(Error::new(ErrorKind::Unsupported, format!("{main_name}: SizeZ = {nz}; only single-layer surfaces are read")));
     }
     let n = checked_size(&[nx, ny], "X3P matrix")?;
+    crate::budget::check_points(nx, ny, &format!("{main_name}: MatrixDimension"))?;
 
     let mut z: Vec<f64>;
     if let Some(link) = r3.child("DataLink") {
@@ -224,13 +225,18 @@ fn find_main_xml<R: std::io::Read + std::io::Seek>(zip: &mut zip::ZipArchive<R>)
 
 fn read_entry_text<R: std::io::Read + std::io::Seek>(zip: &mut zip::ZipArchive<R>, name: &str) -> Result<String> {
     let entry = zip.by_name(name).map_err(|e| Error::corrupt(format!("cannot open {name} in the zip ({e})")))?;
+    // The text and its element tree must fit the budget: the declared size is checked first, and the
+    // read stops at the bound whatever the zip declares.
+    let limit = MAX_MAIN_XML.min(crate::budget::max_memory() / 2);
+    let declared = entry.size();
+    crate::budget::check_bytes(declared.saturating_mul(2), &format!("{name} ({declared} bytes of XML)"))?;
     let mut buf = Vec::new();
     entry
-        .take(MAX_MAIN_XML + 1)
+        .take(limit + 1)
         .read_to_end(&mut buf)
         .map_err(|e| Error::corrupt(format!("cannot read {name} from the zip ({e})")))?;
-    if buf.len() as u64 > MAX_MAIN_XML {
-        return Err(Error::corrupt(format!("{name} is larger than {MAX_MAIN_XML} bytes")));
+    if buf.len() as u64 > limit {
+        return Err(Error::new(ErrorKind::TooLarge, format!("{name} is larger than {limit} bytes (it declares {declared})")));
     }
     String::from_utf8(buf).map_err(|_| Error::corrupt(format!("{name} is not UTF-8 text")))
 }

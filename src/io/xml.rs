@@ -12,6 +12,9 @@ use crate::error::{Error, Result};
 const MAX_DEPTH: usize = 64;
 /// Bound on elements; a DataList of one `Datum` per point can be large, so this is generous.
 const MAX_ELEMENTS: usize = 50_000_000;
+/// Bytes one parsed element holds at most while the tree is built (the struct, its short text, and
+/// the slack of its parent's growing child list): the element count is also bounded by the memory budget.
+const ELEMENT_BYTES: u64 = 256;
 
 /// One XML element: local name, attributes, concatenated text and children.
 #[derive(Debug, Clone, Default)]
@@ -50,6 +53,17 @@ pub fn parse(text: &str) -> Result<Element> {
     let mut stack: Vec<Element> = Vec::new();
     let mut root: Option<Element> = None;
     let mut count = 0usize;
+    let budget = crate::budget::max_memory();
+    let max_elements = MAX_ELEMENTS.min(usize::try_from(budget / ELEMENT_BYTES).unwrap_or(usize::MAX));
+    let too_many = || {
+        Error::new(
+            crate::error::ErrorKind::TooLarge,
+            format!(
+                "XML has more than {max_elements} elements, beyond the memory budget of {} (--max-memory)",
+                crate::budget::human(budget)
+            ),
+        )
+    };
     loop {
         let ev = reader
             .read_event()
@@ -57,15 +71,18 @@ pub fn parse(text: &str) -> Result<Element> {
         match ev {
             Event::Start(s) => {
                 count += 1;
-                if stack.len() >= MAX_DEPTH || count > MAX_ELEMENTS {
-                    return Err(Error::corrupt("XML nests too deeply or has too many elements"));
+                if stack.len() >= MAX_DEPTH {
+                    return Err(Error::corrupt("XML nests too deeply"));
+                }
+                if count > max_elements {
+                    return Err(too_many());
                 }
                 stack.push(element_from(&s)?);
             }
             Event::Empty(s) => {
                 count += 1;
-                if count > MAX_ELEMENTS {
-                    return Err(Error::corrupt("XML has too many elements"));
+                if count > max_elements {
+                    return Err(too_many());
                 }
                 let e = element_from(&s)?;
                 attach(&mut stack, &mut root, e)?;

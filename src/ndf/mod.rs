@@ -339,6 +339,20 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
 
     let (bins, bin_cells) = build_bins(&frame, &grid, &acc.counts, acc.n, quantization.as_ref().and_then(|q| q.lattice.as_ref()));
     let counts_odd = bin_cells.iter().map(|&c| acc.odd[c as usize]).collect();
+    // Heights so large that their slopes overflow (or a frame that is not finite) leave bins without a
+    // direction: an error, never rows of NaN.
+    if !(frame.center.iter().chain(frame.cov.iter().flatten()).all(|v| v.is_finite()))
+        || bins.iter().any(|b| !(b.m.iter().all(|v| v.is_finite()) && b.d.is_finite()))
+        || !bins.iter().any(|b| b.count > 0)
+    {
+        return Err(Error::new(
+            ErrorKind::BadData,
+            format!(
+                "the NDF is not finite: the slopes of these heights (centre {:e}, {:e}) are beyond floating-point range; check the height unit (--z-scale)",
+                frame.center[0], frame.center[1]
+            ),
+        ));
+    }
     Ok(EmpiricalNdf {
         bins,
         n_samples: acc.n,

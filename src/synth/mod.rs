@@ -67,6 +67,7 @@ impl SynthSettings {
         if self.nx < 3 || self.ny < 3 || self.nx > MAX_SIDE || self.ny > MAX_SIDE {
             return Err(Error::invalid(format!("synthetic grid {} x {} must be between 3 and {MAX_SIDE} per side", self.nx, self.ny)));
         }
+        crate::budget::check_points(self.nx, self.ny, "synthetic grid")?;
         if !(self.dx.is_finite() && self.dx > 0.0 && self.dy.is_finite() && self.dy > 0.0) {
             return Err(Error::invalid(format!("spacing must be finite and positive, got dx={}, dy={}", self.dx, self.dy)));
         }

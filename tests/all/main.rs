@@ -7,6 +7,7 @@ mod bench;
 mod cli;
 mod export;
 mod fit;
+mod hostile;
 mod models;
 mod ndf;
 mod ndf_storage;

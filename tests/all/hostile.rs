@@ -1,0 +1,378 @@
+//! Hostile inputs and faults (CONTRACT.md "Any failure"): every command, run under an address-space
+//! limit, ends with its exit status and one line naming the file, never a panic or an abort, leaves no
+//! output behind and clobbers nothing. The bombs are built here at test time, never committed.
+
+#![cfg(target_os = "linux")]
+
+use std::io::Write;
+use std::os::unix::fs::{FileTypeExt, PermissionsExt};
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::common::ndfit_bin;
+
+/// Address-space limit of every run: what the issue's campaign used.
+const AS_LIMIT: u64 = 4 << 30;
+
+/// `ndfit ARGS` in `dir` under an address-space limit of `limit` bytes and umask 027, killed after 20 s.
+fn run_limited(dir: &Path, args: &[&str], limit: u64) -> Output {
+    let mut cmd = Command::new(ndfit_bin());
+    cmd.args(args).current_dir(dir).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    // SAFETY: setrlimit and umask are async-signal-safe and touch only the child.
+    unsafe {
+        cmd.pre_exec(move || {
+            let r = libc::rlimit { rlim_cur: limit as libc::rlim_t, rlim_max: limit as libc::rlim_t };
+            if libc::setrlimit(libc::RLIMIT_AS, &r) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            libc::umask(0o027);
+            Ok(())
+        });
+    }
+    let child = cmd.spawn().expect("spawn ndfit");
+    wait_killing_after(child, Duration::from_secs(20))
+}
+
+fn run(dir: &Path, args: &[&str]) -> Output {
+    run_limited(dir, args, AS_LIMIT)
+}
+
+/// Wait for `child`, killing it (and failing the test) if it takes longer than `limit`.
+fn wait_killing_after(mut child: std::process::Child, limit: Duration) -> Output {
+    let t0 = Instant::now();
+    loop {
+        if child.try_wait().expect("wait").is_some() {
+            return child.wait_with_output().expect("output");
+        }
+        if t0.elapsed() > limit {
+            let _ = child.kill();
+            let out = child.wait_with_output().expect("output");
+            panic!("ndfit did not finish within {limit:?} (hangs); stderr: {}", String::from_utf8_lossy(&out.stderr));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The failure contract: no signal, no panic (101), a non-zero exit, exactly one stderr line that
+/// contains `names`.
+fn assert_refused(out: &Output, names: &[&str]) -> String {
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.signal().is_none(), "killed by signal {:?} (abort?); stderr: {err}", out.status.signal());
+    let code = out.status.code().expect("exit code");
+    assert!(code != 0 && code != 101, "exit {code}, expected a clean failure; stderr: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    let lines: Vec<&str> = err.lines().filter(|l| !l.starts_with("ndfit batch: [")).collect();
+    assert_eq!(lines.len(), 1, "exactly one stderr line expected, got: {err:?}");
+    for n in names {
+        assert!(lines[0].contains(n), "the line must name {n:?}: {err}");
+    }
+    err
+}
+
+fn synth(dir: &Path, name: &str, n: usize) -> PathBuf {
+    let n = n.to_string();
+    let out = run(dir, &["synth", "--nx", &n, "--ny", &n, name]);
+    assert!(out.status.success(), "synth: {}", String::from_utf8_lossy(&out.stderr));
+    dir.join(name)
+}
+
+/// An X3P of `main` and entries `(name, chunk, repeats)`: each entry is `chunk` written `repeats`
+/// times, deflated (a bomb is a small chunk of zeros repeated).
+fn x3p(path: &Path, main: &str, entries: &[(&str, &[u8], usize)]) {
+    let f = std::fs::File::create(path).expect("create");
+    let mut zw = zip::ZipWriter::new(std::io::BufWriter::new(f));
+    let opts = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated)
+        .compression_level(Some(6))
+        .large_file(true);
+    zw.start_file("main.xml", opts).expect("start");
+    zw.write_all(main.as_bytes()).expect("write");
+    for (name, chunk, repeats) in entries {
+        zw.start_file(*name, opts).expect("start");
+        for _ in 0..*repeats {
+            zw.write_all(chunk).expect("write");
+        }
+    }
+    zw.finish().expect("finish");
+}
+
+fn main_xml(nx: usize, ny: usize, ztype: &str, record3_data: &str) -> String {
+    format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<p:ISO5436_2 xmlns:p="http://www.opengps.eu/2008/ISO5436_2">
+<Record1><Revision>ISO5436 - 2000</Revision><FeatureType>SUR</FeatureType><Axes>
+<CX><AxisType>I</AxisType><DataType>D</DataType><Increment>1e-6</Increment><Offset>0</Offset></CX>
+<CY><AxisType>I</AxisType><DataType>D</DataType><Increment>1e-6</Increment><Offset>0</Offset></CY>
+<CZ><AxisType>A</AxisType><DataType>{ztype}</DataType></CZ></Axes></Record1>
+<Record3><MatrixDimension><SizeX>{nx}</SizeX><SizeY>{ny}</SizeY><SizeZ>1</SizeZ></MatrixDimension>{record3_data}</Record3>
+</p:ISO5436_2>"#
+    )
+}
+
+#[test]
+fn closed_standard_output_ends_quietly_and_a_full_one_fails_in_one_line() {
+    let d = tempfile::tempdir().unwrap();
+    synth(d.path(), "s.x3p", 64);
+    for args in [&["info", "s.x3p", "--json"][..], &["info", "s.x3p"], &["fit", "s.x3p", "--model", "ggx"]] {
+        // A reader that closed its end before anything was written (`| head -c0`).
+        let (rd, wr) = std::io::pipe().expect("pipe");
+        drop(rd);
+        let out = Command::new(ndfit_bin()).args(args).current_dir(d.path()).stdout(wr).stderr(Stdio::piped()).output().unwrap();
+        assert_eq!(out.status.code(), Some(0), "{args:?} into a closed pipe: {}", String::from_utf8_lossy(&out.stderr));
+        assert!(out.stderr.is_empty(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        // A full disk (`> /dev/full`).
+        let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+        let out = Command::new(ndfit_bin()).args(args).current_dir(d.path()).stdout(full).stderr(Stdio::piped()).output().unwrap();
+        assert_refused(&out, &["<stdout>", "No space left"]);
+    }
+}
+
+#[test]
+fn outputs_follow_symlinks_and_fifos_keep_their_mode_and_never_replace_the_input() {
+    let d = tempfile::tempdir().unwrap();
+    let scan = synth(d.path(), "s.x3p", 64);
+    let scan_bytes = std::fs::read(&scan).unwrap();
+
+    // The input itself, directly and through a link: refused, untouched.
+    std::os::unix::fs::symlink("s.x3p", d.path().join("alias.json")).unwrap();
+    for o in ["s.x3p", "alias.json"] {
+        let out = run(d.path(), &["fit", "s.x3p", "--model", "ggx", "-o", o]);
+        assert_refused(&out, &[o, "input"]);
+        assert_eq!(std::fs::read(&scan).unwrap(), scan_bytes, "-o {o} clobbered the input");
+    }
+    let out = run(d.path(), &["convert", "s.x3p", "s.x3p"]);
+    assert_refused(&out, &["s.x3p", "input"]);
+
+    // A symlink is written through: the link stays, its target gets the JSON.
+    std::fs::write(d.path().join("target.json"), "old").unwrap();
+    std::os::unix::fs::symlink("target.json", d.path().join("link.json")).unwrap();
+    // A temporary file a killed run left behind is cleaned up by the next write of that name.
+    let stale = d.path().join(".target.json.k1LLed.tmp");
+    std::fs::write(&stale, "half").unwrap();
+    let out = run(d.path(), &["fit", "s.x3p", "--model", "ggx", "-o", "link.json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::symlink_metadata(d.path().join("link.json")).unwrap().file_type().is_symlink());
+    let fit: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.path().join("target.json")).unwrap()).unwrap();
+    assert_eq!(fit["model"], "ggx");
+    assert!(!stale.exists(), "stale temporary file left");
+
+    // A new output follows the umask (027 in run): 0666 & !027 = 0640.
+    let out = run(d.path(), &["fit", "s.x3p", "--model", "ggx", "-o", "new.json"]);
+    assert!(out.status.success());
+    assert_eq!(std::fs::metadata(d.path().join("new.json")).unwrap().permissions().mode() & 0o777, 0o640);
+
+    // A FIFO is written into, not replaced by a regular file.
+    let fifo = d.path().join("pipe.json");
+    let c = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: mkfifo on a NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0);
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+    };
+    let out = run(d.path(), &["fit", "s.x3p", "--model", "ggx", "-o", "pipe.json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = reader.join().unwrap();
+    assert!(text.contains("\"schema\": \"ndfit.fit/1\""), "{text}");
+    assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo(), "the FIFO was replaced");
+}
+
+#[test]
+fn small_files_declaring_huge_grids_are_refused_within_the_budget() {
+    let d = tempfile::tempdir().unwrap();
+    // 8192 x 8192 float64 (512 MiB) from ~0.5 MiB of deflated zeros, under a 1 GiB address space.
+    let zeros = vec![0u8; 1 << 20];
+    x3p(
+        &d.path().join("bomb.x3p"),
+        &main_xml(8192, 8192, "D", "<DataLink><PointDataLink>bindata/data.bin</PointDataLink></DataLink>"),
+        &[("bindata/data.bin", &zeros, 512)],
+    );
+    let size = std::fs::metadata(d.path().join("bomb.x3p")).unwrap().len();
+    assert!(size < 2 << 20, "{size} bytes");
+    // 4M XML elements (hundreds of MiB as a tree) from a small deflated main.xml.
+    let data = format!("<DataList>{}</DataList>", "<Datum/>".repeat(4 << 20));
+    x3p(&d.path().join("xml.x3p"), &main_xml(2048, 2048, "D", &data), &[]);
+    for (file, what) in [("bomb.x3p", "8192 x 8192"), ("xml.x3p", "elements")] {
+        for cmd in ["info", "fit", "ndf"] {
+            let mut args = vec![cmd, file];
+            if cmd == "ndf" {
+                args.extend(["-o", "n.csv"]);
+            }
+            let t0 = Instant::now();
+            let out = run_limited(d.path(), &args, 1 << 30);
+            let err = assert_refused(&out, &[file, what, "memory budget"]);
+            assert!(t0.elapsed() < Duration::from_secs(5), "{cmd} {file}: refusal took {:?}: {err}", t0.elapsed());
+        }
+    }
+    assert!(!d.path().join("n.csv").exists());
+    // `--max-memory` moves the budget: a 64 x 64 scan is refused under 64 KiB.
+    synth(d.path(), "s.x3p", 64);
+    let out = run(d.path(), &["--max-memory", "64K", "info", "s.x3p"]);
+    assert_refused(&out, &["s.x3p", "64 x 64", "64.0 KiB"]);
+    // In-range requests that exceed the budget are refused the same way.
+    let out = run(d.path(), &["synth", "--nx", "32768", "--ny", "32768", "big.x3p"]);
+    assert_refused(&out, &["32768 x 32768", "memory budget"]);
+    assert!(!d.path().join("big.x3p").exists());
+}
+
+#[test]
+fn batch_keeps_going_past_a_bomb_and_refuses_colliding_names_and_a_second_writer() {
+    let d = tempfile::tempdir().unwrap();
+    let scans = d.path().join("scans");
+    std::fs::create_dir(&scans).unwrap();
+    synth(&scans, "a.x3p", 48);
+    let zeros = vec![0u8; 1 << 20];
+    x3p(
+        &scans.join("bomb.x3p"),
+        &main_xml(8192, 8192, "D", "<DataLink><PointDataLink>bindata/data.bin</PointDataLink></DataLink>"),
+        &[("bindata/data.bin", &zeros, 512)],
+    );
+    // One unreadable file is an error entry; the run finishes with its summary and exit 2.
+    let out = run_limited(d.path(), &["batch", "scans", "-o", "out", "--jobs", "1"], 1 << 30);
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.path().join("out/summary.json")).unwrap()).unwrap();
+    let text = summary.to_string();
+    assert!(text.contains("memory budget") && text.contains("a.x3p"), "{text}");
+    std::fs::remove_file(scans.join("bomb.x3p")).unwrap();
+
+    // Two scans whose keys map to one output name: refused, naming both, nothing written.
+    std::fs::copy(scans.join("a.x3p"), scans.join("a:b.x3p")).unwrap();
+    std::fs::copy(scans.join("a.x3p"), scans.join("a_b.x3p")).unwrap();
+    let out = run(d.path(), &["batch", "scans", "-o", "out2"]);
+    assert_refused(&out, &["a:b.x3p", "a_b.x3p", "same output"]);
+    assert!(!d.path().join("out2/summary.json").exists());
+    std::fs::remove_file(scans.join("a:b.x3p")).unwrap();
+
+    // A second batch on an OUT_DIR in use is refused with one line; the first finishes normally.
+    let first = Command::new(ndfit_bin())
+        .args(["batch", "scans", "-o", "out3", "--debug-delay-ms", "1500", "--jobs", "1"])
+        .current_dir(d.path())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lock = d.path().join("out3/.ndfit-batch.lock");
+    let t0 = Instant::now();
+    while !lock.exists() && t0.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(100));
+    let out = run(d.path(), &["batch", "scans", "-o", "out3"]);
+    assert_refused(&out, &["out3", "another ndfit batch"]);
+    let first = wait_killing_after(first, Duration::from_secs(30));
+    assert_eq!(first.status.code(), Some(0), "{}", String::from_utf8_lossy(&first.stderr));
+}
+
+#[test]
+fn huge_heights_special_files_and_bad_arguments_fail_in_one_line() {
+    let d = tempfile::tempdir().unwrap();
+    // Heights near 1e200: slopes overflow; the NDF is an error, no CSV and no plot are left.
+    let mut text = String::new();
+    for i in 0..32 {
+        let row: Vec<String> = (0..32).map(|j| format!("{:e}", (((i * 7 + j * 13) % 17) as f64 - 8.0) * 1e200)).collect();
+        text.push_str(&row.join(" "));
+        text.push('\n');
+    }
+    std::fs::write(d.path().join("huge.asc"), text).unwrap();
+    let out = run(d.path(), &["ndf", "huge.asc", "--dx", "1e-6", "--z-scale", "1", "-o", "h.csv", "--png", "h"]);
+    assert_refused(&out, &["huge.asc", "not finite"]);
+    let left: Vec<String> = std::fs::read_dir(d.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert_eq!(left, ["huge.asc"], "outputs or temporary files left behind");
+
+    // A FIFO with no writer and an endless device are refused at once, not waited on or read forever.
+    let fifo = d.path().join("f.x3p");
+    let c = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: mkfifo on a NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0);
+    assert_refused(&run(d.path(), &["info", "f.x3p"]), &["f.x3p", "regular file"]);
+    assert_refused(&run(d.path(), &["info", "/dev/zero"]), &["/dev/zero", "regular file"]);
+
+    // A newline inside the file's text stays inside the one line.
+    let link = "<DataLink><PointDataLink>bin\ndata.bin</PointDataLink></DataLink>";
+    x3p(&d.path().join("nl.x3p"), &main_xml(4, 4, "D", link), &[("bindata/data.bin", &[0u8; 128], 1)]);
+    assert_refused(&run(d.path(), &["info", "nl.x3p"]), &["nl.x3p", "bin\\ndata.bin"]);
+
+    // Argument errors are one line; a timeout beyond any Duration is refused, not a panic.
+    assert_refused(&run(d.path(), &["fit", "--bogus"]), &["--bogus"]);
+    assert_refused(&run(d.path(), &["batch", "x", "-o", "y", "--isolate", "process", "--timeout", "1e20"]), &["--timeout"]);
+    // Values out of range are refused, not silently changed.
+    synth(d.path(), "s.x3p", 32);
+    assert_refused(&run(d.path(), &["fit", "s.x3p", "--ndf-cells", "4"]), &["--ndf-cells 4", "odd"]);
+    assert_refused(&run(d.path(), &["fit", "s.x3p", "--extra-starts", "100"]), &["--extra-starts 100"]);
+}
+
+#[test]
+fn eval_gives_tiny_directions_their_value() {
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(d.path().join("f.json"), r#"{"model": "ggx", "params": {"alpha": 0.3}}"#).unwrap();
+    let eval = |input: &str| {
+        let mut child = Command::new(ndfit_bin())
+            .args(["eval", "f.json"])
+            .current_dir(d.path())
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
+        child.wait_with_output().unwrap()
+    };
+    // (1e-310, 0, 1e-310) is the direction (1, 0, 1)/sqrt(2): the same D, not "the zero vector".
+    let tiny = eval("mx,my,mz\n1e-310,0,1e-310\n");
+    let unit = eval("mx,my,mz\n1,0,1\n");
+    assert!(tiny.status.success(), "{}", String::from_utf8_lossy(&tiny.stderr));
+    assert_eq!(String::from_utf8_lossy(&tiny.stdout), String::from_utf8_lossy(&unit.stdout));
+    assert_refused(&eval("mx,my,mz\n0,0,0\n"), &["line 2", "zero vector"]);
+}
+
+#[test]
+fn a_tiff_strip_shorter_than_its_rows_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let (nx, ny) = (64u32, 64u32);
+    let px: Vec<u16> = (0..nx * ny).map(|k| (k % 977) as u16 + 1000).collect();
+    let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(nx, ny, px).unwrap();
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut bytes, image::ImageFormat::Tiff).unwrap();
+    let mut bytes = bytes.into_inner();
+    std::fs::write(d.path().join("ok.tif"), &bytes).unwrap();
+    let out = run(d.path(), &["info", "ok.tif", "--dx", "1e-6", "--z-scale", "1e-9"]);
+    assert!(out.status.success(), "the intact TIFF reads: {}", String::from_utf8_lossy(&out.stderr));
+    // Little-endian classic TIFF: find StripByteCounts (279) in the first directory and shorten the
+    // last strip by one row.
+    assert_eq!(&bytes[..4], b"II*\0");
+    let u16at = |b: &[u8], o: usize| u16::from_le_bytes([b[o], b[o + 1]]) as usize;
+    let u32at = |b: &[u8], o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap()) as usize;
+    let ifd = u32at(&bytes, 4);
+    let entry = (0..u16at(&bytes, ifd)).map(|k| ifd + 2 + 12 * k).find(|&e| u16at(&bytes, e) == 279).expect("StripByteCounts");
+    let (typ, count) = (u16at(&bytes, entry + 2), u32at(&bytes, entry + 4));
+    let size = if typ == 3 { 2 } else { 4 };
+    let at = if count * size <= 4 { entry + 8 } else { u32at(&bytes, entry + 8) } + (count - 1) * size;
+    let last = if size == 2 { u16at(&bytes, at) } else { u32at(&bytes, at) };
+    let short = last - 2 * nx as usize;
+    if size == 2 {
+        bytes[at..at + 2].copy_from_slice(&(short as u16).to_le_bytes());
+    } else {
+        bytes[at..at + 4].copy_from_slice(&(short as u32).to_le_bytes());
+    }
+    std::fs::write(d.path().join("short.tif"), &bytes).unwrap();
+    let out = run(d.path(), &["info", "short.tif", "--dx", "1e-6", "--z-scale", "1e-9"]);
+    assert_refused(&out, &["short.tif", "strip", &format!("holds {short} bytes")]);
+}
+
+#[test]
+fn resume_writes_a_deleted_fit_file_again() {
+    let d = tempfile::tempdir().unwrap();
+    let scans = d.path().join("scans");
+    std::fs::create_dir(&scans).unwrap();
+    synth(&scans, "a.x3p", 48);
+    let out = run(d.path(), &["batch", "scans", "-o", "out", "--model", "ggx"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let fit = d.path().join("out/fits/a.x3p.fit.json");
+    let first = std::fs::read_to_string(&fit).unwrap();
+    std::fs::remove_file(&fit).unwrap();
+    let out = run(d.path(), &["batch", "scans", "-o", "out", "--model", "ggx", "--resume"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(std::fs::read_to_string(&fit).expect("the fit file is back"), first);
+}
