@@ -65,8 +65,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let _ = writeln!(text, "file:       {}", args.scan.scan.display());
         let _ = writeln!(text, "format:     {}", m.format);
         let _ = writeln!(text, "grid:       {} x {} ({} points)", shaped.nx, shaped.ny, shaped.nx * shaped.ny);
-        let _ = writeln!(text, "spacing:    dx = {:e} m, dy = {:e} m", shaped.dx, shaped.dy);
-        let _ = writeln!(text, "origin:     x0 = {:e} m, y0 = {:e} m", shaped.x0, shaped.y0);
+        let _ = writeln!(text, "spacing:    dx = {} m, dy = {} m", sig(shaped.dx), sig(shaped.dy));
+        let _ = writeln!(text, "origin:     x0 = {} m, y0 = {} m", sig(shaped.x0), sig(shaped.y0));
         let _ = writeln!(
             text,
             "file units: lateral {}, height {} (held in metres)",
@@ -74,13 +74,24 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             m.file_z_unit.as_deref().unwrap_or("none")
         );
         let _ = writeln!(text, "invalid:    {} of {}", range.invalid, range.invalid + range.valid);
-        let _ = writeln!(text, "heights:    {:e} .. {:e} m (mean {:e} m)", range.z_min, range.z_max, range.z_mean);
-        let _ = writeln!(text, "Sq:         {:e} m (after {:?} removal)", st.sq, pre_form);
-        let _ = writeln!(text, "Sdq:        {} (central differences, {} points with 4 valid neighbours)", st.sdq, st.sdq_points);
+        let _ = writeln!(text, "heights:    {} .. {} m (mean {} m)", sig(range.z_min), sig(range.z_max), sig(range.z_mean));
+        let _ = writeln!(text, "Sq:         {} m (after {} removal)", sig(st.sq), format!("{pre_form:?}").to_lowercase());
+        let _ = writeln!(text, "Sdq:        {} (central differences, {} points with 4 valid neighbours)", sig(st.sdq), st.sdq_points);
         for (k, v) in &m.instrument {
             let _ = writeln!(text, "meta:       {k} = {}", super::one_line(v));
         }
         super::write_stdout(text.as_bytes())?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// A value for people: six significant digits, no trailing zeros, `0` for zero (the JSON keeps every digit).
+fn sig(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return if v == 0.0 { "0".into() } else { v.to_string() };
+    }
+    let s = format!("{v:.5e}");
+    let (mant, exp) = s.split_once('e').unwrap_or((&s, "0"));
+    let mant = if mant.contains('.') { mant.trim_end_matches('0').trim_end_matches('.') } else { mant };
+    if exp == "0" { mant.to_string() } else { format!("{mant}e{exp}") }
 }

@@ -24,6 +24,8 @@ fn ellipsoid_case(p: [f64; 5], n: usize, offset: f64, scheme: ndfit::ndf::Normal
     assert!(rep.param_vec().iter().all(|v| v.is_finite()));
     let d = delta_to_truth(&rep.to_model().expect("model"), &truth);
     eprintln!("{p:?} n={n} offset={offset} {scheme:?}: fit {:?} se {:?} delta {d:.2e} chi2r {:?}", rep.param_vec(), rep.std_error_vec(), rep.quality.reduced_chi2);
+    // A single-lobe truth that the fit recovers must be trusted (data_formats/objective.md, "The verdict").
+    assert_eq!(rep.quality.verdict, ndfit::fit::verdict::Verdict::Ok, "{p:?}: {:?}", rep.quality.reasons);
     (d, rep)
 }
 
@@ -63,6 +65,7 @@ fn flat_tilted_plane_is_a_finite_specular_fit() {
         let mut rep = fit_model(&ndf, id, &FitOptions::default()).expect("a plane is a usable fit");
         rep.input = Some(ndfit::fit::InputInfo::new(std::path::Path::new("plane"), &hf));
         assert!(rep.specular, "{id}: not flagged specular");
+        assert_eq!(rep.quality.verdict, ndfit::fit::verdict::Verdict::Unresolved, "{id}: a lobe inside one bin is not resolved");
         let v = serde_json::to_value(&rep).expect("json");
         super::schema::assert_valid(&v);
         assert!(rep.param_vec().iter().all(|x| x.is_finite()), "{id}: {:?}", rep.param_vec());
@@ -92,5 +95,6 @@ fn gaussian_scan_fits_beckmann_aniso_to_sqrt2_rms_slope() {
     eprintln!("gaussian: fit {p:?}, sqrt2 rms slopes ({ax}, {ay}), prescribed ({}, {})", 0.2 * 2f64.sqrt(), 0.08 * 2f64.sqrt());
     assert!((p[0] / ax - 1.0).abs() < 0.01 && (p[1] / ay - 1.0).abs() < 0.01, "{p:?} vs ({ax}, {ay})");
     assert!(super::fixtures::angle_diff(p[2], 0.4, std::f64::consts::PI).abs() < 0.01, "theta_z {}", p[2]);
+    assert_eq!(rep.quality.verdict, ndfit::fit::verdict::Verdict::Ok, "{:?}", rep.quality.reasons);
 }
 
