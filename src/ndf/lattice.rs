@@ -54,7 +54,9 @@ pub(crate) fn respect_lattice(frame: &SlopeFrame, grid: &BinGrid, lat: &SlopeLat
         let far = x0.abs().max(x1.abs()).hypot(y0.abs().max(y1.abs()));
         let (w, _, p) = ints[k];
         let mz = frame.normal_at(p).z;
-        if far >= inner || !(w > 0.0) || !(mz > 0.0) || w / mz.powi(4) / cell_area > NODE_CAP {
+        // (NaN-safe: a cell whose W or direction is not a positive number is skipped.)
+        let few_nodes = w > 0.0 && mz > 0.0 && w / mz.powi(4) / cell_area <= NODE_CAP;
+        if far >= inner || !few_nodes {
             continue;
         }
         slot[c] = picked.len() as u32;

@@ -1002,6 +1002,30 @@ mod tests {
     /// with it to 1e-10) to 3e-5 relative. Measured worst: 1.6e-5, on the coarsest grid (15 cells) of
     /// the tilted frame; 0.02 rad pieces everywhere gave 1.2e-5 there, so the rule's error on coarse
     /// rim cells comes mostly from elsewhere. Either is far below a bin's counting error (1/sqrt(64)).
+    /// Every rim cell (one the cheap rule does not take) of an `n`-cell grid over frame `f`, against
+    /// `QuadOrder::Fine(fine)`: `(cell, relative difference of W or solid angle, W, reference W)`. Slivers
+    /// of the rim (W below 1e-12 of the hemisphere's pi) are compared absolutely.
+    fn rim_cell_differences(f: &SlopeFrame, n: usize, fine: usize) -> Vec<(usize, f64, f64, f64)> {
+        let (rim, g) = (f.rim_shape(), BinGrid::new(n));
+        let mut out = Vec::new();
+        for c in 0..g.cells() {
+            let [x0, x1, y0, y1] = g.bounds(c);
+            if !g.meets_disk(c) || cheap_rule(x0, x1, y0, y1, &rim).is_some() {
+                continue;
+            }
+            let (w, o, _) = cell_integrals(f, &rim, &g, c);
+            let (mut rw, mut ro) = (0.0, 0.0);
+            g.quadrature(c, QuadOrder::Fine(fine), &rim, |p, wt| {
+                let (dw, dom) = f.densities(p);
+                rw += dw * wt;
+                ro += dom * wt;
+            });
+            let e = ((w - rw).abs() / rw.max(1e-12 * std::f64::consts::PI)).max((o - ro).abs() / ro.max(1e-12));
+            out.push((c, e, w, rw));
+        }
+        out
+    }
+
     #[test]
     fn wide_rings_take_long_angular_pieces() {
         let frames = [
@@ -1015,23 +1039,9 @@ mod tests {
             let rim = f.rim_shape();
             assert!(rim.ring >= 0.05, "{rim:?}");
             for n in [15, 25, 61] {
-                let g = BinGrid::new(n);
-                for c in 0..g.cells() {
-                    let [x0, x1, y0, y1] = g.bounds(c);
-                    if !g.meets_disk(c) || cheap_rule(x0, x1, y0, y1, &rim).is_some() {
-                        continue;
-                    }
-                    let (w, o, _) = cell_integrals(&f, &rim, &g, c);
-                    let (mut rw, mut ro) = (0.0, 0.0);
-                    g.quadrature(c, QuadOrder::Fine(4), &rim, |p, wt| {
-                        let (dw, dom) = f.densities(p);
-                        rw += dw * wt;
-                        ro += dom * wt;
-                    });
-                    // Slivers of the rim (W below 1e-12 of the hemisphere's pi) are compared absolutely.
-                    let e = ((w - rw).abs() / rw.max(1e-12 * std::f64::consts::PI)).max((o - ro).abs() / ro.max(1e-12));
+                for (c, e, w, rw) in rim_cell_differences(&f, n, 4) {
                     worst = worst.max(e);
-                    assert!(e <= 3e-5, "frame {:?} n {n} cell {c}: {w} vs {rw}, {o} vs {ro}", f.cov);
+                    assert!(e <= 3e-5, "frame {:?} n {n} cell {c}: {w} vs {rw}", f.cov);
                 }
             }
         }
@@ -1068,21 +1078,7 @@ mod tests {
             let rim = f.rim_shape();
             let mut worst = (0.0f64, 0usize, 0usize, 0.0f64, 0.0f64);
             for n in [15, 25, 61] {
-                let g = BinGrid::new(n);
-                for c in 0..g.cells() {
-                    let [x0, x1, y0, y1] = g.bounds(c);
-                    if !g.meets_disk(c) || cheap_rule(x0, x1, y0, y1, &rim).is_some() {
-                        continue;
-                    }
-                    let (w, o, _) = cell_integrals(&f, &rim, &g, c);
-                    let (mut rw, mut ro) = (0.0, 0.0);
-                    g.quadrature(c, QuadOrder::Fine(8), &rim, |p, wt| {
-                        let (dw, dom) = f.densities(p);
-                        rw += dw * wt;
-                        ro += dom * wt;
-                    });
-                    // Slivers of the rim (W below 1e-12 of the hemisphere's pi) are compared absolutely.
-                    let e = ((w - rw).abs() / rw.max(1e-12 * std::f64::consts::PI)).max((o - ro).abs() / ro.max(1e-12));
+                for (c, e, w, rw) in rim_cell_differences(&f, n, 8) {
                     if e > worst.0 {
                         worst = (e, n, c, w, rw);
                     }
