@@ -376,3 +376,39 @@ fn resume_writes_a_deleted_fit_file_again() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert_eq!(std::fs::read_to_string(&fit).expect("the fit file is back"), first);
 }
+
+#[test]
+fn negative_values_reach_batch_scans_from_the_command_line_and_the_manifest() {
+    let d = tempfile::tempdir().unwrap();
+    // A rough ASCII grid (height units; slopes about 0.3 at --z-scale 1e-9 over --dx 1e-6).
+    let rows: Vec<String> = (0..48)
+        .map(|i| {
+            let h = |j: usize| {
+                let (x, y) = (i as f64, j as f64);
+                300.0 * (0.7 * x + 0.3 * y).sin() + 200.0 * (1.3 * y + 0.2 * x).cos() + 50.0 * (2.1 * ((i * j) % 7) as f64).sin()
+            };
+            (0..48).map(|j| format!("{:.3}", h(j))).collect::<Vec<_>>().join(" ")
+        })
+        .collect();
+    std::fs::write(d.path().join("r.asc"), rows.join("\n") + "\n").unwrap();
+    // Negative values with exponents, after `--` and in manifest cells; a scan's own value replaces the run's.
+    std::fs::write(d.path().join("m.csv"), "path,id,z_scale,options\nr.asc,neg,-2e-9,\nr.asc,pos,2e-9,\nr.asc,opt,,--z-scale -2e-9\nr.asc,run,,\n").unwrap();
+    let out = run(d.path(), &["batch", "m.csv", "-o", "out", "--model", "ggx", "--", "--dx", "1e-6", "--z-scale", "-1e-9"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.path().join("out/summary.json")).unwrap()).unwrap();
+    let alpha = |key: &str| {
+        let e = summary["entries"].as_array().unwrap().iter().find(|e| e["path"] == key).unwrap();
+        assert_eq!(e["status"], "ok", "{e}");
+        e["fit"]["params"]["alpha"].as_f64().unwrap()
+    };
+    // Negated heights give the point-reflected NDF: an isotropic fit sees the same roughness; GGX alpha
+    // is a slope scale, so twice the heights give about twice the alpha.
+    assert_eq!(alpha("opt"), alpha("neg"));
+    assert!((alpha("neg") / alpha("pos") - 1.0).abs() < 1e-3, "{} vs {}", alpha("neg"), alpha("pos"));
+    assert!((alpha("pos") / (2.0 * alpha("run")) - 1.0).abs() < 0.03, "{} vs {}", alpha("pos"), alpha("run"));
+    // A negative count is a one-line error naming the option, not a stray argument.
+    std::fs::write(d.path().join("bad.csv"), "path,extra_starts\nr.asc,-1\n").unwrap();
+    let out = run(d.path(), &["batch", "bad.csv", "-o", "out2", "--", "--dx", "1e-6"]);
+    assert_refused(&out, &["r.asc", "'-1' for '--extra-starts"]);
+    assert_refused(&run(d.path(), &["batch", "m.csv", "-o", "out3", "--", "--extra-starts", "100"]), &["--extra-starts 100"]);
+}
