@@ -412,3 +412,20 @@ fn negative_values_reach_batch_scans_from_the_command_line_and_the_manifest() {
     assert_refused(&out, &["r.asc", "'-1' for '--extra-starts"]);
     assert_refused(&run(d.path(), &["batch", "m.csv", "-o", "out3", "--", "--extra-starts", "100"]), &["--extra-starts 100"]);
 }
+
+#[test]
+fn an_x3p_whose_main_xml_does_not_match_its_md5_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let main = main_xml(4, 4, "D", "<DataLink><PointDataLink>bindata/data.bin</PointDataLink></DataLink>");
+    let data: Vec<u8> = (0..16).flat_map(|k| (k as f64 * 1e-7).to_le_bytes()).collect();
+    // The checksum file of a different main.xml (one byte more).
+    let sum = format!("{} *main.xml\n", ndfit::io::md5::md5_hex(format!("{main} ").as_bytes()));
+    x3p(&d.path().join("m.x3p"), &main, &[("bindata/data.bin", &data, 1), ("md5checksum.hex", sum.as_bytes(), 1)]);
+    let out = run(d.path(), &["info", "m.x3p"]);
+    assert_refused(&out, &["m.x3p", "md5checksum.hex", "main.xml"]);
+    // With the right sum it reads.
+    let sum = format!("{} *main.xml\n", ndfit::io::md5::md5_hex(main.as_bytes()));
+    x3p(&d.path().join("m.x3p"), &main, &[("bindata/data.bin", &data, 1), ("md5checksum.hex", sum.as_bytes(), 1)]);
+    let out = run(d.path(), &["info", "m.x3p"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
