@@ -429,3 +429,73 @@ fn an_x3p_whose_main_xml_does_not_match_its_md5_is_refused() {
     let out = run(d.path(), &["info", "m.x3p"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// Degenerate NDFs for the plots: one bin, every bin empty (D constant 0), D equal everywhere, D over
+/// six hundred decades, a bin at the pole only.
+fn degenerate_ndfs() -> Vec<(&'static str, ndfit::ndf::EmpiricalNdf)> {
+    use ndfit::ndf::{EmpiricalNdf, NdfBin};
+    let bin = |th: f64, d: f64, count: u64| NdfBin {
+        m: nalgebra::Vector3::new(th.sin(), 0.0, th.cos()),
+        d,
+        stderr: 0.0,
+        count,
+        solid_angle: 1e-3,
+        proj_solid_angle: 1e-3 * th.cos(),
+    };
+    let ramp = |f: &dyn Fn(usize) -> (f64, u64)| (0..40).map(|k| { let (d, c) = f(k); bin(k as f64 * 0.035, d, c) }).collect::<Vec<_>>();
+    vec![
+        ("one bin", EmpiricalNdf::from_bins(vec![bin(0.0, 1.0 / 1e-3, 100)], 100)),
+        ("all empty", EmpiricalNdf::from_bins(ramp(&|_| (0.0, 0)), 0)),
+        ("constant", EmpiricalNdf::from_bins(ramp(&|_| (25.0, 10)), 400)),
+        ("huge range", EmpiricalNdf::from_bins(ramp(&|k| (10f64.powi(300 - 15 * k as i32), 1 + k as u64)), 820)),
+        ("tiny", EmpiricalNdf::from_bins(ramp(&|_| (f64::MIN_POSITIVE, 1)), 40)),
+        ("zero solid angle", EmpiricalNdf::from_bins(ramp(&|k| (1.0, k as u64)).into_iter().map(|b| NdfBin { proj_solid_angle: 0.0, solid_angle: 0.0, ..b }).collect(), 780)),
+        ("denormal solid angle", EmpiricalNdf::from_bins(ramp(&|k| (1e300, k as u64)).into_iter().map(|b| NdfBin { proj_solid_angle: 1e-320, ..b }).collect(), 780)),
+    ]
+}
+
+#[test]
+fn plots_of_degenerate_ndfs_draw_or_fail_cleanly() {
+    let d = tempfile::tempdir().unwrap();
+    let models = [
+        ndfit::models::Model::from_json(&serde_json::json!({"model": "ggx", "params": {"alpha": 0.3}})).unwrap(),
+        ndfit::models::Model::from_json(&serde_json::json!({"model": "beckmann", "params": {"alpha": 1e-3}})).unwrap(),
+        ndfit::models::Model::from_json(&serde_json::json!({"model": "ggx", "params": {"alpha": 1e-170}})).unwrap(),
+    ];
+    let mut bad = Vec::new();
+    for (name, ndf) in degenerate_ndfs() {
+        let outs: Vec<(String, ndfit::Result<()>)> = vec![
+            ("map".into(), ndfit::ndf::plot::plot_map(&d.path().join("map.png"), &ndf, name)),
+            ("slices".into(), ndfit::ndf::plot::plot_slices(&d.path().join("slices.png"), &ndf, name)),
+        ]
+        .into_iter()
+        .chain(models.iter().enumerate().map(|(k, m)| (format!("fit{k}"), ndfit::fit::plot::plot_fit(&d.path().join(format!("fit{k}.png")), &ndf, m, name))))
+        .collect();
+        for (what, r) in outs {
+            let p = d.path().join(format!("{what}.png"));
+            match r {
+                Ok(()) => match image::open(&p) {
+                    Ok(img) if img.width() > 100 => std::fs::remove_file(&p).unwrap(),
+                    other => bad.push(format!("{name} {what}: not a PNG: {:?}", other.err())),
+                },
+                Err(e) => {
+                    let msg = e.to_string();
+                    if msg.contains('\n') || !msg.contains(&format!("{what}.png")) {
+                        bad.push(format!("{name} {what}: the error must be one line naming the file: {msg}"));
+                    }
+                    if p.exists() {
+                        bad.push(format!("{name} {what}: a failed plot left its file"));
+                    }
+                }
+            }
+        }
+        let left: Vec<_> = std::fs::read_dir(d.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        if !left.is_empty() {
+            bad.push(format!("{name}: left behind {left:?}"));
+            for f in left {
+                std::fs::remove_file(d.path().join(f)).unwrap();
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{bad:#?}");
+}
