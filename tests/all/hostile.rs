@@ -499,3 +499,28 @@ fn plots_of_degenerate_ndfs_draw_or_fail_cleanly() {
     }
     assert!(bad.is_empty(), "{bad:#?}");
 }
+
+#[test]
+fn resume_writes_deleted_ndf_files_and_plots_again() {
+    let d = tempfile::tempdir().unwrap();
+    let scans = d.path().join("scans");
+    std::fs::create_dir(&scans).unwrap();
+    synth(&scans, "a.x3p", 48);
+    synth(&scans, "b.x3p", 40);
+    let args = ["batch", "scans", "-o", "out", "--model", "ggx", "--write-ndf", "--plots", "--jobs", "1"];
+    let out = run(d.path(), &args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (ndf, png, other) = (d.path().join("out/ndf/a.x3p.ndf.csv"), d.path().join("out/plots/a.x3p.png"), d.path().join("out/ndf/b.x3p.ndf.csv"));
+    let (first_ndf, first_png) = (std::fs::read(&ndf).unwrap(), std::fs::read(&png).unwrap());
+    let other_mtime = std::fs::metadata(&other).unwrap().modified().unwrap();
+    std::fs::remove_file(&ndf).unwrap();
+    std::fs::remove_file(&png).unwrap();
+    let out = run(d.path(), &[&args[..], &["--resume"]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(std::fs::read(&ndf).expect("the NDF file is back"), first_ndf);
+    assert_eq!(std::fs::read(&png).expect("the plot is back"), first_png);
+    // The scan whose files are all there is reused, not fitted again.
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("ok (resumed) b.x3p") && !err.contains("ok (resumed) a.x3p"), "{err}");
+    assert_eq!(std::fs::metadata(&other).unwrap().modified().unwrap(), other_mtime);
+}
