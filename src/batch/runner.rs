@@ -41,6 +41,10 @@ pub struct RunOptions {
     pub settings: String,
     /// Tolerances of the baseline comparison.
     pub tolerances: Tolerances,
+    /// The per-scan files the job writes besides the fit, as `(kind, suffix)` of
+    /// [`JobContext::extra_path`] (e.g. `("ndf", ".ndf.csv")`): `--resume` fits a scan again when one
+    /// of them is missing (they cannot be rebuilt from its record).
+    pub extras: Vec<(String, String)>,
 }
 
 /// The small per-scan summary kept in memory: the entry without its fit, plus the fit's headline numbers.
@@ -316,8 +320,11 @@ fn run_one(
 ) -> Result<Brief> {
     let key = resume_key(spec, base, opts);
     let rec_path = record_path(&opts.out_dir, spec);
+    let out_rel = spec.out_rel();
+    let ctx = JobContext { out_dir: &opts.out_dir, out_rel: &out_rel, baseline: base };
     if opts.resume {
-        if let Some(entry) = read_record(&rec_path).filter(|e| e.resume.as_ref() == Some(&key) && e.path == spec.key) {
+        let extras_present = |e: &Entry| e.fit.is_none() || opts.extras.iter().all(|(kind, suffix)| ctx.extra_path(kind, suffix).exists());
+        if let Some(entry) = read_record(&rec_path).filter(|e| e.resume.as_ref() == Some(&key) && e.path == spec.key && extras_present(e)) {
             // The record holds the fit: a per-scan fit file deleted since is written again from it.
             if let Some(fit) = &entry.fit {
                 let p = fit_path(&opts.out_dir, spec);
@@ -328,8 +335,6 @@ fn run_one(
             return Ok(brief_of(entry, true));
         }
     }
-    let out_rel = spec.out_rel();
-    let ctx = JobContext { out_dir: &opts.out_dir, out_rel: &out_rel, baseline: base };
     let t0 = Instant::now();
     let call = || guarded(|| job(spec, &ctx));
     let result = match pool {

@@ -158,7 +158,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         "baseline": baseline.is_some(),
     })
     .to_string();
-    let opts = RunOptions { out_dir: out.clone(), jobs, resume: args.resume, settings, tolerances };
+    let mut extras = Vec::new();
+    if args.write_ndf {
+        extras.push(("ndf".to_string(), ".ndf.csv".to_string()));
+    }
+    if args.plots {
+        extras.push(("plots".to_string(), ".png".to_string()));
+    }
+    let opts = RunOptions { out_dir: out.clone(), jobs, resume: args.resume, settings, tolerances, extras };
 
     let bar = progress_bar(specs.len() as u64);
     let progress = |p: batch::runner::Progress<'_>| {

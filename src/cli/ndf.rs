@@ -18,10 +18,10 @@ pub struct NdfArgs {
     pub normals: String,
     /// Cells across the Lambert disk of the whitened hemisphere (odd, 3-1023). Default: chosen from the
     /// number of samples so that bins hold about --target-count samples on average (15-255).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub ndf_cells: Option<usize>,
     /// Mean samples per bin aimed at when --ndf-cells is not given.
-    #[arg(long, default_value_t = ndfit::ndf::DEFAULT_TARGET_COUNT)]
+    #[arg(long, default_value_t = ndfit::ndf::DEFAULT_TARGET_COUNT, allow_hyphen_values = true)]
     pub target_count: f64,
 }
 

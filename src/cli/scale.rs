@@ -19,7 +19,7 @@ pub struct Args {
     #[command(flatten)]
     pub scan: ScanArgs,
     /// Footprints in metres (the width of one pixel on the surface), comma-separated.
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub footprint: Vec<f64>,
     /// The footprints a scene implies, as key=value pairs: footprint=LO..HI, or distance=LO..HI with
     /// fov_deg= and pixels=, or with pixel_pitch= and focal=; optional max_incidence_deg=.

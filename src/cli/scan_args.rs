@@ -11,13 +11,13 @@ pub struct ScanArgs {
     /// The scan file (format detected from content, then extension).
     pub scan: PathBuf,
     /// Spacing along x in metres, for formats that carry none.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub dx: Option<f64>,
     /// Spacing along y in metres (default: --dx).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub dy: Option<f64>,
     /// Metres per stored height unit, for formats that carry no height unit.
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, allow_hyphen_values = true)]
     pub z_scale: Option<f64>,
     /// Force the format instead of detecting it (x3p, plu, sur, opd, metropro, al3d, tmd, ascii, xyz,
     /// csv, gsf, npy, exr, png, tiff).
@@ -31,7 +31,7 @@ pub struct ScanArgs {
     #[arg(long, value_parser = parse_crop)]
     pub crop: Option<Crop>,
     /// Keep every N-th point along x and y (after the crop; no averaging).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true)]
     pub subsample: usize,
 }
 

@@ -40,7 +40,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0.0)]
     holes: f64,
     /// Constant added to every height (m).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     offset: f64,
     /// Ellipsoid: alpha_x.
     #[arg(long, default_value_t = 0.3)]
@@ -49,13 +49,13 @@ pub struct Args {
     #[arg(long)]
     alpha_y: Option<f64>,
     /// Ellipsoid: theta_x (rad).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     theta_x: f64,
     /// Ellipsoid: theta_y (rad).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     theta_y: f64,
     /// Ellipsoid and gaussian: theta_z (rad).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     theta_z: f64,
     /// Ellipsoid: fraction of the grid the footprint fills.
     #[arg(long, default_value_t = 0.96)]
@@ -70,7 +70,7 @@ pub struct Args {
     #[arg(long)]
     corr_length: Option<f64>,
     /// Planes: one facet `SX,SY[,WEIGHT]` (slope grad h and relative width); repeat for strips.
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, allow_hyphen_values = true)]
     plane: Vec<String>,
 }
 

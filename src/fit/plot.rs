@@ -18,7 +18,7 @@ use crate::models::{Model, Ndf};
 use crate::ndf::EmpiricalNdf;
 
 fn perr<E: std::fmt::Display>(e: E) -> Error {
-    Error::new(ErrorKind::Io, format!("plot failed: {e}"))
+    Error::new(ErrorKind::Io, format!("plot failed: {}", e.to_string().replace('\n', " ")))
 }
 
 /// The colour of map pixel `k` (`None` outside the disk).
@@ -38,11 +38,18 @@ fn diverging(t: f64) -> RGBColor {
     }
 }
 
-/// Draw the plot to `path` (PNG, written atomically).
+/// Draw the plot to `path` (PNG, written atomically). Values that are not finite are left out; an axis
+/// that would not be finite is an error naming the file, and then no file is written.
 pub fn plot_fit(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> Result<()> {
+    plot_fit_to(path, ndf, model, title).map_err(|e| e.with_path(path))
+}
+
+fn plot_fit_to(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> Result<()> {
     crate::plot::ensure_font();
     let axes = model.canonical().axes();
     let peak = axes.map_or(Vector3::z(), |a| Vector3::from(a.peak));
+    // Guard: a degenerate model (its peak not a direction) is drawn about the normal.
+    let peak = if peak.iter().all(|v| v.is_finite()) && peak.z > 0.0 { peak } else { Vector3::z() };
     let half = crate::ndf::plot::zoom_half(ndf, peak);
     let c = [peak.x, peak.y];
     let px = 2.0 * half / RES as f64;
@@ -57,8 +64,9 @@ pub fn plot_fit(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> 
     for row in 0..RES {
         for col in 0..RES {
             if let Some(m) = at(row, col) {
-                data[row * RES + col] = Some(ndf.d_at(m));
-                fit[row * RES + col] = Some(model.d(m));
+                // Values that overflow (a denormal bin, an extreme model) are left out, not drawn.
+                data[row * RES + col] = Some(ndf.d_at(m)).filter(|v| v.is_finite());
+                fit[row * RES + col] = Some(model.d(m)).filter(|v| v.is_finite());
             }
         }
     }
@@ -89,16 +97,17 @@ pub fn plot_fit(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> 
     let mut slices = Vec::new();
     for (k, e) in dirs.iter().enumerate() {
         let range = 5.0 * widths[k].max(1e-6);
+        let range = if range.is_finite() { range } else { 1.0 };
         let (mut pts_d, mut pts_f) = (Vec::new(), Vec::new());
         for i in -300..=300 {
             let t = range * i as f64 / 300.0;
             let m = Vector3::new(-(s0[0] + t * e[0]), -(s0[1] + t * e[1]), 1.0).normalize();
             let ang = m.angle(&peak).to_degrees() * t.signum();
             let (d, f) = (ndf.d_at(m), model.d(m));
-            if d > 0.0 && i % 3 == 0 {
+            if d > 0.0 && d.is_finite() && ang.is_finite() && i % 3 == 0 {
                 pts_d.push((ang, d.log10()));
             }
-            if f > 0.0 {
+            if f > 0.0 && f.is_finite() && ang.is_finite() {
                 pts_f.push((ang, f.log10()));
             }
         }
@@ -145,12 +154,13 @@ pub fn plot_fit(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> 
             let ymin = pts_d.iter().map(|p| p.1).fold(f64::INFINITY, f64::min).max(ymax - 6.0);
             let (x0, x1) = if x1 > x0 { (x0, x1) } else { (-1.0, 1.0) };
             let (ymin, ymax) = if ymax > ymin { (ymin - 0.3, ymax + 0.3) } else { (-1.0, 1.0) };
+            let (xr, yr) = (crate::plot::axis(x0, x1, 1.0, "slice angle")?, crate::plot::axis(ymin, ymax, 1.0, "log10 D")?);
             let mut chart = ChartBuilder::on(area)
                 .margin(12)
                 .caption(format!("slice through the peak along {name} (azimuth {az:.1} deg)"), (crate::plot::FONT, 16))
                 .x_label_area_size(40)
                 .y_label_area_size(60)
-                .build_cartesian_2d(x0..x1, ymin..ymax)
+                .build_cartesian_2d(xr, yr)
                 .map_err(perr)?;
             chart
                 .configure_mesh()

@@ -13,7 +13,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::io::write_bytes_atomic;
 
 fn perr<E: std::fmt::Display>(e: E) -> Error {
-    Error::new(ErrorKind::Io, format!("plot failed: {e}"))
+    Error::new(ErrorKind::Io, format!("plot failed: {}", e.to_string().replace('\n', " ")))
 }
 
 /// Encode an RGB buffer as PNG and write it atomically.
@@ -53,15 +53,21 @@ pub fn zoom_half(ndf: &EmpiricalNdf, pk: Vector3<f64>) -> f64 {
 /// peak holding 99% of the samples ([`zoom_half`]). Colour is `log10 D` over four
 /// decades below the maximum; grey where D = 0.
 pub fn plot_map(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
+    plot_map_to(path, ndf, title).map_err(|e| e.with_path(path))
+}
+
+fn plot_map_to(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
     crate::plot::ensure_font();
     let (w, h) = (1160u32, 620u32);
     let mut buf = vec![0u8; (w * h * 3) as usize];
     let res = 480usize;
     let pk = peak(ndf);
+    let pk = if pk.x.is_finite() && pk.y.is_finite() { pk } else { Vector3::z() };
     let half = zoom_half(ndf, pk);
+    let half = if half.is_finite() { half } else { 0.5 };
     let full = raster(ndf, res, [0.0, 0.0], 1.0);
     let zoom = raster(ndf, res, [pk.x, pk.y], half);
-    let dmax = full.iter().chain(&zoom).cloned().fold(0.0f64, f64::max);
+    let dmax = full.iter().chain(&zoom).cloned().filter(|d| d.is_finite()).fold(0.0f64, f64::max);
     let (lo, hi) = if dmax > 0.0 { (dmax.log10() - 4.0, dmax.log10()) } else { (-1.0, 0.0) };
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
@@ -90,7 +96,7 @@ pub fn plot_map(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
                     if x * x + y * y > 1.0 {
                         return None;
                     }
-                    let colour = if d > 0.0 {
+                    let colour = if d > 0.0 && d.is_finite() {
                         let t = ((d.log10() - lo) / (hi - lo)).clamp(0.0, 1.0);
                         ViridisRGB::get_color(t)
                     } else {
@@ -114,6 +120,10 @@ pub fn plot_map(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
 /// Slices of the empirical D through the peak along the two principal axes of the robust slope
 /// covariance, against the signed angle from the peak direction (degrees), log scale.
 pub fn plot_slices(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
+    plot_slices_to(path, ndf, title).map_err(|e| e.with_path(path))
+}
+
+fn plot_slices_to(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
     crate::plot::ensure_font();
     let (w, h) = (1000u32, 600u32);
     let mut buf = vec![0u8; (w * h * 3) as usize];
@@ -134,7 +144,7 @@ pub fn plot_slices(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
                 let m = Vector3::new(-s[0], -s[1], 1.0).normalize();
                 let d = ndf.d_at(m);
                 let ang = m.angle(&pk).to_degrees() * t.signum();
-                (d > 0.0).then(|| (ang, d.log10()))
+                (d > 0.0 && d.is_finite() && ang.is_finite()).then(|| (ang, d.log10()))
             })
             .collect();
         series.push(pts);
@@ -142,8 +152,8 @@ pub fn plot_slices(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
     let all = series.iter().flatten();
     let (xmin, xmax) = all.clone().fold((0.0f64, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
     let (ymin, ymax) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
-    let (xmin, xmax) = if xmax > xmin { (xmin, xmax) } else { (-1.0, 1.0) };
-    let (ymin, ymax) = if ymax > ymin { (ymin - 0.2, ymax + 0.2) } else { (-1.0, 1.0) };
+    let x = crate::plot::axis(xmin, xmax, 1.0, "angle").map_err(|e| e.with_path(path))?;
+    let y = if ymax >= ymin { crate::plot::axis(ymin - 0.2, ymax + 0.2, 1.0, "log10 D").map_err(|e| e.with_path(path))? } else { -1.0..1.0 };
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;
@@ -152,7 +162,7 @@ pub fn plot_slices(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
             .caption(title, (crate::plot::FONT, 20))
             .x_label_area_size(40)
             .y_label_area_size(60)
-            .build_cartesian_2d(xmin..xmax, ymin..ymax)
+            .build_cartesian_2d(x, y)
             .map_err(perr)?;
         chart
             .configure_mesh()

@@ -15,3 +15,12 @@ pub fn ensure_font() {
         let _ = plotters::style::register_font(FONT, plotters::style::FontStyle::Normal, dejavu::sans::regular());
     });
 }
+
+/// The range `lo..hi` of a plot axis, checked: plotters loops or panics on a non-finite or inverted
+/// range, so those are an error naming `what`; an empty one (all values equal) is widened by `pad`.
+pub fn axis(lo: f64, hi: f64, pad: f64, what: &str) -> crate::Result<std::ops::Range<f64>> {
+    if !(lo.is_finite() && hi.is_finite() && (hi - lo).is_finite()) || lo > hi {
+        return Err(crate::Error::invalid(format!("cannot plot: the {what} axis would span {lo:e} to {hi:e}")));
+    }
+    Ok(if hi > lo { lo..hi } else { (lo - pad)..(hi + pad) })
+}

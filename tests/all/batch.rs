@@ -47,7 +47,7 @@ fn fake_job(spec: &ScanSpec, ctx: &JobContext<'_>) -> Result<JobOutput, JobFailu
 }
 
 fn opts(out: &Path, jobs: usize) -> RunOptions {
-    RunOptions { out_dir: out.to_path_buf(), jobs, resume: false, settings: "test".into(), tolerances: Tolerances::default() }
+    RunOptions { out_dir: out.to_path_buf(), jobs, resume: false, settings: "test".into(), tolerances: Tolerances::default(), extras: Vec::new() }
 }
 
 fn run_dir(dir: &Path, o: &RunOptions, baseline: Option<&Baseline>, job: &batch::Job<'_>) -> RunOutcome {

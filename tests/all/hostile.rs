@@ -376,3 +376,151 @@ fn resume_writes_a_deleted_fit_file_again() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert_eq!(std::fs::read_to_string(&fit).expect("the fit file is back"), first);
 }
+
+#[test]
+fn negative_values_reach_batch_scans_from_the_command_line_and_the_manifest() {
+    let d = tempfile::tempdir().unwrap();
+    // A rough ASCII grid (height units; slopes about 0.3 at --z-scale 1e-9 over --dx 1e-6).
+    let rows: Vec<String> = (0..48)
+        .map(|i| {
+            let h = |j: usize| {
+                let (x, y) = (i as f64, j as f64);
+                300.0 * (0.7 * x + 0.3 * y).sin() + 200.0 * (1.3 * y + 0.2 * x).cos() + 50.0 * (2.1 * ((i * j) % 7) as f64).sin()
+            };
+            (0..48).map(|j| format!("{:.3}", h(j))).collect::<Vec<_>>().join(" ")
+        })
+        .collect();
+    std::fs::write(d.path().join("r.asc"), rows.join("\n") + "\n").unwrap();
+    // Negative values with exponents, after `--` and in manifest cells; a scan's own value replaces the run's.
+    std::fs::write(d.path().join("m.csv"), "path,id,z_scale,options\nr.asc,neg,-2e-9,\nr.asc,pos,2e-9,\nr.asc,opt,,--z-scale -2e-9\nr.asc,run,,\n").unwrap();
+    let out = run(d.path(), &["batch", "m.csv", "-o", "out", "--model", "ggx", "--", "--dx", "1e-6", "--z-scale", "-1e-9"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.path().join("out/summary.json")).unwrap()).unwrap();
+    let alpha = |key: &str| {
+        let e = summary["entries"].as_array().unwrap().iter().find(|e| e["path"] == key).unwrap();
+        assert_eq!(e["status"], "ok", "{e}");
+        e["fit"]["params"]["alpha"].as_f64().unwrap()
+    };
+    // Negated heights give the point-reflected NDF: an isotropic fit sees the same roughness; GGX alpha
+    // is a slope scale, so twice the heights give about twice the alpha.
+    assert_eq!(alpha("opt"), alpha("neg"));
+    assert!((alpha("neg") / alpha("pos") - 1.0).abs() < 1e-3, "{} vs {}", alpha("neg"), alpha("pos"));
+    assert!((alpha("pos") / (2.0 * alpha("run")) - 1.0).abs() < 0.03, "{} vs {}", alpha("pos"), alpha("run"));
+    // A negative count is a one-line error naming the option, not a stray argument.
+    std::fs::write(d.path().join("bad.csv"), "path,extra_starts\nr.asc,-1\n").unwrap();
+    let out = run(d.path(), &["batch", "bad.csv", "-o", "out2", "--", "--dx", "1e-6"]);
+    assert_refused(&out, &["r.asc", "'-1' for '--extra-starts"]);
+    assert_refused(&run(d.path(), &["batch", "m.csv", "-o", "out3", "--", "--extra-starts", "100"]), &["--extra-starts 100"]);
+}
+
+#[test]
+fn an_x3p_whose_main_xml_does_not_match_its_md5_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let main = main_xml(4, 4, "D", "<DataLink><PointDataLink>bindata/data.bin</PointDataLink></DataLink>");
+    let data: Vec<u8> = (0..16).flat_map(|k| (k as f64 * 1e-7).to_le_bytes()).collect();
+    // The checksum file of a different main.xml (one byte more).
+    let sum = format!("{} *main.xml\n", ndfit::io::md5::md5_hex(format!("{main} ").as_bytes()));
+    x3p(&d.path().join("m.x3p"), &main, &[("bindata/data.bin", &data, 1), ("md5checksum.hex", sum.as_bytes(), 1)]);
+    let out = run(d.path(), &["info", "m.x3p"]);
+    assert_refused(&out, &["m.x3p", "md5checksum.hex", "main.xml"]);
+    // With the right sum it reads.
+    let sum = format!("{} *main.xml\n", ndfit::io::md5::md5_hex(main.as_bytes()));
+    x3p(&d.path().join("m.x3p"), &main, &[("bindata/data.bin", &data, 1), ("md5checksum.hex", sum.as_bytes(), 1)]);
+    let out = run(d.path(), &["info", "m.x3p"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// Degenerate NDFs for the plots: one bin, every bin empty (D constant 0), D equal everywhere, D over
+/// six hundred decades, a bin at the pole only.
+fn degenerate_ndfs() -> Vec<(&'static str, ndfit::ndf::EmpiricalNdf)> {
+    use ndfit::ndf::{EmpiricalNdf, NdfBin};
+    let bin = |th: f64, d: f64, count: u64| NdfBin {
+        m: nalgebra::Vector3::new(th.sin(), 0.0, th.cos()),
+        d,
+        stderr: 0.0,
+        count,
+        solid_angle: 1e-3,
+        proj_solid_angle: 1e-3 * th.cos(),
+    };
+    let ramp = |f: &dyn Fn(usize) -> (f64, u64)| (0..40).map(|k| { let (d, c) = f(k); bin(k as f64 * 0.035, d, c) }).collect::<Vec<_>>();
+    vec![
+        ("one bin", EmpiricalNdf::from_bins(vec![bin(0.0, 1.0 / 1e-3, 100)], 100)),
+        ("all empty", EmpiricalNdf::from_bins(ramp(&|_| (0.0, 0)), 0)),
+        ("constant", EmpiricalNdf::from_bins(ramp(&|_| (25.0, 10)), 400)),
+        ("huge range", EmpiricalNdf::from_bins(ramp(&|k| (10f64.powi(300 - 15 * k as i32), 1 + k as u64)), 820)),
+        ("tiny", EmpiricalNdf::from_bins(ramp(&|_| (f64::MIN_POSITIVE, 1)), 40)),
+        ("zero solid angle", EmpiricalNdf::from_bins(ramp(&|k| (1.0, k as u64)).into_iter().map(|b| NdfBin { proj_solid_angle: 0.0, solid_angle: 0.0, ..b }).collect(), 780)),
+        ("denormal solid angle", EmpiricalNdf::from_bins(ramp(&|k| (1e300, k as u64)).into_iter().map(|b| NdfBin { proj_solid_angle: 1e-320, ..b }).collect(), 780)),
+    ]
+}
+
+#[test]
+fn plots_of_degenerate_ndfs_draw_or_fail_cleanly() {
+    let d = tempfile::tempdir().unwrap();
+    let models = [
+        ndfit::models::Model::from_json(&serde_json::json!({"model": "ggx", "params": {"alpha": 0.3}})).unwrap(),
+        ndfit::models::Model::from_json(&serde_json::json!({"model": "beckmann", "params": {"alpha": 1e-3}})).unwrap(),
+        ndfit::models::Model::from_json(&serde_json::json!({"model": "ggx", "params": {"alpha": 1e-170}})).unwrap(),
+    ];
+    let mut bad = Vec::new();
+    for (name, ndf) in degenerate_ndfs() {
+        let outs: Vec<(String, ndfit::Result<()>)> = vec![
+            ("map".into(), ndfit::ndf::plot::plot_map(&d.path().join("map.png"), &ndf, name)),
+            ("slices".into(), ndfit::ndf::plot::plot_slices(&d.path().join("slices.png"), &ndf, name)),
+        ]
+        .into_iter()
+        .chain(models.iter().enumerate().map(|(k, m)| (format!("fit{k}"), ndfit::fit::plot::plot_fit(&d.path().join(format!("fit{k}.png")), &ndf, m, name))))
+        .collect();
+        for (what, r) in outs {
+            let p = d.path().join(format!("{what}.png"));
+            match r {
+                Ok(()) => match image::open(&p) {
+                    Ok(img) if img.width() > 100 => std::fs::remove_file(&p).unwrap(),
+                    other => bad.push(format!("{name} {what}: not a PNG: {:?}", other.err())),
+                },
+                Err(e) => {
+                    let msg = e.to_string();
+                    if msg.contains('\n') || !msg.contains(&format!("{what}.png")) {
+                        bad.push(format!("{name} {what}: the error must be one line naming the file: {msg}"));
+                    }
+                    if p.exists() {
+                        bad.push(format!("{name} {what}: a failed plot left its file"));
+                    }
+                }
+            }
+        }
+        let left: Vec<_> = std::fs::read_dir(d.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        if !left.is_empty() {
+            bad.push(format!("{name}: left behind {left:?}"));
+            for f in left {
+                std::fs::remove_file(d.path().join(f)).unwrap();
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{bad:#?}");
+}
+
+#[test]
+fn resume_writes_deleted_ndf_files_and_plots_again() {
+    let d = tempfile::tempdir().unwrap();
+    let scans = d.path().join("scans");
+    std::fs::create_dir(&scans).unwrap();
+    synth(&scans, "a.x3p", 48);
+    synth(&scans, "b.x3p", 40);
+    let args = ["batch", "scans", "-o", "out", "--model", "ggx", "--write-ndf", "--plots", "--jobs", "1"];
+    let out = run(d.path(), &args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (ndf, png, other) = (d.path().join("out/ndf/a.x3p.ndf.csv"), d.path().join("out/plots/a.x3p.png"), d.path().join("out/ndf/b.x3p.ndf.csv"));
+    let (first_ndf, first_png) = (std::fs::read(&ndf).unwrap(), std::fs::read(&png).unwrap());
+    let other_mtime = std::fs::metadata(&other).unwrap().modified().unwrap();
+    std::fs::remove_file(&ndf).unwrap();
+    std::fs::remove_file(&png).unwrap();
+    let out = run(d.path(), &[&args[..], &["--resume"]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(std::fs::read(&ndf).expect("the NDF file is back"), first_ndf);
+    assert_eq!(std::fs::read(&png).expect("the plot is back"), first_png);
+    // The scan whose files are all there is reused, not fitted again.
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("ok (resumed) b.x3p") && !err.contains("ok (resumed) a.x3p"), "{err}");
+    assert_eq!(std::fs::metadata(&other).unwrap().modified().unwrap(), other_mtime);
+}

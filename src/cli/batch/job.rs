@@ -40,7 +40,7 @@ impl JobConfig {
 /// The per-scan options: reading and preprocessing (`ScanArgs`), the NDF (`NdfArgs`) and the fit, with
 /// the flag names of `ndfit fit` / `ndfit ndf`.
 #[derive(Debug, Parser)]
-#[command(no_binary_name = true, disable_help_flag = true)]
+#[command(no_binary_name = true, disable_help_flag = true, args_override_self = true)]
 pub struct PerScan {
     #[command(flatten)]
     pub scan: ScanArgs,
@@ -53,7 +53,7 @@ pub struct PerScan {
     #[arg(long, default_value = "lm")]
     pub solver: String,
     /// Extra skew starts for the ellipsoid (0-4).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
     pub extra_starts: usize,
 }
 
@@ -62,10 +62,13 @@ impl PerScan {
     pub fn pipeline(&self, model: String) -> ndfit::Result<PipelineOptions> {
         let bad = |flag: &str, e: ndfit::Error| ndfit::Error::invalid(format!("{flag}: {}", e.message()));
         let ndf = self.ndf.options().map_err(|e| ndfit::Error::invalid(e.to_string()))?;
+        if self.extra_starts > 4 {
+            return Err(ndfit::Error::invalid(format!("--extra-starts {} must be between 0 and 4", self.extra_starts)));
+        }
         let fit = FitOptions {
             objective: self.objective.parse::<Objective>().map_err(|e| bad("--objective", e))?,
             solver: self.solver.parse::<Solver>().map_err(|e| bad("--solver", e))?,
-            extra_starts: self.extra_starts.min(4),
+            extra_starts: self.extra_starts,
             ..FitOptions::default()
         };
         Ok(PipelineOptions { read: self.scan.read_options(), preprocess: self.scan.preprocess(), ndf, model, fit })

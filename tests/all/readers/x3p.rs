@@ -226,3 +226,68 @@ fn x3p_defects_give_one_precise_line() {
         assert!(!msg.contains('\n'), "case {k}: more than one line: {msg}");
     }
 }
+
+/// The entries of an X3P zip, in order, as (name, bytes).
+fn entries_of(bytes: &[u8]) -> Vec<(String, Vec<u8>)> {
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes)).expect("zip");
+    (0..zip.len())
+        .map(|i| {
+            let mut e = zip.by_index(i).expect("entry");
+            let mut v = Vec::new();
+            std::io::Read::read_to_end(&mut e, &mut v).expect("read");
+            (e.name().expect("name").into_owned(), v)
+        })
+        .collect()
+}
+
+#[test]
+fn md5_checksums_are_checked() {
+    let good = ndfit::io::x3p_write::x3p_bytes(&sample_heightfield()).expect("bytes");
+    let entries = entries_of(&good);
+    let get = |n: &str| entries.iter().find(|(k, _)| k == n).map(|(_, v)| v.clone()).expect(n);
+    let (main, data) = (String::from_utf8(get("main.xml")).unwrap(), get("bindata/data.bin"));
+    // MD5s computed by an independent implementation (Python's hashlib) of a fixed text, so the
+    // reader's MD5 is not checked against itself only.
+    assert_eq!(ndfit::io::md5::md5_hex(b"<main/>\n"), "e18d496402bd1faf45c061ec443aa483");
+    let rebuild = |main: &str, sums: &[u8], data: &[u8]| {
+        build_x3p(&[("main.xml", main.as_bytes()), ("bindata/data.bin", data), ("md5checksum.hex", sums)])
+    };
+    let main_sum = |m: &str| format!("{} *main.xml\n", ndfit::io::md5::md5_hex(m.as_bytes()));
+    // As written, and with the variants writers use (upper case, the bare sum), the file reads.
+    for sums in [main_sum(&main), main_sum(&main).to_uppercase(), ndfit::io::md5::md5_hex(main.as_bytes())] {
+        read_bytes_as_file(&rebuild(&main, sums.as_bytes(), &data), "ok.x3p").expect("checksums verify");
+    }
+    // main.xml edited after its checksum was written: corrupt, naming the checksum file.
+    let edited = main.replace("<SizeZ>1</SizeZ>", "<SizeZ>1</SizeZ> ");
+    assert_ne!(edited, main);
+    let err = read_bytes_as_file(&rebuild(&edited, main_sum(&main).as_bytes(), &data), "bad.x3p").expect_err("must fail");
+    assert_eq!(err.kind(), ndfit::ErrorKind::Corrupt);
+    let msg = err.to_string();
+    assert!(msg.contains("bad.x3p") && msg.contains("md5checksum.hex") && !msg.contains('\n'), "{msg}");
+    // Point data changed (one value), with a zip CRC and main.xml checksum that agree: caught by the
+    // point-data MD5 alone.
+    let mut altered = data.clone();
+    altered[8] ^= 1;
+    let err = read_bytes_as_file(&rebuild(&main, main_sum(&main).as_bytes(), &altered), "bad.x3p").expect_err("must fail");
+    assert_eq!(err.kind(), ndfit::ErrorKind::Corrupt);
+    let msg = err.to_string();
+    assert!(msg.contains("bad.x3p") && msg.contains("bindata/data.bin") && msg.contains("MD5ChecksumPointData"), "{msg}");
+    // A checksum file without a sum is a writer's quirk: read, with a note.
+    let hf = read_bytes_as_file(&rebuild(&main, b"n/a\n", &data), "q.x3p").expect("read");
+    assert!(hf.meta.instrument.get("x3p.md5_note").is_some_and(|n| n.contains("md5checksum.hex")), "{:?}", hf.meta.instrument);
+}
+
+#[test]
+fn real_x3p_scans_pass_their_checksums() {
+    let Some(dir) = crate::common::shared_scans("real_x3p_scans_pass_their_checksums") else { return };
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).expect("dir") {
+        let p = e.expect("entry").path();
+        if p.extension().is_some_and(|x| x == "x3p") {
+            let hf = read_scan(&p, &ReadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+            assert!(!hf.meta.instrument.contains_key("x3p.md5_note"), "{}", p.display());
+            n += 1;
+        }
+    }
+    assert!(n >= 5, "{n} X3P scans");
+}
