@@ -36,10 +36,16 @@ fn number(t: &str, line: usize) -> Result<f64> {
     }
 }
 
+/// Memory a text scan may need per byte of the file (see [`text_of`]).
+const TEXT_BYTES_PER_FILE_BYTE: u64 = 24;
+
 fn text_of(bytes: &[u8]) -> Result<&str> {
     if bytes.len() > MAX_TEXT {
         return Err(Error::new(ErrorKind::Unsupported, format!("text file over {MAX_TEXT} bytes")));
     }
+    // Every value is at least two bytes of text: parsing holds at most ~12 bytes per file byte (an XYZ
+    // triple per line), and the grid's later stages ~24 bytes per point, i.e. ~12 per file byte.
+    crate::budget::check_bytes((bytes.len() as u64).saturating_mul(TEXT_BYTES_PER_FILE_BYTE), "reading this text scan")?;
     std::str::from_utf8(bytes).map_err(|e| Error::corrupt(format!("not UTF-8/ASCII text (byte {})", e.valid_up_to())))
 }
 

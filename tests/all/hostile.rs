@@ -524,3 +524,24 @@ fn resume_writes_deleted_ndf_files_and_plots_again() {
     assert!(err.contains("ok (resumed) b.x3p") && !err.contains("ok (resumed) a.x3p"), "{err}");
     assert_eq!(std::fs::metadata(&other).unwrap().modified().unwrap(), other_mtime);
 }
+
+/// Text scans have no header to declare their size, so the budget is checked against the file's own size
+/// (24 bytes of memory per file byte, `data_formats/limits.md`): a 1.2 MB matrix needs ~29 MB, refused under
+/// an 8 MiB budget in one line naming the file, read under 64 MiB.
+#[test]
+fn a_text_scan_beyond_the_budget_is_refused_before_parsing() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("big.txt");
+    let row: String = (0..400).map(|j| format!("{} ", (j * 7919) % 1000)).collect::<String>() + "\n";
+    std::fs::write(&path, row.repeat(400)).unwrap();
+    let len = std::fs::metadata(&path).unwrap().len();
+    assert!(len * 24 > 8 << 20 && len * 24 < 64 << 20, "{len} bytes");
+    let p = path.to_str().unwrap();
+    let out = run(dir.path(), &["--max-memory", "8M", "info", p, "--dx", "1e-6", "--z-scale", "1e-9"]);
+    let err = assert_refused(&out, &["big.txt", "memory budget"]);
+    assert!(err.contains("text scan"), "{err}");
+    let ok = run(dir.path(), &["--max-memory", "64M", "info", p, "--dx", "1e-6", "--z-scale", "1e-9", "--json"]);
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&ok.stdout).unwrap();
+    assert_eq!((v["nx"].as_u64(), v["ny"].as_u64()), (Some(400), Some(400)));
+}
