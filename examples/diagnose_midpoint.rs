@@ -3,8 +3,7 @@
 //!
 //!     cargo run --release --example diagnose_midpoint
 
-use ndfit::fit::metric::delta;
-use ndfit::fit::synthetic::Grid;
+use ndfit::fit::metric::delta_to_model;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{Model, ModelId, Ndf};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
@@ -16,8 +15,7 @@ fn settings(n: usize, seed: u64) -> SynthSettings {
 
 /// `delta(D_fit; D_true)` (objective.md) by quadrature on a fine grid matched to the truth.
 fn delta_to_truth(fit: &Model, truth: &Model) -> f64 {
-    let (bins, _) = ndfit::fit::synthetic::expected(truth, &Grid::for_model(truth, 256), 1.0);
-    delta(|m| fit.d(*m), |m| truth.d(*m), bins.iter().map(|b| (b.m, b.proj_solid_angle))).expect("truth has mass")
+    delta_to_model(fit, truth).expect("truth has mass")
 }
 
 fn main() {

@@ -26,6 +26,14 @@ where
     (den > 0.0).then(|| (num / den).sqrt())
 }
 
+/// `delta(D; D_ref)` between two models, by quadrature on a 256-cell grid matched to the reference
+/// (how fits are scored against synthetic truth in the tests and examples).
+pub fn delta_to_model(d: &Model, reference: &Model) -> Option<f64> {
+    let grid = super::synthetic::Grid::for_model(reference, 256);
+    let (bins, _) = super::synthetic::expected(reference, &grid, 1.0);
+    delta(|m| d.d(*m), |m| reference.d(*m), bins.iter().map(|b| (b.m, b.proj_solid_angle)))
+}
+
 /// `delta(D_model; D_empirical)` over the bins of `ndf` (the fit error against the data; it includes
 /// the counting noise of the bins, about `sqrt(K_eff / N)`).
 pub fn delta_to_data(model: &Model, ndf: &EmpiricalNdf) -> Option<f64> {
