@@ -510,7 +510,7 @@ impl Block {
 }
 
 /// Row blocks of the dispersion split: the rows are cut into this many blocks of equal height, and the
-/// counts of the odd blocks are kept beside the total ([`Dispersion`]). Blocks many correlation lengths
+/// counts of the odd blocks are kept beside the total ([`crate::fit::verdict::data_dispersion`]). Blocks many correlation lengths
 /// tall make the two halves' counts independent; sixteen alternate often enough to average the scan's
 /// large-scale variation into both halves.
 pub const DISPERSION_BLOCKS: usize = 16;
