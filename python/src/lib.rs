@@ -1,0 +1,647 @@
+//! `ndfit._ndfit`: the Python extension behind `import ndfit`.
+//!
+//! A thin layer over the library: reading, preprocessing, the empirical NDF and the fits are the
+//! library's, in the order and with the options of `ndfit fit` / `ndfit ndf`, so a fit from Python and
+//! one from the command line are the same computation. This file only converts arguments and results,
+//! releases the GIL while the library works, and turns library errors (and panics) into
+//! `ndfit.NdfitError` carrying the library's one-line message (file, then problem).
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use nalgebra::Vector3;
+use ndarray::ArrayView2;
+use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::create_exception;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+
+use ndfit::bench::Preset;
+use ndfit::fit::{FitOptions, FitReport, InputInfo, Objective, Solver};
+use ndfit::io::ReadOptions;
+use ndfit::models::{Model, ModelChoice, Ndf as _};
+use ndfit::ndf::{EmpiricalNdf, NdfOptions, NormalScheme};
+use ndfit::preprocess::{Crop, FormRemoval, Preprocess};
+use ndfit::Heightfield;
+
+create_exception!(ndfit, NdfitError, PyException, "A scan that cannot be read, an option out of range, or a fit that failed: one line naming the file and the problem.");
+
+/// The label a scan built from an array carries where a file would give its path (`input.path`).
+const ARRAY_LABEL: &str = "<array>";
+
+/// `NdfitError(message)` with `.kind` the library's error kind as `ndfit batch` names it (`io`,
+/// `unknown_format`, `corrupt`, `invalid_input`, ...).
+fn error_of_kind(message: String, kind: &str) -> PyErr {
+    let err = NdfitError::new_err(message);
+    Python::attach(|py| err.value(py).setattr("kind", kind).ok());
+    err
+}
+
+fn to_py(e: ndfit::Error) -> PyErr {
+    let kind = serde_json::to_value(e.kind()).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default();
+    error_of_kind(e.to_string(), &kind)
+}
+
+fn invalid(msg: impl Into<String>) -> PyErr {
+    error_of_kind(msg.into(), "invalid_input")
+}
+
+/// Run `f` without the GIL, inside a `threads`-thread rayon pool when asked (`None`: the global pool, as
+/// the CLI), turning a panic into an error instead of unwinding into the interpreter.
+fn work<T: Send>(py: Python<'_>, threads: Option<usize>, f: impl FnOnce() -> ndfit::Result<T> + Send) -> PyResult<T> {
+    let pool = match threads {
+        None => None,
+        Some(0) => return Err(invalid("threads must be at least 1")),
+        Some(n) => Some(rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| invalid(format!("cannot start {n} threads: {e}")))?),
+    };
+    let r = py.detach(|| {
+        catch_unwind(AssertUnwindSafe(|| match &pool {
+            Some(p) => p.install(f),
+            None => f(),
+        }))
+    });
+    match r {
+        Ok(r) => r.map_err(to_py),
+        Err(p) => {
+            let what = p.downcast_ref::<String>().cloned().or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string())).unwrap_or_default();
+            Err(error_of_kind(format!("internal error (please report): {what}"), "panic"))
+        }
+    }
+}
+
+/// A heightfield scan (metres; NaN marks invalid points), as read from a file or built from an array.
+#[pyclass(module = "ndfit", name = "Scan", frozen)]
+pub struct Scan {
+    hf: Arc<Heightfield>,
+    path: Option<PathBuf>,
+}
+
+#[pymethods]
+impl Scan {
+    /// `Scan(heights, dx, dy=None)`: a scan from a 2D array of heights in metres, shape (ny, nx), row
+    /// index along +y and column along +x; NaN (or an infinity) marks an invalid point. `dy` defaults to
+    /// `dx`. The heights are copied once into the scan.
+    #[new]
+    #[pyo3(signature = (heights, dx, dy=None))]
+    fn new(py: Python<'_>, heights: &Bound<'_, PyAny>, dx: f64, dy: Option<f64>) -> PyResult<Scan> {
+        let arr = py.import("numpy")?.call_method1("ascontiguousarray", (heights, "float64")).map_err(|e| invalid(format!("heights: not an array of numbers ({e})")))?;
+        let ndim: usize = arr.getattr("ndim")?.extract()?;
+        if ndim != 2 {
+            return Err(invalid(format!("heights must be a 2D array (ny, nx), got {ndim} dimensions")));
+        }
+        let arr: PyReadonlyArray2<'_, f64> = arr.extract()?;
+        let (ny, nx) = (arr.shape()[0], arr.shape()[1]);
+        let z = arr.as_slice().map(|s| s.to_vec()).unwrap_or_else(|_| arr.as_array().iter().copied().collect());
+        let mut hf = Heightfield::new(nx, ny, dx, dy.unwrap_or(dx), z).map_err(to_py)?;
+        hf.meta.format = "array".into();
+        Ok(Scan { hf: Arc::new(hf), path: None })
+    }
+
+    /// The heights in metres, shape (ny, nx), float64, NaN where invalid: a read-only view of the scan's
+    /// own buffer (for a float64 `.npy` file in metres, of the file's memory map), not a copy.
+    #[getter]
+    fn heights<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let hf = &slf.get().hf;
+        let view = ArrayView2::from_shape((hf.ny, hf.nx), &hf.z[..]).map_err(|e| invalid(e.to_string()))?;
+        // SAFETY: the scan is immutable (frozen) and owns `hf` through an Arc that lives as long as the
+        // scan object, which becomes the array's base: the buffer outlives the array and never moves.
+        let arr = unsafe { PyArray2::borrow_from_array(&view, slf.clone().into_any()) };
+        let kw = PyDict::new(slf.py());
+        kw.set_item("write", false)?;
+        arr.call_method("setflags", (), Some(&kw))?;
+        Ok(arr)
+    }
+
+    /// Spacing along x in metres.
+    #[getter]
+    fn dx(&self) -> f64 {
+        self.hf.dx
+    }
+
+    /// Spacing along y in metres.
+    #[getter]
+    fn dy(&self) -> f64 {
+        self.hf.dy
+    }
+
+    /// Columns (samples along x).
+    #[getter]
+    fn nx(&self) -> usize {
+        self.hf.nx
+    }
+
+    /// Rows (samples along y).
+    #[getter]
+    fn ny(&self) -> usize {
+        self.hf.ny
+    }
+
+    /// `(ny, nx)`, the shape of `heights`.
+    #[getter]
+    fn shape(&self) -> (usize, usize) {
+        (self.hf.ny, self.hf.nx)
+    }
+
+    /// The format id (`x3p`, `plu`, `npy`, ...; `array` for a scan built from an array).
+    #[getter]
+    fn format(&self) -> String {
+        self.hf.meta.format.clone()
+    }
+
+    /// The file the scan was read from (None for an array).
+    #[getter]
+    fn path(&self) -> Option<String> {
+        self.path.as_ref().map(|p| p.display().to_string())
+    }
+
+    /// Number of invalid (NaN) points.
+    #[getter]
+    fn invalid(&self) -> usize {
+        self.hf.invalid_count()
+    }
+
+    /// What the reader learned besides the heights: `format`, `file_z_unit`, `file_xy_unit`,
+    /// `instrument` (dict of text), and when known `height_quantum` (m) and `file_grid` ([nx, ny]).
+    #[getter]
+    fn meta<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &serde_json::to_string(&self.hf.meta).map_err(|e| invalid(e.to_string()))?)
+    }
+
+    fn __repr__(&self) -> String {
+        let src = self.path.as_ref().map_or(ARRAY_LABEL.to_string(), |p| p.display().to_string());
+        format!("Scan({src}, {} x {}, dx={:e} m, dy={:e} m, format={})", self.hf.nx, self.hf.ny, self.hf.dx, self.hf.dy, self.hf.meta.format)
+    }
+}
+
+/// Parse a JSON text into Python objects (dicts, lists, floats, None).
+fn json_to_py<'py>(py: Python<'py>, text: &str) -> PyResult<Bound<'py, PyAny>> {
+    py.import("json")?.call_method1("loads", (text,))
+}
+
+/// What to fit or bin: a file, or a scan already in memory.
+enum Source {
+    File(PathBuf),
+    Scan(Arc<Heightfield>, Option<PathBuf>),
+}
+
+impl Source {
+    fn from_py(obj: &Bound<'_, PyAny>) -> PyResult<Source> {
+        if let Ok(s) = obj.cast::<Scan>() {
+            let s = s.get();
+            return Ok(Source::Scan(s.hf.clone(), s.path.clone()));
+        }
+        obj.extract::<PathBuf>().map(Source::File).map_err(|_| {
+            let ty = obj.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+            invalid(format!("expected an ndfit.Scan or a path, got {ty}"))
+        })
+    }
+
+    /// The path written into results (`input.path`), as given.
+    fn label(&self) -> PathBuf {
+        match self {
+            Source::File(p) | Source::Scan(_, Some(p)) => p.clone(),
+            Source::Scan(_, None) => PathBuf::from(ARRAY_LABEL),
+        }
+    }
+
+    /// Read (files) and preprocess, keeping every `extra`-th of the points `pre.subsample` keeps, as
+    /// `ndfit fit` does: without a crop a file's subsampled points are all that is read.
+    fn load(&self, read: &ReadOptions, pre: &Preprocess, extra: usize) -> ndfit::Result<Heightfield> {
+        let pre = Preprocess { subsample: pre.subsample.saturating_mul(extra.max(1)), ..pre.clone() };
+        match self {
+            Source::File(p) => {
+                if pre.crop.is_none() && pre.subsample > 1 {
+                    let hf = ndfit::io::read_scan_subsampled(p, read, pre.subsample)?;
+                    ndfit::preprocess::apply(hf, &Preprocess { subsample: 1, ..pre }).map_err(|e| e.with_path(p))
+                } else {
+                    let hf = ndfit::io::read_scan(p, read)?;
+                    ndfit::preprocess::apply(hf, &pre).map_err(|e| e.with_path(p))
+                }
+            }
+            Source::Scan(hf, _) => ndfit::preprocess::apply((**hf).clone(), &pre).map_err(|e| e.with_path(self.label())),
+        }
+    }
+}
+
+/// Options of reading and preprocessing, by their CLI names.
+struct ScanOpts {
+    read: ReadOptions,
+    pre: Preprocess,
+}
+
+impl ScanOpts {
+    #[allow(clippy::too_many_arguments)]
+    fn new(src: &Source, dx: Option<f64>, dy: Option<f64>, z_scale: Option<f64>, format: Option<String>, form: &str, crop: Option<&str>, subsample: usize) -> PyResult<ScanOpts> {
+        let read = ReadOptions { dx, dy, z_scale, format };
+        if matches!(src, Source::Scan(..)) && (read.dx.is_some() || read.dy.is_some() || read.z_scale.is_some() || read.format.is_some()) {
+            return Err(invalid("dx, dy, z_scale and format apply to reading a file; this scan is already read"));
+        }
+        let form = match form {
+            "none" => FormRemoval::None,
+            "plane" => FormRemoval::Plane,
+            "poly2" => FormRemoval::Polynomial(2),
+            "poly3" => FormRemoval::Polynomial(3),
+            "cylinder" => FormRemoval::Cylinder,
+            other => return Err(invalid(format!("form: unknown form {other:?}: use none, plane, poly2, poly3 or cylinder"))),
+        };
+        let crop = crop.map(parse_crop).transpose()?;
+        Ok(ScanOpts { read, pre: Preprocess { form, crop, subsample } })
+    }
+}
+
+/// `NXxNY+X+Y` (columns X..X+NX, rows Y..Y+NY), as `--crop`.
+fn parse_crop(s: &str) -> PyResult<Crop> {
+    let bad = || invalid(format!("crop {s:?} is not NXxNY+X+Y (for example 512x512+0+0)"));
+    let (size, rest) = s.split_once('+').ok_or_else(bad)?;
+    let (x, y) = rest.split_once('+').ok_or_else(bad)?;
+    let (nx, ny) = size.split_once('x').ok_or_else(bad)?;
+    let p = |t: &str| t.trim().parse::<usize>().map_err(|_| bad());
+    Ok(Crop { x: p(x)?, y: p(y)?, nx: p(nx)?, ny: p(ny)? })
+}
+
+/// The NDF options of `--normals`, `--ndf-cells`, `--target-count`, range-checked as the CLI does.
+fn ndf_options(normals: &str, ndf_cells: Option<usize>, target_count: Option<f64>) -> PyResult<NdfOptions> {
+    let target_count = target_count.unwrap_or(ndfit::ndf::DEFAULT_TARGET_COUNT);
+    let scheme: NormalScheme = normals.parse().map_err(|e: ndfit::Error| invalid(format!("normals: {}", e.message())))?;
+    if let Some(c) = ndf_cells {
+        let max = ndfit::ndf::grid::MAX_CELLS_ACROSS;
+        if !(3..=max).contains(&c) {
+            return Err(invalid(format!("ndf_cells {c} must be between 3 and {max}")));
+        }
+        if c % 2 == 0 {
+            return Err(invalid(format!("ndf_cells {c} must be odd (the grid has a centre cell): use {} or {}", c - 1, c + 1)));
+        }
+    }
+    if !(target_count.is_finite() && target_count >= 1.0) {
+        return Err(invalid(format!("target_count {target_count} must be at least 1")));
+    }
+    Ok(NdfOptions { scheme, cells_across: ndf_cells, target_count, frame: None })
+}
+
+fn parse_preset(s: Option<&str>) -> PyResult<Option<Preset>> {
+    s.map(|s| Preset::ALL.into_iter().find(|p| p.as_str() == s).ok_or_else(|| invalid(format!("preset: unknown preset {s:?}: use fast, balanced or accurate"))))
+        .transpose()
+}
+
+/// `ndfit.read(path, dx=None, dy=None, z_scale=None, format=None) -> Scan`: read a scan file as stored
+/// (no preprocessing). The format is detected from the content, then the extension; `dx`, `dy` (m),
+/// `z_scale` (m per stored unit) and `format` are for formats that carry no spacing or unit. A float64
+/// `.npy` in metres is memory-mapped: `Scan.heights` is then a view of the file.
+#[pyfunction]
+#[pyo3(signature = (path, *, dx=None, dy=None, z_scale=None, format=None))]
+fn read(py: Python<'_>, path: PathBuf, dx: Option<f64>, dy: Option<f64>, z_scale: Option<f64>, format: Option<String>) -> PyResult<Scan> {
+    let opts = ReadOptions { dx, dy, z_scale, format };
+    let p = path.clone();
+    let hf = work(py, None, move || ndfit::io::read_scan(&p, &opts))?;
+    Ok(Scan { hf: Arc::new(hf), path: Some(path) })
+}
+
+/// The empirical NDF of a scan (the bins of `ndfit ndf`, empty ones included).
+#[pyclass(module = "ndfit", name = "Ndf", frozen)]
+pub struct Ndf {
+    ndf: EmpiricalNdf,
+    path: String,
+}
+
+impl Ndf {
+    fn column<'py>(&self, py: Python<'py>, f: impl Fn(&ndfit::ndf::NdfBin) -> f64) -> Bound<'py, numpy::PyArray1<f64>> {
+        self.ndf.bins.iter().map(f).collect::<Vec<f64>>().into_pyarray(py)
+    }
+}
+
+#[pymethods]
+impl Ndf {
+    /// Bin centre directions, unit vectors with `m.z > 0`, shape (n, 3).
+    #[getter]
+    fn m<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let flat: Vec<f64> = self.ndf.bins.iter().flat_map(|b| [b.m.x, b.m.y, b.m.z]).collect();
+        Ok(flat.into_pyarray(py).reshape([self.ndf.bins.len(), 3])?)
+    }
+    /// D per bin (1/sr): the projected-area fraction in the bin over its projected solid angle.
+    #[getter]
+    fn d<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray1<f64>> {
+        self.column(py, |b| b.d)
+    }
+    /// Standard error of `d` (Poisson on the count).
+    #[getter]
+    fn stderr<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray1<f64>> {
+        self.column(py, |b| b.stderr)
+    }
+    /// Samples (normals) per bin, uint64.
+    #[getter]
+    fn count<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray1<u64>> {
+        self.ndf.bins.iter().map(|b| b.count).collect::<Vec<u64>>().into_pyarray(py)
+    }
+    /// Solid angle of each bin (sr).
+    #[getter]
+    fn solid_angle<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray1<f64>> {
+        self.column(py, |b| b.solid_angle)
+    }
+    /// Projected solid angle of each bin, the integral of `m.z` over it (sr).
+    #[getter]
+    fn proj_solid_angle<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray1<f64>> {
+        self.column(py, |b| b.proj_solid_angle)
+    }
+    /// Normals binned.
+    #[getter]
+    fn n_samples(&self) -> u64 {
+        self.ndf.n_samples
+    }
+    /// Stencils (or triangles) skipped because they touch an invalid point.
+    #[getter]
+    fn n_skipped(&self) -> u64 {
+        self.ndf.n_skipped
+    }
+    /// `central` or `triangles`.
+    #[getter]
+    fn normals(&self) -> &'static str {
+        self.ndf.scheme.as_str()
+    }
+    /// Cells across the Lambert disk of the binning grid.
+    #[getter]
+    fn cells_across(&self) -> usize {
+        self.ndf.grid.n
+    }
+    /// Warnings for the user, one line each.
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.ndf.warnings.clone()
+    }
+    fn __len__(&self) -> usize {
+        self.ndf.bins.len()
+    }
+    fn __repr__(&self) -> String {
+        format!("Ndf({}: {} bins, {} samples, {} normals)", self.path, self.ndf.bins.len(), self.ndf.n_samples, self.ndf.scheme.as_str())
+    }
+}
+
+/// `ndfit.ndf(scan_or_path, form="plane", *, ...) -> Ndf`: the empirical NDF, as `ndfit ndf` computes it.
+/// Options are those of `ndfit ndf` by name: reading (`dx`, `dy`, `z_scale`, `format`; files only),
+/// preprocessing (`form`, `crop` as "NXxNY+X+Y", `subsample`) and binning (`normals` central|triangles,
+/// `ndf_cells` odd 3-1023, `target_count` mean samples per bin, default 64); `threads` caps the work's threads (default: all cores).
+#[pyfunction]
+#[pyo3(signature = (source, form="plane", *, dx=None, dy=None, z_scale=None, format=None, crop=None, subsample=1,
+    normals="central", ndf_cells=None, target_count=None, threads=None))]
+#[allow(clippy::too_many_arguments)]
+fn ndf(
+    py: Python<'_>,
+    source: &Bound<'_, PyAny>,
+    form: &str,
+    dx: Option<f64>,
+    dy: Option<f64>,
+    z_scale: Option<f64>,
+    format: Option<String>,
+    crop: Option<&str>,
+    subsample: usize,
+    normals: &str,
+    ndf_cells: Option<usize>,
+    target_count: Option<f64>,
+    threads: Option<usize>,
+) -> PyResult<Ndf> {
+    let src = Source::from_py(source)?;
+    let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample)?;
+    let opts = ndf_options(normals, ndf_cells, target_count)?;
+    let label = src.label();
+    let ndf = work(py, threads, || {
+        let hf = src.load(&so.read, &so.pre, 1)?;
+        ndfit::ndf::empirical_ndf(&hf, &opts).map_err(|e| e.with_path(src.label()))
+    })?;
+    Ok(Ndf { ndf, path: label.display().to_string() })
+}
+
+/// A fitted model: the `ndfit.fit/1` document of `ndfit fit`, and the model to evaluate.
+#[pyclass(module = "ndfit", name = "Fit", frozen)]
+pub struct Fit {
+    report: FitReport,
+    model: Model,
+}
+
+impl Fit {
+    fn from_report(report: FitReport) -> PyResult<Fit> {
+        let model = report.to_model().map_err(to_py)?;
+        Ok(Fit { report, model })
+    }
+}
+
+/// `(n, 3)` directions from an array-like of shape (n, 3) or (3,), and whether it was a single vector.
+fn directions(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<Vector3<f64>>, bool)> {
+    let arr = py.import("numpy")?.call_method1("ascontiguousarray", (obj, "float64")).map_err(|e| invalid(format!("{name}: not an array of numbers ({e})")))?;
+    let shape: Vec<usize> = arr.getattr("shape")?.extract()?;
+    let single = match shape.as_slice() {
+        [3] => true,
+        [_, 3] => false,
+        _ => return Err(invalid(format!("{name} must have shape (n, 3) or (3,), got {shape:?}"))),
+    };
+    let arr = arr.call_method1("reshape", ((-1i64, 3i64),))?;
+    let arr: PyReadonlyArray2<'_, f64> = arr.extract()?;
+    let v = arr.as_array();
+    Ok((v.rows().into_iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect(), single))
+}
+
+#[pymethods]
+impl Fit {
+    /// The model id: ggx, ggx-aniso, beckmann, beckmann-aniso or ellipsoid (for `auto`, the one chosen).
+    #[getter]
+    fn model(&self) -> &'static str {
+        self.report.model.as_str()
+    }
+    /// Canonical parameters by name (radians for angles). For the anisotropic models the alpha_x axis
+    /// lies at azimuth -theta_z, along (cos theta_z, -sin theta_z) in the scan frame (Walter et al.'s
+    /// A = S Rz(theta_z)).
+    #[getter]
+    fn params(&self) -> std::collections::BTreeMap<String, f64> {
+        self.report.params.clone()
+    }
+    /// Parameter names in the model's order.
+    #[getter]
+    fn param_names(&self) -> Vec<&'static str> {
+        self.report.model.param_names().to_vec()
+    }
+    /// Standard errors by name; None for a parameter the data do not determine.
+    #[getter]
+    fn std_errors(&self) -> std::collections::BTreeMap<String, Option<f64>> {
+        self.report.std_errors.clone()
+    }
+    /// The ellipsoid matrix A (3x3, scan frame) for the models that are ellipsoid special cases; None
+    /// for Beckmann.
+    #[getter]
+    fn matrix_a<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        self.report.matrix_a.map(|a| Ok(a.iter().flatten().copied().collect::<Vec<f64>>().into_pyarray(py).reshape([3, 3])?)).transpose()
+    }
+    /// Goodness of fit (the JSON's `quality`): objective, reduced_chi2, delta_data, dispersion, verdict
+    /// (ok|misfit|unresolved) and its reasons, ...
+    #[getter]
+    fn quality<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &serde_json::to_string(&self.report.quality).map_err(|e| invalid(e.to_string()))?)
+    }
+    /// `ok`, `misfit` or `unresolved` (`quality["verdict"]`).
+    #[getter]
+    fn verdict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.quality(py)?.get_item("verdict")
+    }
+    /// Warnings for the user, one line each.
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.report.warnings.clone()
+    }
+    /// The whole `ndfit.fit/1` document as a dict.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.to_json()?)
+    }
+    /// The `ndfit.fit/1` JSON text, byte for byte what `ndfit fit` writes for the same scan and options
+    /// (apart from the wall-clock `timings`).
+    fn to_json(&self) -> PyResult<String> {
+        let mut s = serde_json::to_string_pretty(&self.report).map_err(|e| invalid(format!("cannot serialize the fit ({e})")))?;
+        s.push('\n');
+        Ok(s)
+    }
+    /// A fit from an `ndfit.fit/1` JSON text (a file `ndfit fit` wrote, or `Fit.to_json()`).
+    #[staticmethod]
+    fn from_json(text: &str) -> PyResult<Fit> {
+        let report: FitReport = serde_json::from_str(text).map_err(|e| invalid(format!("not an ndfit.fit/1 document: {e}")))?;
+        Fit::from_report(report)
+    }
+    /// D(m) (1/sr) of the fitted model for unit directions `m`, shape (n, 3) or (3,).
+    fn d<'py>(&self, py: Python<'py>, m: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        let (ms, single) = directions(py, m, "m")?;
+        let model = self.model;
+        let out: Vec<f64> = py.detach(|| ms.iter().map(|m| model.d(*m)).collect());
+        finish(py, out, single)
+    }
+    /// Smith masking G1(u, m) of the fitted model (Walter et al. eq. 6 for the ellipsoid) for view
+    /// directions `u` and microfacet normals `m`, each shape (n, 3) or (3,) (a single vector is paired
+    /// with every row of the other).
+    fn g1<'py>(&self, py: Python<'py>, u: &Bound<'py, PyAny>, m: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        let (us, su) = directions(py, u, "u")?;
+        let (ms, sm) = directions(py, m, "m")?;
+        if !su && !sm && us.len() != ms.len() {
+            return Err(invalid(format!("u has {} rows but m has {}", us.len(), ms.len())));
+        }
+        let n = us.len().max(ms.len());
+        let model = self.model;
+        let out: Vec<f64> = py.detach(|| (0..n).map(|i| model.g1(us[if su { 0 } else { i }], ms[if sm { 0 } else { i }])).collect());
+        finish(py, out, su && sm)
+    }
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let ctor = slf.get_type().getattr("from_json")?;
+        Ok((ctor, PyTuple::new(slf.py(), [slf.get().to_json()?])?))
+    }
+    fn __repr__(&self) -> String {
+        let p: Vec<String> = self.report.model.param_names().iter().map(|n| format!("{n}={:.6}", self.report.params.get(*n).copied().unwrap_or(f64::NAN))).collect();
+        format!("Fit({} {}, verdict {})", self.report.model, p.join(" "), self.report.quality.verdict.as_str())
+    }
+}
+
+/// A float for a single direction, else a 1D array.
+fn finish<'py>(py: Python<'py>, out: Vec<f64>, single: bool) -> PyResult<Bound<'py, PyAny>> {
+    if single {
+        Ok(out[0].into_pyobject(py)?.into_any())
+    } else {
+        Ok(out.into_pyarray(py).into_any())
+    }
+}
+
+/// `ndfit.fit(scan_or_path, model="auto", form="plane", preset=None, *, ...) -> Fit`: read (for a path),
+/// preprocess, build the empirical NDF and fit, as `ndfit fit` does with the same options; the result's
+/// `to_json()` is the document `ndfit fit` writes.
+///
+/// - `model`: ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid, or auto (the nested models, chosen by
+///   the quasi-likelihood BIC).
+/// - reading (files only): `dx`, `dy` (m), `z_scale` (m per stored unit), `format`.
+/// - preprocessing: `form` (none|plane|poly2|poly3|cylinder), `crop` ("NXxNY+X+Y"), `subsample`.
+/// - the NDF: `normals` (central|triangles), `ndf_cells` (odd, 3-1023), `target_count` (default 64).
+/// - the fit: `objective` (poisson|logd), `solver` (lm|nelder-mead|lbfgs), `extra_starts` (0-4),
+///   `max_theta` (degrees, (0, 90], default 70), `preset` (fast|balanced|accurate, as `--preset`).
+/// - `threads`: threads for this call (default: all cores, as the CLI).
+#[pyfunction]
+#[pyo3(signature = (source, model="auto", form="plane", preset=None, *, dx=None, dy=None, z_scale=None, format=None, crop=None,
+    subsample=1, normals="central", ndf_cells=None, target_count=None, objective="poisson", solver="lm",
+    extra_starts=0, max_theta=None, threads=None))]
+#[allow(clippy::too_many_arguments)]
+fn fit(
+    py: Python<'_>,
+    source: &Bound<'_, PyAny>,
+    model: &str,
+    form: &str,
+    preset: Option<&str>,
+    dx: Option<f64>,
+    dy: Option<f64>,
+    z_scale: Option<f64>,
+    format: Option<String>,
+    crop: Option<&str>,
+    subsample: usize,
+    normals: &str,
+    ndf_cells: Option<usize>,
+    target_count: Option<f64>,
+    objective: &str,
+    solver: &str,
+    extra_starts: usize,
+    max_theta: Option<f64>,
+    threads: Option<usize>,
+) -> PyResult<Fit> {
+    let src = Source::from_py(source)?;
+    let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample)?;
+    let mut ndf_opts = ndf_options(normals, ndf_cells, target_count)?;
+    let max_theta = max_theta.unwrap_or(ndfit::fit::objective::DEFAULT_MAX_THETA_DEG);
+    let mut opts = FitOptions {
+        objective: objective.parse::<Objective>().map_err(|e| invalid(format!("objective: {}", e.message())))?,
+        solver: solver.parse::<Solver>().map_err(|e| invalid(format!("solver: {}", e.message())))?,
+        extra_starts,
+        max_theta: max_theta.to_radians(),
+        ..FitOptions::default()
+    };
+    if extra_starts > 4 {
+        return Err(invalid(format!("extra_starts {extra_starts} must be between 0 and 4")));
+    }
+    if !(max_theta > 0.0 && max_theta <= 90.0) {
+        return Err(invalid(format!("max_theta {max_theta} must be in (0, 90] degrees")));
+    }
+    let model = match model.parse::<ModelChoice>().map_err(|e| invalid(format!("model: {}", e.message())))? {
+        ModelChoice::Auto => None,
+        ModelChoice::Model(id) => Some(id),
+    };
+    let preset = parse_preset(preset)?;
+    let report = work(py, threads, move || {
+        let path = src.label();
+        let t0 = Instant::now();
+        let hf = src.load(&so.read, &so.pre, preset.map_or(1, |p| p.stride()))?;
+        if let Some(p) = preset {
+            // The preset's knobs, as `ndfit fit --preset`; an explicit ndf_cells still wins.
+            let po = p.ndf_options(if p.needs_sample_count() { hf.valid_count() as u64 } else { 0 });
+            ndf_opts = NdfOptions { cells_across: ndf_cells.or(po.cells_across), ..po };
+            let pf = p.fit_options();
+            opts.tolerances = pf.tolerances;
+            opts.extra_starts = opts.extra_starts.max(pf.extra_starts);
+        }
+        let t1 = Instant::now();
+        let ndf = ndfit::ndf::empirical_ndf(&hf, &ndf_opts).map_err(|e| e.with_path(&path))?;
+        let t2 = Instant::now();
+        let result = match model {
+            Some(id) => ndfit::fit::fit_model(&ndf, id, &opts),
+            None => ndfit::fit::fit_auto(&ndf, &opts),
+        };
+        let mut report = result.map_err(|e| e.with_path(&path))?;
+        report.input = Some(InputInfo::new(Path::new(&path), &hf));
+        report.timings.read_ms = Some((t1 - t0).as_secs_f64() * 1e3);
+        report.timings.ndf_ms = Some((t2 - t1).as_secs_f64() * 1e3);
+        Ok(report)
+    })?;
+    Fit::from_report(report)
+}
+
+/// The compiled part of `ndfit`; import `ndfit`, not this.
+#[pymodule]
+fn _ndfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("NdfitError", m.py().get_type::<NdfitError>())?;
+    m.add_class::<Scan>()?;
+    m.add_class::<Ndf>()?;
+    m.add_class::<Fit>()?;
+    m.add_function(wrap_pyfunction!(read, m)?)?;
+    m.add_function(wrap_pyfunction!(ndf, m)?)?;
+    m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
