@@ -9,6 +9,7 @@ fails becomes an ``error`` row while the others go on.
 from __future__ import annotations
 
 import inspect
+import math
 import os
 from typing import Any, Dict, Iterable, List, Optional, Union
 
@@ -21,12 +22,13 @@ COLUMNS = ["path", "status", "model", *PARAM_COLUMNS, "verdict", "reduced_chi2",
 def fit_row(path: str, model: str = "auto", options: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
     """Fit one scan; a plain dict row (the task :func:`fit_many` submits per scan).
 
-    ``status`` is ``ok`` with ``model``, the parameters, ``verdict``, ``reduced_chi2`` and ``n_samples``, or
+    ``status`` is ``ok`` with ``model``, the parameters (NaN for those the model lacks), ``verdict``, ``reduced_chi2`` and ``n_samples``, or
     ``error`` with ``error`` (one line naming the file and the problem) and ``error_kind``.
     """
     import ndfit
 
     row: Dict[str, Any] = {c: None for c in COLUMNS}
+    row.update({c: math.nan for c in PARAM_COLUMNS})
     row["path"] = str(path)
     opts = dict(options or {})
     opts.setdefault("threads", 1)
@@ -82,7 +84,7 @@ def fit_many(
     owned = []
     try:
         if client is None:
-            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None)
+            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0")
             owned.append(cluster)
             client = Client(cluster)
             owned.append(client)
