@@ -549,6 +549,142 @@ def scale():
     return cells
 
 
+PY_SETUP = r"""
+import os
+import numpy as np
+import matplotlib.pyplot as plt
+import ndfit
+from ndfit.dask import fit_many
+
+def find_root():
+    d = os.getcwd()
+    while d != os.path.dirname(d):
+        if os.path.exists(os.path.join(d, "Cargo.toml")) and os.path.isdir(os.path.join(d, "fits")):
+            return d
+        d = os.path.dirname(d)
+    raise RuntimeError("run this notebook inside the ndfit repository")
+
+ROOT = find_root()
+SCANS = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "scans"))
+REQUIRE_SHARED = os.environ.get("NDFIT_REQUIRE_SHARED", "") not in ("", "0")
+real = os.path.join(SCANS, "hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p")
+HAVE_REAL = os.path.exists(real)
+if REQUIRE_SHARED and not HAVE_REAL:
+    raise RuntimeError(f"{real} is absent and NDFIT_REQUIRE_SHARED is set")
+print("ndfit", ndfit.__version__, "|", "real scan: " + real if HAVE_REAL else f"SKIP: {SCANS} absent, a numpy surface stands in")
+"""
+
+PY_READ = r"""
+if HAVE_REAL:
+    scan = ndfit.read(real)
+else:  # a smooth random surface made here, in metres
+    rng = np.random.default_rng(1)
+    k = np.fft.rfft2(rng.standard_normal((256, 256)))
+    f = np.exp(-((np.fft.rfftfreq(256)[None, :] / 0.05) ** 2 + (np.fft.fftfreq(256)[:, None] / 0.08) ** 2))
+    h = np.fft.irfft2(k * f, s=(256, 256))
+    scan = ndfit.Scan(h * 1e-6 / np.std(h), dx=1e-6)
+print(scan)
+print({k: v for k, v in scan.meta.items() if k != "instrument"})
+h = scan.heights  # (ny, nx) metres, NaN = invalid; a read-only view of the scan's buffer, not a copy
+fig, ax = plt.subplots(figsize=(6, 4))
+im = ax.imshow(h * 1e6, origin="lower", cmap="viridis", extent=[0, scan.nx * scan.dx * 1e3, 0, scan.ny * scan.dy * 1e3], aspect="auto")
+fig.colorbar(im, label="height (µm)")
+ax.set(xlabel="x (mm)", ylabel="y (mm)", title=f"{os.path.basename(scan.path or 'array')}: heights as read")
+plt.show()
+"""
+
+PY_FIT = r"""
+fit = ndfit.fit(scan, model="auto")  # read -> plane removal -> empirical NDF -> fit, as `ndfit fit`
+print(fit)
+print("parameters:", {k: round(v, 5) for k, v in fit.params.items()})
+print("std errors:", {k: (None if v is None else float(f"{v:.2g}")) for k, v in fit.std_errors.items()})
+q = fit.quality
+print(f"verdict {q['verdict']}; deviance/dof {q['reduced_chi2']:.3f}, the data's own dispersion {q['dispersion']:.3f}")
+for c in fit.to_dict()["selection"]["candidates"]:
+    print(f"  candidate {c['model']:<15} criterion {c['criterion']:.1f}")
+if "theta_z" in fit.params:
+    print(f"alpha_x axis at azimuth {-fit.params['theta_z']:.4f} rad from +x (Walter et al.: A = S Rz(theta_z))")
+"""
+
+PY_PLOT = r"""
+emp = ndfit.ndf(scan)  # the same bins the fit used (same options)
+occ = emp.count > 0
+d_fit = fit.d(emp.m)
+# The empirical NDF is normalized by construction (Heitz eq. 9: the projected areas sum to one).
+assert abs(np.sum(emp.d * emp.proj_solid_angle) - 1) < 1e-9
+theta = np.degrees(np.arccos(emp.m[:, 2]))
+phi_axis = -fit.params.get("theta_z", 0.0)  # the alpha_x axis
+phi = np.arctan2(emp.m[:, 1], emp.m[:, 0])
+dphi = np.angle(np.exp(1j * (phi - phi_axis)))
+fig, (a0, a1) = plt.subplots(1, 2, figsize=(11, 4))
+a0.loglog(emp.d[occ], d_fit[occ], ".", ms=2, alpha=0.4)
+lim = [emp.d[occ].min(), emp.d[occ].max()]
+a0.plot(lim, lim, "k-", lw=0.8)
+a0.set(xlabel="empirical D (1/sr)", ylabel=f"{fit.model} fit D (1/sr)", title="every bin with data")
+for sign, colour, name in ((0.0, "C0", "along the alpha_x axis"), (np.pi / 2, "C1", "across it")):
+    sel = occ & ((np.abs(dphi - sign) < 0.15) | (np.abs(np.abs(dphi - sign) - np.pi) < 0.15))
+    a1.errorbar(theta[sel], emp.d[sel], yerr=emp.stderr[sel], fmt=".", color=colour, ms=3, alpha=0.6, label=f"data {name}")
+    t = np.radians(np.linspace(0, max(theta[occ].max(), 1), 300))
+    dirs = np.stack([np.sin(t) * np.cos(phi_axis + sign), np.sin(t) * np.sin(phi_axis + sign), np.cos(t)], axis=1)
+    a1.plot(np.degrees(t), fit.d(dirs), color=colour, lw=1.2)
+a1.set(yscale="log", xlabel="polar angle of m (deg)", ylabel="D (1/sr)", title="slices through the lobe (lines: fit)")
+a1.legend(fontsize=8)
+plt.show()
+"""
+
+PY_ARRAY = r"""
+# numpy in == file in: the same fit from a cropped array as from the `crop` option on the scan.
+ny, nx = scan.shape
+c = f"{nx // 2}x{ny // 2}+{nx // 4}+{ny // 4}"
+from_option = ndfit.fit(scan, model="ggx-aniso", crop=c)
+from_array = ndfit.fit(ndfit.Scan(scan.heights[ny // 4 : ny // 4 + ny // 2, nx // 4 : nx // 4 + nx // 2], dx=scan.dx, dy=scan.dy), model="ggx-aniso")
+print(from_option)
+print(from_array)
+assert from_option.params == from_array.params
+"""
+
+PY_DASK = r"""
+# Every shared real scan, one Dask task per scan on a 2-worker LocalCluster (started and closed here); with a
+# dask.distributed Client or a scheduler address the same call runs on a cluster.
+if HAVE_REAL:
+    files = sorted(os.path.join(SCANS, f) for f in os.listdir(SCANS) if not f.endswith((".json", ".md")))
+    df = fit_many(files, model="auto", n_workers=2)
+    df["path"] = df["path"].map(os.path.basename)
+    assert (df["status"] == "ok").all(), df.loc[df["status"] != "ok", "error"].tolist()
+    show = df[["path", "model", "alpha", "alpha_x", "alpha_y", "theta_z", "theta_x", "theta_y", "verdict", "reduced_chi2"]]
+    print(show.to_string(float_format=lambda v: f"{v:.4g}"))
+    print(df["verdict"].value_counts().to_dict())
+else:
+    print(f"SKIP: {SCANS} absent")
+"""
+
+
+def python_api():
+    cells = [
+        new_markdown_cell(
+            "# `import ndfit`: the Python package\n\n"
+            "The Rust library as a Python module (`pip install .` at the repository root builds it): read a real "
+            "scan, fit it, plot the data against the fit with matplotlib, then fit every shared real scan on a "
+            "Dask LocalCluster into a pandas DataFrame. `ndfit.fit` is the computation of `ndfit fit` "
+            "(`Fit.to_json()` is the document the CLI writes; `python/tests` checks both agree byte for byte)."
+        ),
+        new_code_cell(PY_SETUP.strip()),
+        new_markdown_cell("## A real scan"),
+        new_code_cell(PY_READ.strip()),
+        new_markdown_cell("## The fit (`model=\"auto\"`: the nested models, chosen by the quasi-likelihood BIC)"),
+        new_code_cell(PY_FIT.strip()),
+        new_markdown_cell(
+            "## Data against fit\n\nLeft: every bin's empirical D against the fitted D (on the diagonal when the model "
+            "describes the data). Right: D against the polar angle in two slices, along the fit's alpha_x axis and across it."
+        ),
+        new_code_cell(PY_PLOT.strip()),
+        new_code_cell(PY_ARRAY.strip()),
+        new_markdown_cell("## Many scans on Dask: `ndfit.dask.fit_many`"),
+        new_code_cell(PY_DASK.strip()),
+    ]
+    return cells
+
+
 def write(name, cells):
     nb = new_notebook(cells=cells)
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
@@ -563,3 +699,4 @@ if __name__ == "__main__":
     write("01_tour.ipynb", tour())
     write("02_speed_accuracy.ipynb", speed())
     write("03_scale.ipynb", scale())
+    write("04_python.ipynb", python_api())
