@@ -37,6 +37,13 @@ if [ -f fits/pyproject.toml ]; then
     cargo build --release --locked --bin ndfit 2>&1
   fi
   NDFIT_BIN="${NDFIT:-target/release/ndfit}"
+  # The Python package (`import ndfit`, python/): pip builds the extension with maturin into the same
+  # target/ as cargo above (the dependencies shared with the library are not compiled again), then its
+  # tests compare it with the binary: parity of fits and NDFs, bad input, fit_many against `ndfit batch`.
+  echo "== python: the ndfit package (pip install ./, maturin)"
+  fits/.venv/bin/python -m pip install --quiet "./[test]"
+  echo "== python package tests"
+  NDFIT="$NDFIT_BIN" fits/.venv/bin/python -m pytest -q python/tests
   echo "== cross-check: Rust fits vs numpy + nlopt"
   fits/.venv/bin/python fits/crosscheck.py --ndfit "$NDFIT_BIN"
   echo "== notebooks"

@@ -1,0 +1,140 @@
+"""Type stubs of the compiled core of ndfit (see the docstrings in the module for the details)."""
+
+from os import PathLike
+from typing import Any, Dict, List, Literal, Optional, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+_Path = Union[str, PathLike[str]]
+_Source = Union["Scan", _Path]
+_Form = Literal["none", "plane", "poly2", "poly3", "cylinder"]
+_Model = Literal["auto", "ggx", "ggx-aniso", "beckmann", "beckmann-aniso", "ellipsoid"]
+_Directions = npt.ArrayLike  # shape (n, 3) or (3,)
+
+class NdfitError(Exception):
+    """One line naming the file and the problem; ``kind`` as ``ndfit batch`` names it."""
+
+    kind: str
+
+class Scan:
+    """A heightfield scan in metres (NaN = invalid), read from a file or built from a 2D array."""
+
+    def __init__(self, heights: npt.ArrayLike, dx: float, dy: Optional[float] = None) -> None: ...
+    @property
+    def heights(self) -> npt.NDArray[np.float64]:
+        """(ny, nx) float64, read-only view of the scan's buffer (no copy)."""
+    @property
+    def dx(self) -> float: ...
+    @property
+    def dy(self) -> float: ...
+    @property
+    def nx(self) -> int: ...
+    @property
+    def ny(self) -> int: ...
+    @property
+    def shape(self) -> Tuple[int, int]: ...
+    @property
+    def format(self) -> str: ...
+    @property
+    def path(self) -> Optional[str]: ...
+    @property
+    def invalid(self) -> int: ...
+    @property
+    def meta(self) -> Dict[str, Any]: ...
+
+class Ndf:
+    """The empirical NDF: one entry per bin, empty bins included."""
+
+    @property
+    def m(self) -> npt.NDArray[np.float64]:
+        """(n, 3) unit bin directions."""
+    @property
+    def d(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def stderr(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def count(self) -> npt.NDArray[np.uint64]: ...
+    @property
+    def solid_angle(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def proj_solid_angle(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def n_samples(self) -> int: ...
+    @property
+    def n_skipped(self) -> int: ...
+    @property
+    def normals(self) -> str: ...
+    @property
+    def cells_across(self) -> int: ...
+    @property
+    def warnings(self) -> List[str]: ...
+    def __len__(self) -> int: ...
+
+class Fit:
+    """A fitted model: the ``ndfit.fit/1`` document of ``ndfit fit`` and the model to evaluate."""
+
+    @property
+    def model(self) -> str: ...
+    @property
+    def params(self) -> Dict[str, float]: ...
+    @property
+    def param_names(self) -> List[str]: ...
+    @property
+    def std_errors(self) -> Dict[str, Optional[float]]: ...
+    @property
+    def matrix_a(self) -> Optional[npt.NDArray[np.float64]]: ...
+    @property
+    def quality(self) -> Dict[str, Any]: ...
+    @property
+    def verdict(self) -> str: ...
+    @property
+    def warnings(self) -> List[str]: ...
+    def to_dict(self) -> Dict[str, Any]: ...
+    def to_json(self) -> str: ...
+    @staticmethod
+    def from_json(text: str) -> "Fit": ...
+    def d(self, m: _Directions) -> Union[float, npt.NDArray[np.float64]]: ...
+    def g1(self, u: _Directions, m: _Directions) -> Union[float, npt.NDArray[np.float64]]: ...
+
+def read(
+    path: _Path, *, dx: Optional[float] = None, dy: Optional[float] = None, z_scale: Optional[float] = None, format: Optional[str] = None
+) -> Scan: ...
+def ndf(
+    source: _Source,
+    form: _Form = "plane",
+    *,
+    dx: Optional[float] = None,
+    dy: Optional[float] = None,
+    z_scale: Optional[float] = None,
+    format: Optional[str] = None,
+    crop: Optional[str] = None,
+    subsample: int = 1,
+    normals: Literal["central", "triangles"] = "central",
+    ndf_cells: Optional[int] = None,
+    target_count: Optional[float] = None,
+    threads: Optional[int] = None,
+) -> Ndf: ...
+def fit(
+    source: _Source,
+    model: _Model = "auto",
+    form: _Form = "plane",
+    preset: Optional[Literal["fast", "balanced", "accurate"]] = None,
+    *,
+    dx: Optional[float] = None,
+    dy: Optional[float] = None,
+    z_scale: Optional[float] = None,
+    format: Optional[str] = None,
+    crop: Optional[str] = None,
+    subsample: int = 1,
+    normals: Literal["central", "triangles"] = "central",
+    ndf_cells: Optional[int] = None,
+    target_count: Optional[float] = None,
+    objective: Literal["poisson", "logd"] = "poisson",
+    solver: Literal["lm", "nelder-mead", "lbfgs"] = "lm",
+    extra_starts: int = 0,
+    max_theta: Optional[float] = None,
+    threads: Optional[int] = None,
+) -> Fit: ...
