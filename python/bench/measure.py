@@ -8,8 +8,8 @@
    process, and against a fresh `python -c "import ndfit; ..."` process (interpreter start and import
    included). Median and min of REPEAT runs each, alternated.
 2. Throughput: SCANS synthetic scans of SCAN_SIZE^2, `ndfit batch DIR --jobs 2` against
-   `ndfit.dask.fit_many(paths, n_workers=2)` (a 2-worker LocalCluster started and closed by the call) and
-   against the same call on an already running 2-worker cluster. The rows are checked equal to the batch's.
+   `ndfit.dask.fit_many(paths, n_workers=2)` (a 2-worker LocalCluster started and closed by the call; also
+   with `processes=False`, worker threads) and against the same call on an already running 2-worker cluster. The rows are checked equal to the batch's.
 Needs the `ndfit` binary ($NDFIT or target/release/ndfit) and the package installed (`pip install ./`).
 """
 
@@ -82,6 +82,7 @@ def throughput(ndfit_bin, work, n, size):
     t_batch = timed(lambda: subprocess.run([ndfit_bin, "batch", d, "-o", out, "--jobs", "2"], check=True, capture_output=True))
     res = {}
     t_own = timed(lambda: res.setdefault("own", fit_many(paths, n_workers=2)))
+    t_threads = timed(lambda: res.setdefault("threads", fit_many(paths, n_workers=2, processes=False)))
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, Client(cluster) as client:
         client.run(lambda: __import__("ndfit"))
         t_running = timed(lambda: res.setdefault("running", fit_many(paths, client=client)))
@@ -91,7 +92,7 @@ def throughput(ndfit_bin, work, n, size):
             fit = entries[os.path.basename(row["path"])]["fit"]
             assert row["model"] == fit["model"] and all(row[k] == v for k, v in fit["params"].items())
     print(f"{n} scans of {size}^2, 2 workers (rows equal to the batch's):")
-    for label, t in (("ndfit batch --jobs 2", t_batch), ("fit_many, own LocalCluster", t_own), ("fit_many, running cluster", t_running)):
+    for label, t in (("ndfit batch --jobs 2", t_batch), ("fit_many, own LocalCluster", t_own), ("fit_many, own, processes=False", t_threads), ("fit_many, running cluster", t_running)):
         print(f"  {label:<30} {t:7.2f} s  {n / t:6.2f} scans/s  {100*(t/t_batch-1):+6.1f}% vs batch")
 
 

@@ -98,3 +98,11 @@ def test_fit_many_own_local_cluster_on_real_scans(shared_scans, ndfit_bin, tmp_p
     for p, row in zip(files, df.to_dict("records")):
         f = ndfit.fit(str(p), threads=1)
         assert f.model == row["model"] and all(row[k] == v for k, v in f.params.items())
+
+
+def test_fit_many_worker_threads_equal_batch(batch_dir, ndfit_bin, tmp_path):
+    """processes=False: the LocalCluster's workers are threads of this process; the same rows."""
+    entries = run_batch(ndfit_bin, batch_dir, tmp_path / "out", "--model", "ellipsoid")
+    paths = [str(batch_dir / k) for k in sorted(entries)]
+    df = fit_many(paths, model="ellipsoid", n_workers=2, processes=False)
+    assert_rows_match_batch(df, batch_dir, entries)
