@@ -16,7 +16,9 @@
 
 #![warn(missing_docs)]
 
+#[cfg(feature = "cli")]
 pub mod batch;
+#[cfg(feature = "cli")]
 pub mod bench;
 pub mod budget;
 pub mod error;
@@ -25,6 +27,8 @@ pub mod fit;
 pub mod io;
 pub mod models;
 pub mod ndf;
+pub mod pipeline;
+#[cfg(feature = "plot")]
 pub mod plot;
 pub mod preprocess;
 pub mod scale;
@@ -33,7 +37,9 @@ pub mod stats;
 pub mod synth;
 
 pub use error::{Error, ErrorKind, Result};
-pub use scan::{Heightfield, ScanMeta};
+pub use models::ModelChoice;
+pub use pipeline::{read, Options, Outcome, Pipeline, Preset};
+pub use scan::{Heightfield, Scan, ScanMeta};
 
 /// Old home of the scan type, kept so existing paths compile; the type lives in [`scan`].
 pub mod heightfield {

@@ -31,6 +31,7 @@ mod histogram;
 pub mod lattice;
 pub mod normals;
 pub mod output;
+#[cfg(feature = "plot")]
 pub mod plot;
 pub mod precision;
 pub mod quantum;
@@ -43,7 +44,7 @@ pub use precision::{F32Storage, HeightsF32, Precision};
 pub use quantum::{HeightQuantum, SlopeLattice};
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::Heightfield;
+use crate::scan::Scan;
 pub(crate) use cells::build_bins;
 pub use cells::CHEAP_RULE_EPS;
 use histogram::histogram;
@@ -158,7 +159,7 @@ impl NdfOptions {
 ///
 /// Errors: [`ErrorKind::BadData`] when no stencil is valid (all points masked, or the grid is smaller
 /// than one stencil).
-pub fn empirical_ndf(hf: &Heightfield, opts: &NdfOptions) -> Result<EmpiricalNdf> {
+pub fn empirical_ndf(hf: &Scan, opts: &NdfOptions) -> Result<EmpiricalNdf> {
     ndf_of(hf, opts, || hf.invalid_count())
 }
 
@@ -190,7 +191,7 @@ pub fn empirical_ndf_f32(h: &HeightsF32, opts: &NdfOptions) -> Result<EmpiricalN
 
 /// The NDF with heights stored as `precision` asks: f64 reads `hf` itself; f32 makes the f32 copy
 /// first (time and memory of the copy included; to save memory, build [`HeightsF32`] and drop `hf`).
-pub fn empirical_ndf_with(hf: &Heightfield, opts: &NdfOptions, precision: Precision) -> Result<EmpiricalNdf> {
+pub fn empirical_ndf_with(hf: &Scan, opts: &NdfOptions, precision: Precision) -> Result<EmpiricalNdf> {
     match precision {
         Precision::F64 => empirical_ndf(hf, opts),
         Precision::F32 => empirical_ndf_f32(&HeightsF32::from_heightfield(hf), opts),
