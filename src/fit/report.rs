@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::heightfield::Heightfield;
+use crate::scan::Scan;
 use crate::models::ModelId;
 
 /// The schema id of a fit result.
@@ -35,7 +35,7 @@ pub struct InputInfo {
 
 impl InputInfo {
     /// Describe `hf` read from `path`.
-    pub fn new(path: &Path, hf: &Heightfield) -> InputInfo {
+    pub fn new(path: &Path, hf: &Scan) -> InputInfo {
         InputInfo {
             path: path.display().to_string(),
             format: hf.meta.format.clone(),
@@ -158,7 +158,7 @@ pub struct Candidate {
 pub struct Selection {
     /// The criterion: `qbic` = `F / c + p ln N` (BIC with the quasi-likelihood overdispersion `c`).
     pub criterion: String,
-    /// The overdispersion `c = max(1, reduced_chi2 of the richest model)`.
+    /// The overdispersion `c = max(1, smallest reduced_chi2 among the candidates)` ([`crate::fit::qbic`]).
     pub overdispersion: f64,
     /// Every model fitted, simplest first.
     pub candidates: Vec<Candidate>,
