@@ -62,6 +62,18 @@ def overhead(ndfit_bin, work, size, repeat):
     print(f"one {size}^2 fit ({a['model']}), median of {repeat} (min):")
     for k, label in (("cli", "ndfit fit (process)"), ("py", "ndfit.fit + to_json (in process)"), ("py_proc", "python -c 'import ndfit; ...'")):
         print(f"  {label:<36} {med[k]*1e3:8.1f} ms ({min(runs[k])*1e3:.1f})  {100*(med[k]/med['cli']-1):+6.1f}% vs CLI")
+    # The GIL is released while the library works: two Python threads, each fitting on one thread, against
+    # the same two fits one after the other.
+    import threading
+
+    def two_threads():
+        ts = [threading.Thread(target=lambda: ndfit.fit(scan, threads=1)) for _ in range(2)]
+        [t.start() for t in ts]
+        [t.join() for t in ts]
+
+    seq = statistics.median(timed(lambda: (ndfit.fit(scan, threads=1), ndfit.fit(scan, threads=1))) for _ in range(repeat))
+    par = statistics.median(timed(two_threads) for _ in range(repeat))
+    print(f"  two fits (threads=1 each): one after the other {seq*1e3:.1f} ms, in two Python threads {par*1e3:.1f} ms ({seq/par:.2f}x)")
     return med
 
 

@@ -1,31 +1,28 @@
 //! `ndfit._ndfit`: the Python extension behind `import ndfit`.
 //!
-//! A thin layer over the library: reading, preprocessing, the empirical NDF and the fits are the
-//! library's, in the order and with the options of `ndfit fit` / `ndfit ndf`, so a fit from Python and
-//! one from the command line are the same computation. This file only converts arguments and results,
-//! releases the GIL while the library works, and turns library errors (and panics) into
-//! `ndfit.NdfitError` carrying the library's one-line message (file, then problem).
+//! A thin layer over the library's one pipeline ([`ndfit::Pipeline`]: read -> preprocess -> empirical
+//! NDF -> fit), the one `ndfit fit` runs, so a fit from Python and one from the command line are the same
+//! computation. This file only converts arguments into [`ndfit::Options`] and results into Python
+//! objects, hands numpy arrays to the library without a copy ([`ndfit::Scan::from_view`]), releases the
+//! GIL while the library works, and turns library errors (and panics) into `ndfit.NdfitError` carrying
+//! the library's one-line message (file, then problem).
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::time::Instant;
+use std::path::PathBuf;
 
 use nalgebra::Vector3;
-use ndarray::ArrayView2;
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
-use ndfit::bench::Preset;
-use ndfit::fit::{FitOptions, FitReport, InputInfo, Objective, Solver};
+use ndfit::fit::{FitOptions, FitReport, Objective, Solver};
 use ndfit::io::ReadOptions;
-use ndfit::models::{Model, ModelChoice, Ndf as _};
+use ndfit::models::{Model, Ndf as _};
 use ndfit::ndf::{EmpiricalNdf, NdfOptions, NormalScheme};
 use ndfit::preprocess::{Crop, FormRemoval, Preprocess};
-use ndfit::Heightfield;
+use ndfit::{Heightfield, ModelChoice, Options, Pipeline, Preset};
 
 create_exception!(ndfit, NdfitError, PyException, "A scan that cannot be read, an option out of range, or a fit that failed: one line naming the file and the problem.");
 
@@ -72,18 +69,63 @@ fn work<T: Send>(py: Python<'_>, threads: Option<usize>, f: impl FnOnce() -> ndf
     }
 }
 
+/// Where a [`Scan`]'s heights live.
+enum Held {
+    /// Read from a file (owned, or a view of the file's memory map).
+    File(Heightfield),
+    /// The caller's numpy array (float64, C order, no infinities), viewed without a copy.
+    Array { array: Py<PyArray2<f64>>, dx: f64, dy: f64 },
+}
+
 /// A heightfield scan (metres; NaN marks invalid points), as read from a file or built from an array.
 #[pyclass(module = "ndfit", name = "Scan", frozen)]
 pub struct Scan {
-    hf: Arc<Heightfield>,
+    held: Held,
+    meta: ndfit::ScanMeta,
     path: Option<PathBuf>,
+}
+
+impl Scan {
+    /// The scan as the library's [`ndfit::Scan`], borrowing the heights (no copy) from the file's buffer
+    /// or the caller's array: `f` runs while the borrow (and the array's read-only lock) is held.
+    fn with_scan<R>(&self, py: Python<'_>, f: impl FnOnce(ndfit::Scan<'_>) -> PyResult<R>) -> PyResult<R> {
+        match &self.held {
+            Held::File(hf) => {
+                let mut s = ndfit::Scan::from_view(hf.heights(), hf.dx, hf.dy).map_err(to_py)?;
+                (s.x0, s.y0, s.meta) = (hf.x0, hf.y0, hf.meta.clone());
+                f(s)
+            }
+            Held::Array { array, dx, dy } => {
+                let ro = array.bind(py).try_readonly().map_err(|e| invalid(format!("heights: {e}")))?;
+                let mut s = ndfit::Scan::from_view(ro.as_array(), *dx, *dy).map_err(to_py)?;
+                s.meta = self.meta.clone();
+                f(s)
+            }
+        }
+    }
+
+    fn dims(&self) -> (usize, usize, f64, f64) {
+        match &self.held {
+            Held::File(hf) => (hf.nx, hf.ny, hf.dx, hf.dy),
+            Held::Array { array, dx, dy } => {
+                let sh = Python::attach(|py| array.bind(py).shape().to_vec());
+                (sh[1], sh[0], *dx, *dy)
+            }
+        }
+    }
+
+    /// The label of results and errors: the file's path, or `<array>`.
+    fn label(&self) -> String {
+        self.path.as_ref().map_or(ARRAY_LABEL.to_string(), |p| p.display().to_string())
+    }
 }
 
 #[pymethods]
 impl Scan {
     /// `Scan(heights, dx, dy=None)`: a scan from a 2D array of heights in metres, shape (ny, nx), row
     /// index along +y and column along +x; NaN (or an infinity) marks an invalid point. `dy` defaults to
-    /// `dx`. The heights are copied once into the scan.
+    /// `dx`. A float64 C-ordered array without infinities is used in place, not copied: do not write to it
+    /// while a fit of the scan runs. Any other array is converted once.
     #[new]
     #[pyo3(signature = (heights, dx, dy=None))]
     fn new(py: Python<'_>, heights: &Bound<'_, PyAny>, dx: f64, dy: Option<f64>) -> PyResult<Scan> {
@@ -92,24 +134,40 @@ impl Scan {
         if ndim != 2 {
             return Err(invalid(format!("heights must be a 2D array (ny, nx), got {ndim} dimensions")));
         }
-        let arr: PyReadonlyArray2<'_, f64> = arr.extract()?;
-        let (ny, nx) = (arr.shape()[0], arr.shape()[1]);
-        let z = arr.as_slice().map(|s| s.to_vec()).unwrap_or_else(|_| arr.as_array().iter().copied().collect());
-        let mut hf = Heightfield::new(nx, ny, dx, dy.unwrap_or(dx), z).map_err(to_py)?;
-        hf.meta.format = "array".into();
-        Ok(Scan { hf: Arc::new(hf), path: None })
+        let array = arr.cast_into::<PyArray2<f64>>().map_err(|e| invalid(format!("heights: {e}")))?;
+        let dy = dy.unwrap_or(dx);
+        let meta = ndfit::ScanMeta { format: "array".into(), ..Default::default() };
+        let held = {
+            let ro = array.try_readonly().map_err(|e| invalid(format!("heights: {e}")))?;
+            let s = ndfit::Scan::from_view(ro.as_array(), dx, dy).map_err(to_py)?;
+            // Infinities are masked to NaN in a copy (the caller's array is never written): keep that copy.
+            if s.z.is_borrowed() { None } else { Some(s.into_owned()) }
+        };
+        let held = match held {
+            None => Held::Array { array: array.unbind(), dx, dy },
+            Some(mut hf) => {
+                hf.meta = meta.clone();
+                Held::File(hf)
+            }
+        };
+        Ok(Scan { held, meta, path: None })
     }
 
     /// The heights in metres, shape (ny, nx), float64, NaN where invalid: a read-only view of the scan's
-    /// own buffer (for a float64 `.npy` file in metres, of the file's memory map), not a copy.
+    /// own buffer (for a float64 `.npy` file in metres, of the file's memory map; for a scan built from a
+    /// float64 array, of that array), not a copy.
     #[getter]
-    fn heights<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let hf = &slf.get().hf;
-        let view = ArrayView2::from_shape((hf.ny, hf.nx), &hf.z[..]).map_err(|e| invalid(e.to_string()))?;
-        // SAFETY: the scan is immutable (frozen) and owns `hf` through an Arc that lives as long as the
-        // scan object, which becomes the array's base: the buffer outlives the array and never moves.
-        let arr = unsafe { PyArray2::borrow_from_array(&view, slf.clone().into_any()) };
-        let kw = PyDict::new(slf.py());
+    fn heights<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {
+        let py = slf.py();
+        let arr = match &slf.get().held {
+            Held::File(hf) => {
+                // SAFETY: the scan is immutable (frozen) and owns `hf`, which lives as long as the scan
+                // object, the array's base: the buffer outlives the array and never moves.
+                unsafe { PyArray2::borrow_from_array(&hf.heights(), slf.clone().into_any()) }.into_any()
+            }
+            Held::Array { array, .. } => array.bind(py).call_method0("view")?,
+        };
+        let kw = PyDict::new(py);
         kw.set_item("write", false)?;
         arr.call_method("setflags", (), Some(&kw))?;
         Ok(arr)
@@ -118,37 +176,38 @@ impl Scan {
     /// Spacing along x in metres.
     #[getter]
     fn dx(&self) -> f64 {
-        self.hf.dx
+        self.dims().2
     }
 
     /// Spacing along y in metres.
     #[getter]
     fn dy(&self) -> f64 {
-        self.hf.dy
+        self.dims().3
     }
 
     /// Columns (samples along x).
     #[getter]
     fn nx(&self) -> usize {
-        self.hf.nx
+        self.dims().0
     }
 
     /// Rows (samples along y).
     #[getter]
     fn ny(&self) -> usize {
-        self.hf.ny
+        self.dims().1
     }
 
     /// `(ny, nx)`, the shape of `heights`.
     #[getter]
     fn shape(&self) -> (usize, usize) {
-        (self.hf.ny, self.hf.nx)
+        let (nx, ny, _, _) = self.dims();
+        (ny, nx)
     }
 
     /// The format id (`x3p`, `plu`, `npy`, ...; `array` for a scan built from an array).
     #[getter]
     fn format(&self) -> String {
-        self.hf.meta.format.clone()
+        self.meta.format.clone()
     }
 
     /// The file the scan was read from (None for an array).
@@ -159,20 +218,20 @@ impl Scan {
 
     /// Number of invalid (NaN) points.
     #[getter]
-    fn invalid(&self) -> usize {
-        self.hf.invalid_count()
+    fn invalid(&self, py: Python<'_>) -> PyResult<usize> {
+        self.with_scan(py, |s| Ok(s.invalid_count()))
     }
 
     /// What the reader learned besides the heights: `format`, `file_z_unit`, `file_xy_unit`,
     /// `instrument` (dict of text), and when known `height_quantum` (m) and `file_grid` ([nx, ny]).
     #[getter]
     fn meta<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        json_to_py(py, &serde_json::to_string(&self.hf.meta).map_err(|e| invalid(e.to_string()))?)
+        json_to_py(py, &serde_json::to_string(&self.meta).map_err(|e| invalid(e.to_string()))?)
     }
 
     fn __repr__(&self) -> String {
-        let src = self.path.as_ref().map_or(ARRAY_LABEL.to_string(), |p| p.display().to_string());
-        format!("Scan({src}, {} x {}, dx={:e} m, dy={:e} m, format={})", self.hf.nx, self.hf.ny, self.hf.dx, self.hf.dy, self.hf.meta.format)
+        let (nx, ny, dx, dy) = self.dims();
+        format!("Scan({}, {nx} x {ny}, dx={dx:e} m, dy={dy:e} m, format={})", self.label(), self.meta.format)
     }
 }
 
@@ -182,16 +241,15 @@ fn json_to_py<'py>(py: Python<'py>, text: &str) -> PyResult<Bound<'py, PyAny>> {
 }
 
 /// What to fit or bin: a file, or a scan already in memory.
-enum Source {
+enum Source<'py> {
     File(PathBuf),
-    Scan(Arc<Heightfield>, Option<PathBuf>),
+    Scan(Bound<'py, Scan>),
 }
 
-impl Source {
-    fn from_py(obj: &Bound<'_, PyAny>) -> PyResult<Source> {
+impl<'py> Source<'py> {
+    fn from_py(obj: &Bound<'py, PyAny>) -> PyResult<Source<'py>> {
         if let Ok(s) = obj.cast::<Scan>() {
-            let s = s.get();
-            return Ok(Source::Scan(s.hf.clone(), s.path.clone()));
+            return Ok(Source::Scan(s.clone()));
         }
         obj.extract::<PathBuf>().map(Source::File).map_err(|_| {
             let ty = obj.get_type().name().map(|n| n.to_string()).unwrap_or_default();
@@ -199,29 +257,20 @@ impl Source {
         })
     }
 
-    /// The path written into results (`input.path`), as given.
-    fn label(&self) -> PathBuf {
+    /// Run `f` on the pipeline's input: the file's path, or the scan (borrowed) and its label.
+    fn run<R: Send>(
+        &self,
+        py: Python<'py>,
+        threads: Option<usize>,
+        on_file: impl FnOnce(&std::path::Path) -> ndfit::Result<R> + Send,
+        on_scan: impl FnOnce(ndfit::Scan<'_>, &str) -> ndfit::Result<R> + Send,
+    ) -> PyResult<R> {
         match self {
-            Source::File(p) | Source::Scan(_, Some(p)) => p.clone(),
-            Source::Scan(_, None) => PathBuf::from(ARRAY_LABEL),
-        }
-    }
-
-    /// Read (files) and preprocess, keeping every `extra`-th of the points `pre.subsample` keeps, as
-    /// `ndfit fit` does: without a crop a file's subsampled points are all that is read.
-    fn load(&self, read: &ReadOptions, pre: &Preprocess, extra: usize) -> ndfit::Result<Heightfield> {
-        let pre = Preprocess { subsample: pre.subsample.saturating_mul(extra.max(1)), ..pre.clone() };
-        match self {
-            Source::File(p) => {
-                if pre.crop.is_none() && pre.subsample > 1 {
-                    let hf = ndfit::io::read_scan_subsampled(p, read, pre.subsample)?;
-                    ndfit::preprocess::apply(hf, &Preprocess { subsample: 1, ..pre }).map_err(|e| e.with_path(p))
-                } else {
-                    let hf = ndfit::io::read_scan(p, read)?;
-                    ndfit::preprocess::apply(hf, &pre).map_err(|e| e.with_path(p))
-                }
+            Source::File(p) => work(py, threads, || on_file(p)),
+            Source::Scan(s) => {
+                let label = s.get().label();
+                s.get().with_scan(py, |scan| work(py, threads, move || on_scan(scan, &label)))
             }
-            Source::Scan(hf, _) => ndfit::preprocess::apply((**hf).clone(), &pre).map_err(|e| e.with_path(self.label())),
         }
     }
 }
@@ -294,9 +343,8 @@ fn parse_preset(s: Option<&str>) -> PyResult<Option<Preset>> {
 #[pyo3(signature = (path, *, dx=None, dy=None, z_scale=None, format=None))]
 fn read(py: Python<'_>, path: PathBuf, dx: Option<f64>, dy: Option<f64>, z_scale: Option<f64>, format: Option<String>) -> PyResult<Scan> {
     let opts = ReadOptions { dx, dy, z_scale, format };
-    let p = path.clone();
-    let hf = work(py, None, move || ndfit::io::read_scan(&p, &opts))?;
-    Ok(Scan { hf: Arc::new(hf), path: Some(path) })
+    let hf = work(py, None, || ndfit::read(&path, &opts))?;
+    Ok(Scan { meta: hf.meta.clone(), held: Held::File(hf), path: Some(path) })
 }
 
 /// The empirical NDF of a scan (the bins of `ndfit ndf`, empty ones included).
@@ -403,13 +451,19 @@ fn ndf(
 ) -> PyResult<Ndf> {
     let src = Source::from_py(source)?;
     let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample)?;
-    let opts = ndf_options(normals, ndf_cells, target_count)?;
-    let label = src.label();
-    let ndf = work(py, threads, || {
-        let hf = src.load(&so.read, &so.pre, 1)?;
-        ndfit::ndf::empirical_ndf(&hf, &opts).map_err(|e| e.with_path(src.label()))
-    })?;
-    Ok(Ndf { ndf, path: label.display().to_string() })
+    let ndf = ndf_options(normals, ndf_cells, target_count)?;
+    let pipeline = Pipeline::new(Options { read: so.read, preprocess: so.pre, ndf, ..Options::default() });
+    let label = match &src {
+        Source::File(p) => p.display().to_string(),
+        Source::Scan(s) => s.get().label(),
+    };
+    let ndf = src.run(
+        py,
+        threads,
+        |p| pipeline.ndf_path(p).map(|(_, ndf)| ndf),
+        |scan, label| pipeline.ndf(scan).map_err(|e| e.with_path(label)),
+    )?;
+    Ok(Ndf { ndf, path: label })
 }
 
 /// A fitted model: the `ndfit.fit/1` document of `ndfit fit`, and the model to evaluate.
@@ -584,9 +638,9 @@ fn fit(
 ) -> PyResult<Fit> {
     let src = Source::from_py(source)?;
     let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample)?;
-    let mut ndf_opts = ndf_options(normals, ndf_cells, target_count)?;
+    let ndf = ndf_options(normals, ndf_cells, target_count)?;
     let max_theta = max_theta.unwrap_or(ndfit::fit::objective::DEFAULT_MAX_THETA_DEG);
-    let mut opts = FitOptions {
+    let fit = FitOptions {
         objective: objective.parse::<Objective>().map_err(|e| invalid(format!("objective: {}", e.message())))?,
         solver: solver.parse::<Solver>().map_err(|e| invalid(format!("solver: {}", e.message())))?,
         extra_starts,
@@ -599,37 +653,11 @@ fn fit(
     if !(max_theta > 0.0 && max_theta <= 90.0) {
         return Err(invalid(format!("max_theta {max_theta} must be in (0, 90] degrees")));
     }
-    let model = match model.parse::<ModelChoice>().map_err(|e| invalid(format!("model: {}", e.message())))? {
-        ModelChoice::Auto => None,
-        ModelChoice::Model(id) => Some(id),
-    };
+    let model = model.parse::<ModelChoice>().map_err(|e| invalid(format!("model: {}", e.message())))?;
     let preset = parse_preset(preset)?;
-    let report = work(py, threads, move || {
-        let path = src.label();
-        let t0 = Instant::now();
-        let hf = src.load(&so.read, &so.pre, preset.map_or(1, |p| p.stride()))?;
-        if let Some(p) = preset {
-            // The preset's knobs, as `ndfit fit --preset`; an explicit ndf_cells still wins.
-            let po = p.ndf_options(if p.needs_sample_count() { hf.valid_count() as u64 } else { 0 });
-            ndf_opts = NdfOptions { cells_across: ndf_cells.or(po.cells_across), ..po };
-            let pf = p.fit_options();
-            opts.tolerances = pf.tolerances;
-            opts.extra_starts = opts.extra_starts.max(pf.extra_starts);
-        }
-        let t1 = Instant::now();
-        let ndf = ndfit::ndf::empirical_ndf(&hf, &ndf_opts).map_err(|e| e.with_path(&path))?;
-        let t2 = Instant::now();
-        let result = match model {
-            Some(id) => ndfit::fit::fit_model(&ndf, id, &opts),
-            None => ndfit::fit::fit_auto(&ndf, &opts),
-        };
-        let mut report = result.map_err(|e| e.with_path(&path))?;
-        report.input = Some(InputInfo::new(Path::new(&path), &hf));
-        report.timings.read_ms = Some((t1 - t0).as_secs_f64() * 1e3);
-        report.timings.ndf_ms = Some((t2 - t1).as_secs_f64() * 1e3);
-        Ok(report)
-    })?;
-    Fit::from_report(report)
+    let pipeline = Pipeline::new(Options { read: so.read, preprocess: so.pre, preset, ndf, model, fit });
+    let outcome = src.run(py, threads, |p| pipeline.run_path(p), |scan, label| pipeline.run(scan, label))?;
+    Fit::from_report(outcome.fit)
 }
 
 /// The compiled part of `ndfit`; import `ndfit`, not this.

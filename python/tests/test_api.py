@@ -70,6 +70,26 @@ def test_heights_are_the_scan_buffer_not_a_copy(tmp_path):
     np.testing.assert_array_equal(a, h)
 
 
+def test_a_float64_array_is_used_in_place():
+    """Scan over a C-ordered float64 array: no copy in, none out; other arrays are converted once, and
+    infinities are masked in a copy (the caller's array is never written)."""
+    h = np.linspace(0, 1e-6, 64 * 48).reshape(48, 64)
+    s = ndfit.Scan(h, dx=1e-6)
+    assert np.shares_memory(s.heights, h) and not s.heights.flags.writeable
+    assert s.shape == (48, 64) and s.format == "array" and s.path is None
+    f32 = ndfit.Scan(h.astype(np.float32), dx=1e-6)
+    assert not np.shares_memory(f32.heights, h)
+    g = h.copy()
+    g[3, 4] = np.inf
+    si = ndfit.Scan(g, dx=1e-6)
+    assert not np.shares_memory(si.heights, g) and np.isinf(g[3, 4]) and np.isnan(si.heights[3, 4])
+    assert si.invalid == 1 and ndfit.Scan(h, dx=1e-6).invalid == 0
+    # The masked copy fits as the array with NaN in place of the infinity.
+    g2 = g.copy()
+    g2[3, 4] = np.nan
+    assert ndfit.fit(si, model="ggx", form="none").params == ndfit.fit(ndfit.Scan(g2, dx=1e-6), model="ggx", form="none").params
+
+
 def test_read_x3p_meta_and_spacing(synth_dir):
     s = ndfit.read(str(synth_dir / "gauss_holes.x3p"))
     assert (s.nx, s.ny) == (200, 220)
