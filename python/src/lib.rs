@@ -366,7 +366,7 @@ impl Ndf {
     #[getter]
     fn m<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let flat: Vec<f64> = self.ndf.bins.iter().flat_map(|b| [b.m.x, b.m.y, b.m.z]).collect();
-        Ok(flat.into_pyarray(py).reshape([self.ndf.bins.len(), 3])?)
+        flat.into_pyarray(py).reshape([self.ndf.bins.len(), 3])
     }
     /// D per bin (1/sr): the projected-area fraction in the bin over its projected solid angle.
     #[getter]
@@ -523,7 +523,7 @@ impl Fit {
     /// for Beckmann.
     #[getter]
     fn matrix_a<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        self.report.matrix_a.map(|a| Ok(a.iter().flatten().copied().collect::<Vec<f64>>().into_pyarray(py).reshape([3, 3])?)).transpose()
+        self.report.matrix_a.map(|a| a.iter().flatten().copied().collect::<Vec<f64>>().into_pyarray(py).reshape([3, 3])).transpose()
     }
     /// Goodness of fit (the JSON's `quality`): objective, reduced_chi2, delta_data, dispersion, verdict
     /// (ok|misfit|unresolved) and its reasons, ...
