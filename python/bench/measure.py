@@ -62,9 +62,25 @@ def overhead(ndfit_bin, work, size, repeat):
     print(f"one {size}^2 fit ({a['model']}), median of {repeat} (min):")
     for k, label in (("cli", "ndfit fit (process)"), ("py", "ndfit.fit + to_json (in process)"), ("py_proc", "python -c 'import ndfit; ...'")):
         print(f"  {label:<36} {med[k]*1e3:8.1f} ms ({min(runs[k])*1e3:.1f})  {100*(med[k]/med['cli']-1):+6.1f}% vs CLI")
-    # The GIL is released while the library works: two Python threads, each fitting on one thread, against
-    # the same two fits one after the other.
+    # The GIL is released while the library works: a pure-Python thread keeps counting during a fit (with
+    # the GIL held it could not run at all), and two Python threads fitting at once against one after the
+    # other (only faster when a second core is free).
     import threading
+
+    count, stop = [0], threading.Event()
+
+    def counter():
+        while not stop.is_set():
+            count[0] += 1
+
+    t = threading.Thread(target=counter)
+    t.start()
+    before = count[0]
+    dt = timed(lambda: ndfit.fit(scan, threads=1))
+    during = count[0] - before
+    stop.set()
+    t.join()
+    print(f"  a Python thread counted to {during} during one {dt*1e3:.0f} ms fit (GIL released)")
 
     def two_threads():
         ts = [threading.Thread(target=lambda: ndfit.fit(scan, threads=1)) for _ in range(2)]
