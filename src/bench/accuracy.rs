@@ -50,6 +50,8 @@ pub fn param_errors(fit: &Model, truth: &Model) -> Option<(f64, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ndf::SlopeFrame;
+    use nalgebra::Vector3;
 
     /// The nodes cover the hemisphere: `sum W = pi` (the projected solid angle of the hemisphere,
     /// closed form), to the quadrature accuracy of the NDF's bins (Gauss-Legendre, ~1e-9 here).

@@ -392,7 +392,7 @@ mod tests {
     use super::*;
 
     /// The cost of the smaller frame subsample (2^15 instead of 2^17 normals): on the 1024^2 ellipsoid of
-    /// the issue-8 sweep the robust scales from 2^15 and from every normal differ by less than four
+    /// the benchmark sweep the robust scales from 2^15 and from every normal differ by less than four
     /// standard errors of an IQR scale from 2^15 independent samples (4 x 1.17 / sqrt(2^15) = 2.6%; a
     /// regular sub-grid of a smooth surface does better), and the centre by less than 2.6% of the scale.
     #[test]

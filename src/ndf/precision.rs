@@ -1,4 +1,4 @@
-//! f32 storage of the heights for the NDF pass (issue 8's "f32 versus f64 storage" knob).
+//! f32 storage of the heights for the NDF pass (the benchmark's "f32 versus f64 storage" knob).
 //!
 //! The heights are stored as `f32(h - mean)`, the mean of the valid heights taken in f64 first: a
 //! constant offset (0.5 m of stage height over 100 nm of detail) would otherwise leave the detail in

@@ -196,3 +196,60 @@ pub fn fit(ndf: &EmpiricalNdf, model: ModelChoice, opts: &FitOptions) -> Result<
         ModelChoice::Model(id) => crate::fit::fit_model(ndf, id, opts),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::models::ModelId;
+    use crate::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
+
+    fn surface() -> Heightfield {
+        let p = EllipsoidParams { alpha_x: 0.3, alpha_y: 0.15, theta_z: 0.4, ..Default::default() };
+        ellipsoid_surface(&SynthSettings { nx: 192, ny: 192, ..Default::default() }, &p).expect("valid").0
+    }
+
+    /// The pipeline against the stages assembled by hand (plane removal, `empirical_ndf`, `fit_model`):
+    /// the same bins and the same parameters, bit for bit, from a scan in memory and from the same scan
+    /// written to a file; the report's `input` is filled in.
+    #[test]
+    fn pipeline_equals_the_stages_by_hand_in_memory_and_from_a_file() {
+        let hf = surface();
+        let opts = Options { model: ModelChoice::Model(ModelId::GgxAniso), ..Options::default() };
+        let by_hand = {
+            let pre = crate::preprocess::apply(hf.clone(), &Preprocess::default()).expect("plane");
+            let ndf = crate::ndf::empirical_ndf(&pre, &NdfOptions::default()).expect("ndf");
+            let fit = crate::fit::fit_model(&ndf, ModelId::GgxAniso, &FitOptions::default()).expect("fit");
+            (ndf, fit)
+        };
+        let heights = hf.heights().to_owned();
+        let mem = Pipeline::new(opts.clone()).run(Scan::from_view(heights.view(), hf.dx, hf.dy).expect("view"), "mem").expect("run");
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("s.x3p");
+        crate::io::write_x3p(&path, &hf).expect("write");
+        let file = Pipeline::new(opts).run_path(&path).expect("run_path");
+        for o in [&mem, &file] {
+            assert_eq!(o.ndf.bins, by_hand.0.bins);
+            assert_eq!(o.fit.params, by_hand.1.params);
+        }
+        let input = file.fit.input.as_ref().expect("input");
+        assert_eq!((input.nx, input.ny, input.path.as_str()), (192, 192, path.to_str().expect("utf-8")));
+        assert_eq!(mem.fit.input.as_ref().expect("input").path, "mem");
+        assert!(file.fit.timings.read_ms.is_some() && file.fit.timings.ndf_ms.is_some());
+    }
+
+    /// A preset: its stride subsamples (a quarter of the points along each axis for `fast`), its fit
+    /// options apply, and an explicit grid size wins over its binning.
+    #[test]
+    fn presets_set_stride_binning_and_tolerance() {
+        let o = Options { preset: Some(Preset::Fast), ndf: NdfOptions { cells_across: Some(31), ..NdfOptions::default() }, ..Options::default() };
+        assert_eq!(o.preprocess().subsample, preset::FAST_STRIDE);
+        assert_eq!(o.fit_options().tolerances, Preset::Fast.fit_options().tolerances);
+        let hf = surface();
+        assert_eq!(o.ndf_options(&hf).cells_across, Some(31));
+        let ndf = Pipeline::new(o).ndf(hf).expect("ndf");
+        assert_eq!(ndf.grid.n, 31);
+        assert_eq!(ndf.n_samples + ndf.n_skipped, 46 * 46, "central-difference stencils of the 48 x 48 subsample");
+        let none = Options::default();
+        assert_eq!((none.preprocess(), none.fit_options()), (Preprocess::default(), FitOptions::default()));
+    }
+}

@@ -404,6 +404,7 @@ pub fn remove_cylinder(hf: &Scan) -> Result<CylinderFit> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scan::Heightfield;
 
     /// The plane path (`plane_residual`) gives the residuals of the general term loop to rounding: on a
     /// 76 mm stage height under a tilted plane and sub-micrometre roughness, with holes, on grids whose

@@ -1,9 +1,8 @@
-//! The heights of a [`super::Heightfield`]: an owned buffer, or a read-only view of a
-//! memory-mapped file whose bytes already are the heights (zero-copy read, issue 8).
+//! The heights of a [`super::Scan`]: an owned buffer, a read-only view of a memory-mapped file whose
+//! bytes already are the heights (zero-copy read), or the caller's borrowed slice.
 //!
-//! A 4096^2 float64 NPY is 128 MiB. Copying it costs a kernel zero-fill of the fresh buffer plus the copy
-//! itself, most of the read time measured before this type existed (perf: `clear_page_erms` 26% and the
-//! copy 10% of read + NDF). When the file stores native little-endian float64 in row-major order, in
+//! A 4096^2 float64 NPY is 128 MiB; copying it costs a kernel zero-fill of the fresh buffer plus the copy
+//! itself, most of the read time (figures in docs/PERFORMANCE.md). When the file stores native little-endian float64 in row-major order, in
 //! metres, 8-byte aligned and free of infinities, the heights are the mapped bytes: [`Heights`] derefs to
 //! them directly. The first mutable access (form removal, masking) copies them into an owned buffer, so
 //! every stage that edits heights works as before and the file is never written.
@@ -149,8 +148,8 @@ impl std::fmt::Debug for Heights<'_> {
 // transparent huge pages when the kernel allows them on request (`enabled = madvise`).
 //
 // A fresh 128 MiB `Vec` is zeroed by the kernel one 4 KiB page at a time on first write (32768 page
-// faults for a 4096^2 float64 scan, ~75% of the read time measured before this module existed);
-// with `MADV_HUGEPAGE` the same buffer takes 64 faults of 2 MiB. This is what makes numpy's `np.load`
+// faults for a 4096^2 float64 scan, most of the read time; docs/PERFORMANCE.md); with `MADV_HUGEPAGE`
+// the same buffer takes 64 faults of 2 MiB. This is what makes numpy's `np.load`
 // fast on the same machine. The advice changes neither contents nor validity of the memory: where
 // huge pages are unavailable or disabled the kernel silently uses 4 KiB pages.
 

@@ -164,3 +164,47 @@ impl Scan<'_> {
         self.z.len() - self.invalid_count()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A standard-layout view is borrowed in place (the scan's heights are the array's memory), reads
+    /// back the same values through `heights()`, and is copied only when written or made owned.
+    #[test]
+    fn views_are_borrowed_without_a_copy_and_copied_on_write() {
+        let a = ndarray::Array2::from_shape_fn((3, 4), |(i, j)| (10 * i + j) as f64 * 1e-9);
+        let mut s = Scan::from_view(a.view(), 1e-6, 2e-6).expect("valid");
+        assert!(s.z.is_borrowed());
+        assert_eq!(s.z.as_ptr(), a.as_ptr(), "no copy");
+        assert_eq!((s.nx, s.ny, s.dx, s.dy), (4, 3, 1e-6, 2e-6));
+        assert_eq!(s.at(2, 1), a[[2, 1]]);
+        assert_eq!(s.row(2), a.row(2).as_slice().expect("contiguous row"));
+        assert_eq!(s.heights(), a.view());
+        let owned = s.clone().into_owned();
+        assert!(!owned.z.is_borrowed() && owned.z.as_ptr() != a.as_ptr());
+        assert_eq!(owned.heights(), a.view());
+        s.z[0] = 5.0;
+        assert!(!s.z.is_borrowed());
+        assert_eq!(a[[0, 0]], 0.0, "the caller's array is never written");
+    }
+
+    /// A transposed view is not row-major: it is copied in its logical order (row `i` of the view is
+    /// row `i` of the scan); infinities are masked to NaN as every reader masks them; bad spacing and
+    /// empty grids are refused like [`Heightfield::new`] refuses them.
+    #[test]
+    fn other_layouts_are_copied_and_checked() {
+        let a = ndarray::Array2::from_shape_fn((3, 4), |(i, j)| (10 * i + j) as f64);
+        let t = a.t();
+        let s = Scan::from_view(t, 1.0, 1.0).expect("valid");
+        assert!(!s.z.is_borrowed());
+        assert_eq!((s.nx, s.ny), (3, 4));
+        assert_eq!(s.heights(), t);
+        let mut b = a.clone();
+        b[[1, 2]] = f64::INFINITY;
+        let s = Scan::from_view(b.view(), 1.0, 1.0).expect("valid");
+        assert!(s.at(1, 2).is_nan() && s.invalid_count() == 1 && b[[1, 2]].is_infinite());
+        assert!(Scan::from_view(a.view(), 0.0, 1.0).is_err());
+        assert!(Scan::from_view(ndarray::Array2::<f64>::zeros((0, 4)).view(), 1.0, 1.0).is_err());
+    }
+}
