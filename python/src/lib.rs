@@ -24,7 +24,12 @@ use ndfit::ndf::{EmpiricalNdf, NdfOptions, NormalScheme};
 use ndfit::preprocess::{Crop, FormRemoval, Preprocess};
 use ndfit::{Heightfield, ModelChoice, Options, Pipeline, Preset};
 
-create_exception!(ndfit, NdfitError, PyException, "A scan that cannot be read, an option out of range, or a fit that failed: one line naming the file and the problem.");
+create_exception!(
+    ndfit,
+    NdfitError,
+    PyException,
+    "A scan that cannot be read, an option out of range, or a fit that failed: one line naming the file and the problem."
+);
 
 /// The label a scan built from an array carries where a file would give its path (`input.path`).
 const ARRAY_LABEL: &str = "<array>";
@@ -52,7 +57,9 @@ fn work<T: Send>(py: Python<'_>, threads: Option<usize>, f: impl FnOnce() -> ndf
     let pool = match threads {
         None => None,
         Some(0) => return Err(invalid("threads must be at least 1")),
-        Some(n) => Some(rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| invalid(format!("cannot start {n} threads: {e}")))?),
+        Some(n) => {
+            Some(rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| invalid(format!("cannot start {n} threads: {e}")))?)
+        }
     };
     let r = py.detach(|| {
         catch_unwind(AssertUnwindSafe(|| match &pool {
@@ -129,7 +136,10 @@ impl Scan {
     #[new]
     #[pyo3(signature = (heights, dx, dy=None))]
     fn new(py: Python<'_>, heights: &Bound<'_, PyAny>, dx: f64, dy: Option<f64>) -> PyResult<Scan> {
-        let arr = py.import("numpy")?.call_method1("ascontiguousarray", (heights, "float64")).map_err(|e| invalid(format!("heights: not an array of numbers ({e})")))?;
+        let arr = py
+            .import("numpy")?
+            .call_method1("ascontiguousarray", (heights, "float64"))
+            .map_err(|e| invalid(format!("heights: not an array of numbers ({e})")))?;
         let ndim: usize = arr.getattr("ndim")?.extract()?;
         if ndim != 2 {
             return Err(invalid(format!("heights must be a 2D array (ny, nx), got {ndim} dimensions")));
@@ -141,7 +151,11 @@ impl Scan {
             let ro = array.try_readonly().map_err(|e| invalid(format!("heights: {e}")))?;
             let s = ndfit::Scan::from_view(ro.as_array(), dx, dy).map_err(to_py)?;
             // Infinities are masked to NaN in a copy (the caller's array is never written): keep that copy.
-            if s.z.is_borrowed() { None } else { Some(s.into_owned()) }
+            if s.z.is_borrowed() {
+                None
+            } else {
+                Some(s.into_owned())
+            }
         };
         let held = match held {
             None => Held::Array { array: array.unbind(), dx, dy },
@@ -283,7 +297,16 @@ struct ScanOpts {
 
 impl ScanOpts {
     #[allow(clippy::too_many_arguments)]
-    fn new(src: &Source, dx: Option<f64>, dy: Option<f64>, z_scale: Option<f64>, format: Option<String>, form: &str, crop: Option<&str>, subsample: usize) -> PyResult<ScanOpts> {
+    fn new(
+        src: &Source,
+        dx: Option<f64>,
+        dy: Option<f64>,
+        z_scale: Option<f64>,
+        format: Option<String>,
+        form: &str,
+        crop: Option<&str>,
+        subsample: usize,
+    ) -> PyResult<ScanOpts> {
         let read = ReadOptions { dx, dy, z_scale, format };
         if matches!(src, Source::Scan(..)) && (read.dx.is_some() || read.dy.is_some() || read.z_scale.is_some() || read.format.is_some()) {
             return Err(invalid("dx, dy, z_scale and format apply to reading a file; this scan is already read"));
@@ -331,8 +354,13 @@ fn ndf_options(normals: &str, ndf_cells: Option<usize>, target_count: Option<f64
 }
 
 fn parse_preset(s: Option<&str>) -> PyResult<Option<Preset>> {
-    s.map(|s| Preset::ALL.into_iter().find(|p| p.as_str() == s).ok_or_else(|| invalid(format!("preset: unknown preset {s:?}: use fast, balanced or accurate"))))
-        .transpose()
+    s.map(|s| {
+        Preset::ALL
+            .into_iter()
+            .find(|p| p.as_str() == s)
+            .ok_or_else(|| invalid(format!("preset: unknown preset {s:?}: use fast, balanced or accurate")))
+    })
+    .transpose()
 }
 
 /// `ndfit.read(path, dx=None, dy=None, z_scale=None, format=None) -> Scan`: read a scan file as stored
@@ -482,7 +510,10 @@ impl Fit {
 
 /// `(n, 3)` directions from an array-like of shape (n, 3) or (3,), and whether it was a single vector.
 fn directions(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<Vector3<f64>>, bool)> {
-    let arr = py.import("numpy")?.call_method1("ascontiguousarray", (obj, "float64")).map_err(|e| invalid(format!("{name}: not an array of numbers ({e})")))?;
+    let arr = py
+        .import("numpy")?
+        .call_method1("ascontiguousarray", (obj, "float64"))
+        .map_err(|e| invalid(format!("{name}: not an array of numbers ({e})")))?;
     let shape: Vec<usize> = arr.getattr("shape")?.extract()?;
     let single = match shape.as_slice() {
         [3] => true,
@@ -584,7 +615,13 @@ impl Fit {
         Ok((ctor, PyTuple::new(slf.py(), [slf.get().to_json()?])?))
     }
     fn __repr__(&self) -> String {
-        let p: Vec<String> = self.report.model.param_names().iter().map(|n| format!("{n}={:.6}", self.report.params.get(*n).copied().unwrap_or(f64::NAN))).collect();
+        let p: Vec<String> = self
+            .report
+            .model
+            .param_names()
+            .iter()
+            .map(|n| format!("{n}={:.6}", self.report.params.get(*n).copied().unwrap_or(f64::NAN)))
+            .collect();
         format!("Fit({} {}, verdict {})", self.report.model, p.join(" "), self.report.quality.verdict.as_str())
     }
 }
