@@ -292,6 +292,8 @@ fn exact_lobe(model: &Model) -> Option<RendererLobe> {
             let [ax, ay, tx, ty, tz] = e.params();
             (tx == 0.0 && ty == 0.0).then(|| aligned(Distribution::Ggx, ax, ay, tz))
         }
+        // A mixture is exported lobe by lobe (export/mixture.rs).
+        Model::Mixture(_) => None,
     }
 }
 

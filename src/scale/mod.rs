@@ -17,6 +17,7 @@ pub mod filter;
 pub mod fitter;
 pub mod ndf_at;
 pub mod footprint;
+pub mod mixture;
 pub mod plot;
 pub mod report;
 pub mod roughness;

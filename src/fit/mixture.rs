@@ -1,0 +1,112 @@
+//! Fitting the two-lobe mixtures ([`crate::models::mixture`]): starts from the single-lobe fit they
+//! extend, and the ladder step of `--model auto` (one lobe or two), derived in
+//! `data_formats/objective.md` ("Mixtures and the ladder").
+
+use super::{fit_chain, fit_from, public, Fitted, FitOptions, Session};
+use crate::error::Result;
+use crate::models::ModelId;
+
+/// The single-lobe model a mixture extends (its first stage, and its parent in the selection report):
+/// `ggx2` -> `ggx-aniso`, `beckmann2` -> `beckmann-aniso`, `ellipsoid+ggx` -> `ellipsoid`.
+pub fn parent_of(id: ModelId) -> Option<ModelId> {
+    match id {
+        ModelId::Ggx2 => Some(ModelId::GgxAniso),
+        ModelId::Beckmann2 => Some(ModelId::BeckmannAniso),
+        ModelId::EllipsoidGgx => Some(ModelId::Ellipsoid),
+        _ => None,
+    }
+}
+
+/// The (core scale, tail scale, core weight) of each start: the core narrower and the tail wider than
+/// the one lobe that fits both, the tail's share from a few percent to a half.
+const SPLITS: [(f64, f64, f64); 3] = [(0.7, 3.0, 0.7), (0.9, 2.0, 0.5), (0.85, 5.0, 0.9)];
+
+/// Starting points (contract parameters) of mixture `id` from its parent's fit (contract parameters).
+pub fn starts(id: ModelId, parent: &[f64]) -> Vec<Vec<f64>> {
+    SPLITS
+        .iter()
+        .map(|&(kc, kt, w)| match id {
+            ModelId::EllipsoidGgx => {
+                let (ax, ay) = (parent[0], parent[1]);
+                vec![kc * ax, kc * ay, parent[2], parent[3], parent[4], kt * (ax * ay).sqrt(), w]
+            }
+            _ => {
+                let (ax, ay, tz) = (parent[0], parent[1], parent[2]);
+                vec![kc * ax, kc * ay, kt * ax, kt * ay, tz, w]
+            }
+        })
+        .collect()
+}
+
+/// Fit mixture `id` from the fit of its parent.
+pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitOptions) -> Result<Fitted> {
+    fit_from(s, id, &starts(id, &public(parent)), opts)
+}
+
+/// Fit mixture `id` with its parent's chain first.
+pub(super) fn fit_mixture_chain(s: &Session, id: ModelId, opts: &FitOptions) -> Result<Fitted> {
+    let parent = parent_of(id).expect("a mixture id");
+    let p = fit_chain(s, parent, opts)?;
+    fit_mixture(s, id, &p, opts)
+}
+
+/// The ladder step of `--model auto`: the best single lobe (chosen among the single lobes by the QBIC
+/// with their own overdispersion, unchanged) against the mixtures, by `F / c_data + p ln N` with the
+/// data's own overdispersion `c_data = max(1, dispersion)` ([`super::verdict::data_dispersion`]): a
+/// mixture wins only when its deviance, measured in the data's own noise, drops by more than `ln N` per
+/// added parameter. Derivation in `data_formats/objective.md` ("Mixtures and the ladder").
+pub(super) struct Ladder {
+    /// `c_data`.
+    pub c_data: f64,
+    /// The ladder criterion of every fit.
+    pub criterion: Vec<f64>,
+    /// The index of the fit chosen.
+    pub chosen: usize,
+    /// One sentence for the report.
+    pub summary: String,
+}
+
+impl Ladder {
+    /// The ladder over `fits` (single lobes first, `n_single` of them, the best of which is
+    /// `best_single`); `c_single` is the single lobes' overdispersion, used when the NDF has no split.
+    pub fn new(ndf: &crate::ndf::EmpiricalNdf, s: &Session, fits: &[Fitted], n_single: usize, best_single: usize, c_single: f64) -> Ladder {
+        let c_data = super::verdict::data_dispersion(ndf, s.data.max_theta).filter(|d| d.is_finite()).map_or(c_single, |d| d.max(1.0));
+        let ln_n = s.data.n.ln();
+        let criterion: Vec<f64> = fits.iter().map(|f| f.f / c_data + f.id.n_params() as f64 * ln_n).collect();
+        let mut chosen = best_single;
+        for i in n_single..fits.len() {
+            if criterion[i] < criterion[chosen] {
+                chosen = i;
+            }
+        }
+        let best_mix = (n_single..fits.len()).min_by(|&a, &b| criterion[a].total_cmp(&criterion[b]));
+        let summary = match best_mix {
+            None => format!("one lobe: no mixture could be fitted; {} chosen", fits[best_single].id),
+            Some(m) => {
+                let d = criterion[m] - criterion[best_single];
+                if chosen == m {
+                    format!(
+                        "two lobes: {} beats the best single lobe {} by {:.1} in F / c_data + p ln N (c_data = {c_data:.3})",
+                        fits[m].id, fits[best_single].id, -d
+                    )
+                } else {
+                    format!(
+                        "one lobe: the best mixture {} does not pay for its {} extra parameters over {} (criterion {:+.1}, c_data = {c_data:.3})",
+                        fits[m].id,
+                        fits[m].id.n_params() as i64 - fits[best_single].id.n_params() as i64,
+                        fits[best_single].id,
+                        d
+                    )
+                }
+            }
+        };
+        Ladder { c_data, criterion, chosen, summary }
+    }
+
+    /// `(F_parent - F) / (c_data (p - p_parent))`: the deviance, in the data's noise, that each added
+    /// parameter removes (worth keeping when above `ln N`).
+    pub fn gain_per_param(&self, parent: &Fitted, f: &Fitted) -> f64 {
+        let dp = (f.id.n_params() as f64 - parent.id.n_params() as f64).max(1.0);
+        (parent.f - f.f) / (self.c_data * dp)
+    }
+}
