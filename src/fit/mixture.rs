@@ -71,8 +71,7 @@ impl Ladder {
     /// `best_single`); `c_single` is the single lobes' overdispersion, used when the NDF has no split.
     pub fn new(ndf: &crate::ndf::EmpiricalNdf, s: &Session, fits: &[Fitted], n_single: usize, best_single: usize, c_single: f64) -> Ladder {
         let c_data = super::verdict::data_dispersion(ndf, s.data.max_theta).filter(|d| d.is_finite()).map_or(c_single, |d| d.max(1.0));
-        let ln_n = s.data.n.ln();
-        let criterion: Vec<f64> = fits.iter().map(|f| f.f / c_data + f.id.n_params() as f64 * ln_n).collect();
+        let criterion: Vec<f64> = fits.iter().map(|f| super::qbic::qbic(f.f, c_data, f.id.n_params(), s.data.n)).collect();
         let mut chosen = best_single;
         for i in n_single..fits.len() {
             if criterion[i] < criterion[chosen] {

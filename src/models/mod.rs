@@ -32,6 +32,7 @@ pub mod ellipsoid;
 pub mod fresnel;
 pub mod ggx;
 pub mod mixture;
+pub mod roughness;
 pub mod roughness_matrix;
 pub mod sampling;
 pub mod sel;
