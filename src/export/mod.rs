@@ -35,6 +35,7 @@ use crate::error::{Error, Result};
 use crate::models::{LobeAxes, Model, ModelId, Ndf};
 use crate::ndf::SlopeFrame;
 
+pub mod mixture;
 pub mod snippet;
 
 /// Largest `alpha_x / alpha_y` of Blender's Principled BSDF: `1 / aspect^2` at `anisotropic = 1`.
