@@ -35,8 +35,11 @@ PARAM_NAMES: Dict[str, tuple] = {
     **_mixtures.PARAM_NAMES,
 }
 
-#: Every model id of the contract.
-MODELS = tuple(PARAM_NAMES)
+#: Every single-lobe model id of the contract.
+MODELS = tuple(k for k in PARAM_NAMES if k not in _mixtures.PARAM_NAMES)
+
+#: The two-lobe mixtures (mixtures.py).
+MIXTURES = tuple(_mixtures.PARAM_NAMES)
 
 #: Models that are special cases of the ellipsoid (they have a matrix A).
 ELLIPSOID_FAMILY = ("ggx", "ggx-aniso", "ellipsoid")
