@@ -38,9 +38,33 @@ pub fn starts(id: ModelId, parent: &[f64]) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// Fit mixture `id` from the fit of its parent.
+/// The parent as a mixture of two copies of itself (weight one half): the same D, so the same objective.
+fn degenerate(id: ModelId, parent: &[f64]) -> Vec<f64> {
+    match id {
+        ModelId::EllipsoidGgx => vec![parent[0], parent[1], parent[2], parent[3], parent[4], (parent[0] * parent[1]).sqrt(), 0.5],
+        _ => vec![parent[0], parent[1], parent[0], parent[1], parent[2], 0.5],
+    }
+}
+
+/// Fit mixture `id` from the fit of its parent. A mixture holds its parent (two equal lobes), so its
+/// optimum can be no worse: should every start end above the parent's objective (a local optimum, e.g.
+/// on data one lobe describes), the parent written as a mixture is the result, said so in a warning.
 pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitOptions) -> Result<Fitted> {
-    fit_from(s, id, &starts(id, &public(parent)), opts)
+    let p = public(parent);
+    let fit = fit_from(s, id, &starts(id, &p), opts)?;
+    if fit.f <= parent.f {
+        return Ok(fit);
+    }
+    let x = super::params::to_internal(id, &degenerate(id, &p));
+    let mut r = vec![0.0; s.data.bins.len()];
+    let f = super::problem::residuals_into(&s.data, id, &x, &mut r);
+    if !(f.is_finite() && f < fit.f) {
+        return Ok(fit);
+    }
+    let mut warnings = fit.warnings.clone();
+    warnings.push(format!("{id}: every start ended above the one-lobe {} fit; reported as that lobe twice (the data show no second lobe)", parent.id));
+    let local = super::solve::Local { x: x.clone(), f, ..fit.local.clone() };
+    Ok(Fitted { id, x, f, local, warnings, ..fit })
 }
 
 /// Fit mixture `id` with its parent's chain first.
