@@ -9,7 +9,8 @@
 //!
 //! The three ids and their parameters (`weight` is the first lobe's share):
 //! - `ggx2`: two GTR2aniso lobes sharing one tangent frame (one `theta_z`; a renderer's blend of two
-//!   BSDFs has one tangent per surface): `alpha_x1, alpha_y1, alpha_x2, alpha_y2, theta_z, weight`;
+//!   BSDFs has one tangent per surface): `alpha_x1, alpha_y1, alpha_x2, alpha_y2, theta_z, weight`; both
+//!   lobes' `alpha_x` axes lie along `(cos theta_z, -sin theta_z)` in the scan frame (azimuth `-theta_z`);
 //! - `beckmann2`: the same with anisotropic Beckmann lobes;
 //! - `ellipsoid+ggx`: a skewed ellipsoid core (Walter et al. eq. 1-3) with an isotropic GGX tail,
 //!   symmetric about n: `alpha_x1, alpha_y1, theta_x, theta_y, theta_z, alpha2, weight`.
