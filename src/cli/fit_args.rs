@@ -1,0 +1,62 @@
+//! The per-scan fit flags `ndfit fit` and `ndfit batch -- ...` share: reading and preprocessing
+//! ([`ScanArgs`]), the NDF ([`NdfArgs`]), the fit and the preset. One struct, so the two commands cannot
+//! drift; it resolves into the library's [`ndfit::Options`].
+
+use ndfit::fit::{FitOptions, Objective, Solver};
+use ndfit::{ModelChoice, Options, Preset};
+
+use super::ndf::NdfArgs;
+use super::scan_args::ScanArgs;
+
+/// How one scan is read, preprocessed, binned and fitted (everything but the model and the outputs).
+#[derive(Debug, Clone, clap::Args)]
+pub struct FitArgs {
+    #[command(flatten)]
+    pub scan: ScanArgs,
+    #[command(flatten)]
+    pub ndf: NdfArgs,
+    /// Residuals: `poisson` (deviance of the bin counts) or `logd` (count-weighted log D); see
+    /// data_formats/objective.md.
+    #[arg(long, default_value = "poisson")]
+    pub objective: String,
+    /// Local optimizer: `lm` (Levenberg-Marquardt), `nelder-mead` or `lbfgs` (argmin).
+    #[arg(long, default_value = "lm")]
+    pub solver: String,
+    /// Extra skew starts for the ellipsoid (0-4) beyond the default two.
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
+    pub extra_starts: usize,
+    /// Largest polar angle (degrees, 0-90] of the NDF bins the fit uses; the model is normalized over
+    /// them (data_formats/objective.md). Lower it to the instrument's numerical aperture
+    /// (asin(NA)) when the scan cannot see steeper slopes.
+    #[arg(long, default_value_t = ndfit::fit::objective::DEFAULT_MAX_THETA_DEG, allow_hyphen_values = true)]
+    pub max_theta: f64,
+    /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` = the defaults). Sets the
+    /// subsampling stride (on top of --subsample; the kept points are all that is read, and the form is
+    /// removed from them), the NDF's normals and bins (unless --ndf-cells), the tolerance and the starts.
+    #[arg(long, value_enum)]
+    pub preset: Option<Preset>,
+}
+
+impl FitArgs {
+    /// The pipeline options these flags ask for, fitting `model`; out-of-range values are refused here,
+    /// naming the flag.
+    pub fn options(&self, model: ModelChoice) -> ndfit::Result<Options> {
+        let bad = |flag: &str, e: ndfit::Error| ndfit::Error::invalid(format!("{flag}: {}", e.message()));
+        let objective = self.objective.parse::<Objective>().map_err(|e| bad("--objective", e))?;
+        let solver = self.solver.parse::<Solver>().map_err(|e| bad("--solver", e))?;
+        if self.extra_starts > 4 {
+            return Err(ndfit::Error::invalid(format!("--extra-starts {} must be between 0 and 4", self.extra_starts)));
+        }
+        if !(self.max_theta > 0.0 && self.max_theta <= 90.0) {
+            return Err(ndfit::Error::invalid(format!("--max-theta {} must be in (0, 90] degrees", self.max_theta)));
+        }
+        let ndf = self.ndf.options().map_err(|e| ndfit::Error::invalid(e.to_string()))?;
+        let fit = FitOptions { objective, solver, extra_starts: self.extra_starts, max_theta: self.max_theta.to_radians(), ..FitOptions::default() };
+        Ok(Options { read: self.scan.read_options(), preprocess: self.scan.preprocess(), preset: self.preset, ndf, model, fit })
+    }
+}
+
+/// `--model`: an id or `auto`, with the flag named in the error.
+pub fn parse_model(s: &str) -> ndfit::Result<ModelChoice> {
+    s.parse::<ModelChoice>().map_err(|e| ndfit::Error::invalid(format!("--model: {}", e.message())))
+}
