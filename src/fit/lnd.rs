@@ -33,6 +33,9 @@ pub(crate) enum Shape {
 
 /// A model frozen at one internal parameter vector: one lobe ([`LobeLnD`]) or a two-lobe mixture
 /// ([`super::lnd_mixture`]).
+// Built once per residual or Jacobian pass and read per bin: its size costs nothing, a box would cost a
+// pointer chase per bin.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum LnD {
     /// A single-lobe model.

@@ -145,6 +145,8 @@ fn mixture_canonical_form_keeps_d_and_orders_the_lobes() {
 }
 
 /// A lobe to draw facet slopes from.
+// Two values per test case: their size does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy)]
 enum Draw {
     /// GTR2aniso `(alpha_x, alpha_y, theta_z)`, drawn here from its slope distribution (Heitz eq. 84-85:
