@@ -113,7 +113,7 @@ pub struct LobeLnD {
 
 impl LobeLnD {
     /// Freeze single-lobe model `id` at internal vector `x` (length [`ModelId::n_params`]). A mixture id
-    /// gives its first lobe's kind ([`super::lnd_mixture`] builds mixtures from [`LobeLnD::with_shape`]).
+    /// gives its first lobe's kind ([`super::lnd_mixture`] builds mixtures lobe by lobe).
     pub fn new(id: ModelId, x: &[f64]) -> LobeLnD {
         let (shape, beckmann) = match id {
             ModelId::Ggx => (Shape::Iso, false),
