@@ -74,9 +74,10 @@ def log_d_and_grad(model: str, p: np.ndarray, m: np.ndarray, want_grad: bool, si
 
 def starts(model: str, parent: np.ndarray):
     """Starting points from the parent's fit: a core narrower and a tail wider than the one lobe, the tail's share
-    from a tenth to a third (chosen here independently of the Rust fitter's starts)."""
+    from a tenth to a third, and a narrow spike (chosen here independently of the Rust fitter's starts)."""
     out = []
-    for kc, kt, w in ((0.8, 2.5, 0.8), (0.6, 4.0, 0.9), (0.9, 1.8, 0.6)):
+    # The last: a spike of a few percent five times narrower than the one lobe (a specular patch on a rough scan).
+    for kc, kt, w in ((0.8, 2.5, 0.8), (0.6, 4.0, 0.9), (0.9, 1.8, 0.6), (0.2, 1.05, 0.03)):
         if model == "ellipsoid+ggx":
             ax, ay = parent[0], parent[1]
             out.append(np.array([kc * ax, kc * ay, parent[2], parent[3], parent[4], kt * math.sqrt(ax * ay), w]))

@@ -18,8 +18,9 @@ pub fn parent_of(id: ModelId) -> Option<ModelId> {
 }
 
 /// The (core scale, tail scale, core weight) of each start: the core narrower and the tail wider than
-/// the one lobe that fits both, the tail's share from a few percent to a half.
-const SPLITS: [(f64, f64, f64); 3] = [(0.7, 3.0, 0.7), (0.9, 2.0, 0.5), (0.85, 5.0, 0.9)];
+/// the one lobe that fits both, the tail's share from a few percent to a half; and a spike of a few percent
+/// five times narrower than the one lobe (a specular patch on a rough scan).
+const SPLITS: [(f64, f64, f64); 4] = [(0.7, 3.0, 0.7), (0.9, 2.0, 0.5), (0.85, 5.0, 0.9), (0.2, 1.05, 0.03)];
 
 /// Starting points (contract parameters) of mixture `id` from its parent's fit (contract parameters).
 pub fn starts(id: ModelId, parent: &[f64]) -> Vec<Vec<f64>> {
@@ -59,20 +60,32 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
     let p = public(parent);
     let mut o = *opts;
     o.tolerances.max_iter = o.tolerances.max_iter.min(MIXTURE_PATIENCE);
-    let fit = fit_from(s, id, &starts(id, &p), &o)?;
-    if fit.f <= parent.f {
-        return Ok(fit);
+    let fit = fit_from(s, id, &starts(id, &p), &o);
+    // A usable fit no worse than the parent stands. Otherwise (every start above the parent, no finite
+    // start, or a lobe run off beyond the alpha range, e.g. a tail widening without bound to take up a flat
+    // background) the parent written as a mixture is the result, said so in a warning.
+    let valid = |f: &Fitted| crate::models::Model::from_params(id, &public(f)).is_ok();
+    if let Ok(fit) = &fit {
+        if fit.f <= parent.f && valid(fit) {
+            return Ok(fit.clone());
+        }
     }
     let x = super::params::to_internal(id, &degenerate(id, &p));
     let mut r = vec![0.0; s.data.bins.len()];
     let f = super::problem::residuals_into(&s.data, id, &x, &mut r);
-    if !(f.is_finite() && f < fit.f) {
-        return Ok(fit);
-    }
-    let mut warnings = fit.warnings.clone();
-    warnings.push(format!("{id}: every start ended above the one-lobe {} fit; reported as that lobe twice (the data show no second lobe)", parent.id));
-    let local = super::solve::Local { x: x.clone(), f, ..fit.local.clone() };
-    Ok(Fitted { id, x, f, local, warnings, ..fit })
+    let why = match &fit {
+        Ok(g) if valid(g) => format!("every start ended above the one-lobe {} fit", parent.id),
+        Ok(_) => "the fit ran out of the model's domain (a lobe beyond the alpha range)".to_string(),
+        Err(e) => format!("no start gave a usable fit ({})", e.message()),
+    };
+    let mut warnings = fit.as_ref().map(|g| g.warnings.clone()).unwrap_or_default();
+    warnings.push(format!("{id}: {why}; reported as the {} lobe twice (the data show no second lobe it can fit)", parent.id));
+    let local = super::solve::Local { x: x.clone(), f, termination: format!("{id}: the one-lobe {} fit as two equal lobes", parent.id), converged: true, evaluations: 0 };
+    let (evaluations, start_objectives, best_start) = match &fit {
+        Ok(g) => (g.evaluations, g.start_objectives.clone(), g.best_start),
+        Err(_) => (0, Vec::new(), 0),
+    };
+    Ok(Fitted { id, x, f, local, evaluations, start_objectives, best_start, warnings, delta: false })
 }
 
 /// Fit mixture `id` with its parent's chain first.
