@@ -21,7 +21,7 @@ from typing import Dict
 
 import numpy as np
 
-from . import models
+from . import mixtures, models
 from .fit import wrap_theta_z
 
 
@@ -69,4 +69,7 @@ def canonical(model: str, params) -> Dict[str, float]:
         return models.params_to_dict(model, p)
     if model in ("ggx-aniso", "beckmann-aniso"):
         return models.params_to_dict(model, _aniso(p))
+    if model in mixtures.PARAM_NAMES:
+        ell = lambda q: canonical_from_matrix(models.ellipsoid_matrix(*q))  # noqa: E731
+        return models.params_to_dict(model, mixtures.canonical(model, p, ell))
     return models.params_to_dict(model, canonical_from_matrix(models.matrix_a(model, p)))

@@ -21,7 +21,7 @@ from typing import Dict, List, Optional
 import nlopt
 import numpy as np
 
-from . import models
+from . import mixtures, models
 from . import objective as obj
 from .bins import Bins
 
@@ -67,11 +67,21 @@ def _is_log(model: str) -> np.ndarray:
     return np.array([n.startswith("alpha") for n in models.PARAM_NAMES[model]])
 
 
+def _is_weight(model: str) -> np.ndarray:
+    return np.array([n == "weight" for n in models.PARAM_NAMES[model]])
+
+
+#: Bound of a mixture weight's logit in the search (weights within 1e-13 of 0 or 1).
+LOGIT_MAX = 30.0
+
+
 def to_search(model: str, params) -> np.ndarray:
-    """Natural parameters to search coordinates (ln alpha, angles)."""
+    """Natural parameters to search coordinates (ln alpha, angles, logit of a mixture weight)."""
     p = models.params_to_array(model, params).copy()
     lg = _is_log(model)
     p[lg] = np.log(p[lg])
+    wt = _is_weight(model)
+    p[wt] = np.log(p[wt] / (1.0 - p[wt]))
     return p
 
 
@@ -80,6 +90,8 @@ def from_search(model: str, x) -> np.ndarray:
     p = np.array(x, dtype=float)
     lg = _is_log(model)
     p[lg] = np.exp(p[lg])
+    wt = _is_weight(model)
+    p[wt] = 1.0 / (1.0 + np.exp(-p[wt]))
     return p
 
 
@@ -161,8 +173,9 @@ def initial_guess(bins: Bins, model: str) -> np.ndarray:
 
 def _bounds(model: str, x0: np.ndarray):
     lg = _is_log(model)
-    lb = np.where(lg, LN_ALPHA_MIN, -TILT_MAX)
-    ub = np.where(lg, LN_ALPHA_MAX, TILT_MAX)
+    wt = _is_weight(model)
+    lb = np.where(lg, LN_ALPHA_MIN, np.where(wt, -LOGIT_MAX, -TILT_MAX))
+    ub = np.where(lg, LN_ALPHA_MAX, np.where(wt, LOGIT_MAX, TILT_MAX))
     names = models.PARAM_NAMES[model]
     if "theta_z" in names:
         # theta_z has period pi, so an equivalent optimum lies within pi/2 of any start: +-pi leaves slack.
@@ -194,6 +207,7 @@ def _local(model: str, bins: Bins, objective: str, x0: np.ndarray, method: str, 
     sc = _scales(model, x0)
     best = {"x": x0.copy(), "f": math.inf, "n": 0}
     lg = _is_log(model)
+    wt = _is_weight(model)
 
     def f(y, grad):
         try:
@@ -208,6 +222,7 @@ def _local(model: str, bins: Bins, objective: str, x0: np.ndarray, method: str, 
         if grad.size > 0:
             val, g = obj.objective(objective, model, p, bins, want_grad=True)
             g = np.where(lg, g * p, g) * sc  # chain rule: d/d ln(alpha) = alpha d/d alpha; d/dy = scale d/dx
+            g = np.where(wt, g * p * (1.0 - p), g)  # d/d logit(w) = w (1 - w) d/dw
             # Guard: an overflowed gradient would derail L-BFGS; zero it and let the line search shrink the step.
             grad[:] = np.where(np.isfinite(g), g, 0.0)
         else:
@@ -339,6 +354,10 @@ def fit(
     evaluations = 0
     if x0 is not None:
         starts.append(models.params_to_array(model, x0))
+    elif model in mixtures.PARENT:
+        pre = fit(bins, mixtures.PARENT[model], objective, method, stop=stop)
+        evaluations += pre.evaluations
+        starts.extend(mixtures.starts(model, pre.param_array))
     elif model == "ellipsoid":
         pre = fit(bins, "ggx-aniso", objective, method, stop=stop)
         evaluations += pre.evaluations
@@ -362,7 +381,7 @@ def fit(
     if "theta_z" in names:
         i = names.index("theta_z")
         w = wrap_theta_z(p[i])
-        if model == "ellipsoid" and w != p[i] and abs(round((w - p[i]) / math.pi)) % 2 == 1:
+        if model in ("ellipsoid", "ellipsoid+ggx") and w != p[i] and abs(round((w - p[i]) / math.pi)) % 2 == 1:
             p[2], p[3] = -p[2], -p[3]  # theta_z + pi with negated tilts is the same ellipsoid (canonical.py)
         p[i] = w
     value = obj.objective(objective, model, p, bins)

@@ -23,6 +23,8 @@ from typing import Dict, Mapping, Sequence
 
 import numpy as np
 
+from . import mixtures as _mixtures
+
 #: Parameter names of every model, in the order the fitter and the JSON use.
 PARAM_NAMES: Dict[str, tuple] = {
     "ggx": ("alpha",),
@@ -30,10 +32,14 @@ PARAM_NAMES: Dict[str, tuple] = {
     "beckmann": ("alpha",),
     "beckmann-aniso": ("alpha_x", "alpha_y", "theta_z"),
     "ellipsoid": ("alpha_x", "alpha_y", "theta_x", "theta_y", "theta_z"),
+    **_mixtures.PARAM_NAMES,
 }
 
-#: Every model id of the contract.
-MODELS = tuple(PARAM_NAMES)
+#: Every single-lobe model id of the contract.
+MODELS = tuple(k for k in PARAM_NAMES if k not in _mixtures.PARAM_NAMES)
+
+#: The two-lobe mixtures (mixtures.py).
+MIXTURES = tuple(_mixtures.PARAM_NAMES)
 
 #: Models that are special cases of the ellipsoid (they have a matrix A).
 ELLIPSOID_FAMILY = ("ggx", "ggx-aniso", "ellipsoid")
@@ -244,6 +250,8 @@ def log_d_and_grad(model: str, params, m, want_grad: bool = True):
     -inf (and a zero gradient row) where m.n <= 0 (the X+ factor of Walter eq. 1 and Heitz eq. 82).
     """
     p = params_to_array(model, params)
+    if model in _mixtures.PARAM_NAMES:
+        return _mixtures.log_d_and_grad(model, p, _as_dirs(m), want_grad, log_d_and_grad)
     if model in ("ggx", "beckmann", "ggx-aniso", "beckmann-aniso") and not (p[0] > 0.0):
         raise ValueError(f"model '{model}': alpha must be > 0, got {p[0]}")
     if model in ("ggx-aniso", "beckmann-aniso", "ellipsoid") and not (p[0] > 0.0 and p[1] > 0.0):

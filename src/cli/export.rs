@@ -33,11 +33,27 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
     // The fit region of the fit, over which an approximation is fitted and measured.
     let max_theta = json.pointer("/quality/max_theta_deg").and_then(|v| v.as_f64()).unwrap_or(90.0);
+    let name = args.fit.file_name().map_or(path.clone(), |n| n.to_string_lossy().into_owned());
+    if let Model::Mixture(x) = &model {
+        let out = ndfit::export::mixture::export_mixture(x, target, max_theta).map_err(|e| anyhow!("{path}: {}", e.message()))?;
+        for note in [&out.core.note, &out.tail.note].into_iter().flatten() {
+            eprintln!("ndfit: {path}: {note}");
+        }
+        let text = if args.json {
+            let mut s = serde_json::to_string_pretty(&out.to_json()).map_err(|e| anyhow!("{path}: {e}"))?;
+            s.push('\n');
+            s
+        } else {
+            out.snippet(&name)
+        };
+        let mut stdout = std::io::stdout().lock();
+        stdout.write_all(text.as_bytes()).and_then(|_| stdout.flush()).map_err(|e| anyhow!("<stdout>: {e}"))?;
+        return Ok(ExitCode::SUCCESS);
+    }
     let out = export(&model, target, max_theta).map_err(|e| anyhow!("{path}: {}", e.message()))?;
     if let Some(note) = &out.note {
         eprintln!("ndfit: {path}: {note}");
     }
-    let name = args.fit.file_name().map_or(path.clone(), |n| n.to_string_lossy().into_owned());
     let text = if args.json {
         let mut s = serde_json::to_string_pretty(&out.to_json()).map_err(|e| anyhow!("{path}: {e}"))?;
         s.push('\n');

@@ -29,7 +29,7 @@ pub struct Args {
     /// Number of log-spaced footprints evaluated across the scene's range.
     #[arg(long, default_value_t = 5)]
     pub scene_steps: usize,
-    /// Models to carry through (comma-separated ids; default all).
+    /// Models to carry through (comma-separated ids; default all, the two-lobe mixtures included).
     #[arg(long, value_delimiter = ',')]
     pub models: Vec<String>,
     /// Largest acceptable model error delta_model at the scene's footprints.
@@ -79,7 +79,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         anyhow::bail!("give --footprint METRES[,METRES...] or --scene");
     }
     let models: Vec<ModelId> = if args.models.is_empty() {
-        ModelId::ALL.to_vec()
+        ModelId::ALL.iter().chain(&ModelId::MIXTURES).copied().collect()
     } else {
         args.models.iter().map(|s| s.trim().parse::<ModelId>()).collect::<Result<_, _>>().map_err(|e| anyhow!("--models: {e}"))?
     };

@@ -35,6 +35,7 @@ use crate::error::{Error, Result};
 use crate::models::{LobeAxes, Model, ModelId, Ndf};
 use crate::ndf::SlopeFrame;
 
+pub mod mixture;
 pub mod snippet;
 
 /// Largest `alpha_x / alpha_y` of Blender's Principled BSDF: `1 / aspect^2` at `anisotropic = 1`.
@@ -292,6 +293,8 @@ fn exact_lobe(model: &Model) -> Option<RendererLobe> {
             let [ax, ay, tx, ty, tz] = e.params();
             (tx == 0.0 && ty == 0.0).then(|| aligned(Distribution::Ggx, ax, ay, tz))
         }
+        // A mixture is exported lobe by lobe (export/mixture.rs).
+        Model::Mixture(_) => None,
     }
 }
 

@@ -22,7 +22,7 @@ const LN_PI: f64 = 1.144_729_885_849_400_2;
 
 /// Which internal parameters an ellipsoid-family evaluation exposes.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Shape {
+pub(crate) enum Shape {
     /// One roughness for both axes (`ggx`, `beckmann`).
     Iso,
     /// `[u_x, u_y, theta_z]`.
@@ -31,10 +31,59 @@ enum Shape {
     Full,
 }
 
-/// A model frozen at one internal parameter vector, with everything per-call precomputed so the per-bin
+/// A model frozen at one internal parameter vector: one lobe ([`LobeLnD`]) or a two-lobe mixture
+/// ([`super::lnd_mixture`]).
+// Built once per residual or Jacobian pass and read per bin: its size costs nothing, a box would cost a
+// pointer chase per bin.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+pub enum LnD {
+    /// A single-lobe model.
+    One(LobeLnD),
+    /// A mixture.
+    Two(super::lnd_mixture::MixtureLnD),
+}
+
+impl LnD {
+    /// Freeze model `id` at internal vector `x` (length [`ModelId::n_params`]).
+    pub fn new(id: ModelId, x: &[f64]) -> LnD {
+        match id {
+            ModelId::Ggx2 | ModelId::Beckmann2 | ModelId::EllipsoidGgx => LnD::Two(super::lnd_mixture::MixtureLnD::new(id, x)),
+            _ => LnD::One(LobeLnD::new(id, x)),
+        }
+    }
+
+    /// `ln D(m)` for a unit `m` with `m.z > 0`.
+    #[inline]
+    pub fn value(&self, m: &Vector3<f64>) -> f64 {
+        match self {
+            LnD::One(f) => f.value(m),
+            LnD::Two(f) => f.value(m),
+        }
+    }
+
+    /// `ln D(m)` and its gradient with respect to the internal parameters, written into `grad`
+    /// (length = the model's parameter count).
+    #[inline]
+    pub fn value_grad(&self, m: &Vector3<f64>, grad: &mut [f64]) -> f64 {
+        self.grad(m, grad);
+        self.value(m)
+    }
+
+    /// The gradient of `ln D(m)` alone.
+    #[inline]
+    pub fn grad(&self, m: &Vector3<f64>, grad: &mut [f64]) {
+        match self {
+            LnD::One(f) => f.grad(m, grad),
+            LnD::Two(f) => f.grad(m, grad),
+        }
+    }
+}
+
+/// One lobe frozen at one internal parameter vector, with everything per-call precomputed so the per-bin
 /// work is a few multiply-adds (no allocation).
 #[derive(Debug, Clone)]
-pub struct LnD {
+pub struct LobeLnD {
     shape: Shape,
     beckmann: bool,
     ax: f64,
@@ -62,16 +111,23 @@ pub struct LnD {
     k_ty: f64,
 }
 
-impl LnD {
-    /// Freeze model `id` at internal vector `x` (length [`ModelId::n_params`]).
-    pub fn new(id: ModelId, x: &[f64]) -> LnD {
+impl LobeLnD {
+    /// Freeze single-lobe model `id` at internal vector `x` (length [`ModelId::n_params`]). A mixture id
+    /// gives its first lobe's kind ([`super::lnd_mixture`] builds mixtures lobe by lobe).
+    pub fn new(id: ModelId, x: &[f64]) -> LobeLnD {
         let (shape, beckmann) = match id {
             ModelId::Ggx => (Shape::Iso, false),
             ModelId::Beckmann => (Shape::Iso, true),
-            ModelId::GgxAniso => (Shape::Aniso, false),
-            ModelId::BeckmannAniso => (Shape::Aniso, true),
-            ModelId::Ellipsoid => (Shape::Full, false),
+            ModelId::GgxAniso | ModelId::Ggx2 => (Shape::Aniso, false),
+            ModelId::BeckmannAniso | ModelId::Beckmann2 => (Shape::Aniso, true),
+            ModelId::Ellipsoid | ModelId::EllipsoidGgx => (Shape::Full, false),
         };
+        Self::with_shape(shape, beckmann, x)
+    }
+
+    /// Freeze a lobe of `shape` at its internal vector `x` (`[u]`, `[u_x, u_y, theta_z]` or the
+    /// ellipsoid's five).
+    pub(crate) fn with_shape(shape: Shape, beckmann: bool, x: &[f64]) -> LobeLnD {
         let (ux, uy, tx, ty, tz) = match shape {
             Shape::Iso => (x[0], x[0], 0.0, 0.0, 0.0),
             Shape::Aniso => (x[0], x[1], 0.0, 0.0, x[2]),
@@ -94,7 +150,7 @@ impl LnD {
         let an2_tx = 2.0 * sx * cx * cy * cy * (ay * ay - 1.0);
         let an2_ty = 2.0 * sy * cy * (ax * ax - ay * ay * sx * sx - cx * cx);
         let (an2_ax, an2_ay) = (2.0 * sy * sy, 2.0 * sx * sx * cy * cy);
-        LnD {
+        LobeLnD {
             shape,
             beckmann,
             ax,

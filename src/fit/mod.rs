@@ -15,7 +15,9 @@
 
 pub mod covariance;
 pub mod lnd;
+pub mod lnd_mixture;
 pub mod metric;
+pub mod mixture;
 pub mod objective;
 pub mod params;
 #[cfg(feature = "plot")]
@@ -213,6 +215,8 @@ fn delta_fit(s: &Session, id: ModelId) -> Fitted {
         ModelId::Ggx | ModelId::Beckmann => vec![a],
         ModelId::GgxAniso | ModelId::BeckmannAniso => vec![a, a, 0.0],
         ModelId::Ellipsoid => vec![a, a, tx, ty, 0.0],
+        ModelId::Ggx2 | ModelId::Beckmann2 => vec![a, a, a, a, 0.0, 0.5],
+        ModelId::EllipsoidGgx => vec![a, a, tx, ty, 0.0, a, 0.5],
     };
     let x = params::to_internal(id, &p);
     let mut r = vec![0.0; s.data.bins.len()];
@@ -311,6 +315,7 @@ fn fit_chain(s: &Session, id: ModelId, opts: &FitOptions) -> Result<Fitted> {
             };
             fit_ellipsoid(s, &aniso, opts)
         }
+        ModelId::Ggx2 | ModelId::Beckmann2 | ModelId::EllipsoidGgx => mixture::fit_mixture_chain(s, id, opts),
     }
 }
 
@@ -490,8 +495,9 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
         }
     };
     let delta = s.data.k_nonzero == 1;
+    let mut mixtures: Vec<Fitted> = Vec::new();
     let (ggx, ggx_a, ell, beck, beck_a) = if delta {
-        // A delta NDF: every model is at its floor; the simplest wins below.
+        // A delta NDF: every model is at its floor; the simplest wins below (no mixture is fitted).
         let d = |id| Some(delta_fit(&s, id));
         (d(ModelId::Ggx), d(ModelId::GgxAniso), d(ModelId::Ellipsoid), d(ModelId::Beckmann), d(ModelId::BeckmannAniso))
     } else {
@@ -503,9 +509,15 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
         };
         let beck = keep(fit_iso(&s, ModelId::Beckmann, opts));
         let beck_a = keep(fit_aniso(&s, ModelId::BeckmannAniso, beck.as_ref(), opts));
+        // The ladder's second rung: each mixture from the single lobe it extends.
+        for (id, parent) in [(ModelId::Ggx2, &ggx_a), (ModelId::Beckmann2, &beck_a), (ModelId::EllipsoidGgx, &ell)] {
+            if let Some(p) = parent {
+                mixtures.extend(keep(mixture::fit_mixture(&s, id, p, opts)));
+            }
+        }
         (ggx, ggx_a, ell, beck, beck_a)
     };
-    let fits: Vec<Fitted> = [ggx, beck, ggx_a, beck_a, ell].into_iter().flatten().collect();
+    let mut fits: Vec<Fitted> = [ggx, beck, ggx_a, beck_a, ell].into_iter().flatten().collect();
     if fits.is_empty() {
         return Err(Error::new(ErrorKind::Numerical, format!("no model could be fitted ({})", warnings.join("; "))));
     }
@@ -521,11 +533,18 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
             chosen = i;
         }
     }
+    // One lobe or two (mixture.rs): the best single lobe against the mixtures by the QBIC with the data's
+    // own dispersion.
+    let n_single = fits.len();
+    fits.append(&mut mixtures);
+    let crit: Vec<f64> = crit.into_iter().chain(fits[n_single..].iter().map(|f| qbic::qbic(f.f, c, f.id.n_params(), s.data.n))).collect();
+    let ladder = mixture::Ladder::new(ndf, &s, &fits, n_single, chosen, c);
+    let chosen = ladder.chosen;
     let parent = |id: ModelId| match id {
         ModelId::GgxAniso => Some(ModelId::Ggx),
         ModelId::Ellipsoid => Some(ModelId::GgxAniso),
         ModelId::BeckmannAniso => Some(ModelId::Beckmann),
-        _ => None,
+        _ => mixture::parent_of(id),
     };
     let deltas: Vec<Option<f64>> =
         fits.iter().map(|f| Model::from_params(f.id, &public(f)).ok().and_then(|m| metric::delta_to_data(&m, ndf))).collect();
@@ -549,13 +568,22 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
                 d_criterion: pi.map(|j| crit[i] - crit[j]),
                 d_delta_data: pi.and_then(|j| Some(deltas[i]? - deltas[j]?)),
                 converged: f.local.converged,
+                qbic_data: Some(ladder.criterion[i]),
+                deviance_per_dof: (dof > 0.0).then(|| f.f / dof),
+                gain_per_param: pi.map(|j| ladder.gain_per_param(&fits[j], f)),
             }
         })
         .collect();
     let best = fits.into_iter().nth(chosen).expect("chosen indexes the fits");
     let mut rep = build_report(ndf, &s, best, opts, 0.0)?;
     rep.warnings.extend(warnings);
-    rep.selection = Some(Selection { criterion: "qbic".into(), overdispersion: c, candidates });
+    rep.selection = Some(Selection {
+        criterion: "qbic".into(),
+        overdispersion: c,
+        candidates,
+        data_overdispersion: Some(ladder.c_data),
+        ladder: Some(ladder.summary.clone()),
+    });
     rep.timings.fit_ms = t0.elapsed().as_secs_f64() * 1e3;
     Ok(rep)
 }

@@ -11,6 +11,9 @@
 //! Internal vectors `x` by model (Walter et al. eq. 2-3 for the angles):
 //! `ggx`, `beckmann`: `[u]`; `ggx-aniso`, `beckmann-aniso`: `[u_x, u_y, theta_z]`;
 //! `ellipsoid`: `[u_x, u_y, theta_x, theta_y, theta_z]`.
+//!
+//! The mixtures' weight is logistic, `w = 1 / (1 + exp(-v))`, in `(0, 1)` for every real `v`
+//! ([`super::lnd_mixture`] gives their internal vectors).
 
 use crate::models::{ModelId, ALPHA_MIN};
 
@@ -32,8 +35,32 @@ pub fn u_of(alpha: f64) -> f64 {
 pub fn alpha_slots(id: ModelId) -> &'static [usize] {
     match id {
         ModelId::Ggx | ModelId::Beckmann => &[0],
+        ModelId::Ggx2 | ModelId::Beckmann2 => &[0, 1, 2, 3],
+        ModelId::EllipsoidGgx => &[0, 1, 5],
         _ => &[0, 1],
     }
+}
+
+/// Index of a mixture's weight (`v`) in its internal vector.
+pub fn weight_slot(id: ModelId) -> Option<usize> {
+    match id {
+        ModelId::Ggx2 | ModelId::Beckmann2 => Some(5),
+        ModelId::EllipsoidGgx => Some(6),
+        _ => None,
+    }
+}
+
+/// `v -> w`: `1 / (1 + exp(-v))`.
+#[inline]
+pub fn weight_of(v: f64) -> f64 {
+    1.0 / (1.0 + (-v).exp())
+}
+
+/// `w -> v`, the inverse of [`weight_of`] (a weight at 0 or 1 maps to a large finite `v`).
+#[inline]
+pub fn v_of(w: f64) -> f64 {
+    let w = w.clamp(1e-15, 1.0 - 1e-15);
+    (w / (1.0 - w)).ln()
 }
 
 /// The contract's parameters (order of [`ModelId::param_names`]) from an internal vector.
@@ -41,6 +68,9 @@ pub fn to_public(id: ModelId, x: &[f64]) -> Vec<f64> {
     let mut p = x.to_vec();
     for &i in alpha_slots(id) {
         p[i] = alpha_of(x[i]);
+    }
+    if let Some(i) = weight_slot(id) {
+        p[i] = weight_of(x[i]);
     }
     p
 }
@@ -51,14 +81,22 @@ pub fn to_internal(id: ModelId, p: &[f64]) -> Vec<f64> {
     for &i in alpha_slots(id) {
         x[i] = u_of(p[i]);
     }
+    if let Some(i) = weight_slot(id) {
+        x[i] = v_of(p[i]);
+    }
     x
 }
 
-/// `d public_i / d x_i` (the map is diagonal): `alpha - ALPHA_MIN` for roughnesses, 1 for angles.
+/// `d public_i / d x_i` (the map is diagonal): `alpha - ALPHA_MIN` for roughnesses, `w (1 - w)` for a
+/// weight, 1 for angles.
 pub fn public_derivative(id: ModelId, x: &[f64]) -> Vec<f64> {
     let mut g = vec![1.0; x.len()];
     for &i in alpha_slots(id) {
         g[i] = x[i].exp();
+    }
+    if let Some(i) = weight_slot(id) {
+        let w = weight_of(x[i]);
+        g[i] = w * (1.0 - w);
     }
     g
 }

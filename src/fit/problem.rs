@@ -127,8 +127,8 @@ fn jacobian_pass(data: &FitData, id: ModelId, x: &[f64], jac: &mut DMatrix<f64>,
     let np = x.len();
     let nb = data.bins.len();
     let js = jac.as_mut_slice();
-    let mut g = [0.0; 5];
-    let mut gbar = [0.0; 5];
+    let mut g = [0.0; 8];
+    let mut gbar = [0.0; 8];
     for (k, (bin, pk)) in data.bins.iter().zip(&ws.p).enumerate() {
         f.grad(&bin.m, &mut g[..np]);
         for j in 0..np {

@@ -151,6 +151,17 @@ pub struct Candidate {
     pub d_delta_data: Option<f64>,
     /// Whether the solver converged.
     pub converged: bool,
+    /// The ladder's criterion `F / c_data + p ln N` with the data's own overdispersion `c_data`
+    /// ([`Selection::data_overdispersion`]; objective.md, "Mixtures and the ladder"); lower is better.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub qbic_data: Option<f64>,
+    /// Deviance per degree of freedom, `F / (K - p - 1)` (as `reduced_chi2`, named for the ladder table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub deviance_per_dof: Option<f64>,
+    /// What each parameter added over `parent` buys: `(F_parent - F) / (c_data (p - p_parent))`, to be set
+    /// against its price `ln N` in the criterion.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gain_per_param: Option<f64>,
 }
 
 /// Model selection of `--model auto`.
@@ -160,8 +171,15 @@ pub struct Selection {
     pub criterion: String,
     /// The overdispersion `c = max(1, smallest reduced_chi2 among the candidates)` ([`crate::fit::qbic`]).
     pub overdispersion: f64,
-    /// Every model fitted, simplest first.
+    /// Every model fitted, simplest first (the single lobes, then the mixtures).
     pub candidates: Vec<Candidate>,
+    /// The ladder's overdispersion `c_data = max(1, quality.dispersion)` (the data's own, from the odd/even
+    /// block split), or `overdispersion` when the NDF has no split.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_overdispersion: Option<f64>,
+    /// One sentence: the best single lobe against the best mixture, and which won.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ladder: Option<String>,
 }
 
 /// A fit result (`ndfit.fit/1`).

@@ -137,6 +137,9 @@ pub fn closed_form(id: ModelId, s: &SlopeSummary) -> Vec<f64> {
         ModelId::Ggx | ModelId::Beckmann => vec![iso.max(START_ALPHA_MIN)],
         ModelId::GgxAniso | ModelId::BeckmannAniso => vec![ax, ay, s.theta_z],
         ModelId::Ellipsoid => vec![ax, ay, 0.0, 0.0, s.theta_z],
+        // A core a little narrower than the median slopes say and a tail three times wider.
+        ModelId::Ggx2 | ModelId::Beckmann2 => vec![0.7 * ax, 0.7 * ay, 3.0 * ax, 3.0 * ay, s.theta_z, 0.7],
+        ModelId::EllipsoidGgx => vec![0.7 * ax, 0.7 * ay, 0.0, 0.0, s.theta_z, 3.0 * (ax * ay).sqrt(), 0.7],
     }
 }
 

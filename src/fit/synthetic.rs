@@ -37,6 +37,9 @@ impl Grid {
             ModelId::Ggx | ModelId::Beckmann => (p[0], p[0], 0.0, 0.0, 0.0),
             ModelId::GgxAniso | ModelId::BeckmannAniso => (p[0], p[1], 0.0, 0.0, p[2]),
             ModelId::Ellipsoid => (p[0], p[1], p[2], p[3], p[4]),
+            // A grid for the wider (second) lobe, which spans the core too.
+            ModelId::Ggx2 | ModelId::Beckmann2 => (p[2], p[3], 0.0, 0.0, p[4]),
+            ModelId::EllipsoidGgx => (p[5], p[5], 0.0, 0.0, 0.0),
         };
         let r = crate::models::ellipsoid::rotation_xyz(tx, ty, tz);
         let axis = r.row(2);

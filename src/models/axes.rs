@@ -97,6 +97,12 @@ impl Model {
             Model::GgxAniso(g) => Some(LobeAxes::aligned(g.alpha_x, g.alpha_y, g.theta_z)),
             Model::BeckmannAniso(b) => Some(LobeAxes::aligned(b.alpha_x, b.alpha_y, b.theta_z)),
             Model::Ellipsoid(e) => Some(LobeAxes::ellipsoid(e.params())),
+            // A mixture's frame is its first lobe's (shared by both lobes of ggx2 and beckmann2).
+            Model::Mixture(x) => match x.lobe1 {
+                super::Lobe::Ggx(g) => Some(LobeAxes::aligned(g.alpha_x, g.alpha_y, g.theta_z)),
+                super::Lobe::Beckmann(b) => Some(LobeAxes::aligned(b.alpha_x, b.alpha_y, b.theta_z)),
+                super::Lobe::Ellipsoid(e) => Some(LobeAxes::ellipsoid(e.params())),
+            },
         }
     }
 }

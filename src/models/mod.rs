@@ -31,6 +31,7 @@ pub mod canonical;
 pub mod ellipsoid;
 pub mod fresnel;
 pub mod ggx;
+pub mod mixture;
 pub mod roughness;
 pub mod roughness_matrix;
 pub mod sampling;
@@ -43,6 +44,7 @@ pub use brdf::{MaskingShadowing, MicrofacetBrdf};
 pub use ellipsoid::Ellipsoid;
 pub use fresnel::fresnel_conductor;
 pub use ggx::Ggx;
+pub use mixture::{Lobe, Mixture, MixtureKind};
 pub use roughness_matrix::{disk_to_slope_jacobian, GgxMatrix};
 pub use sel::SquaredEllipsoidalLobe;
 
@@ -77,12 +79,41 @@ pub enum ModelId {
     /// The ellipsoid NDF, A = S R (Walter et al. eq. 2-3): `alpha_x`, `alpha_y`, `theta_x`, `theta_y`, `theta_z`.
     #[serde(rename = "ellipsoid")]
     Ellipsoid,
+    /// Two GTR2aniso lobes sharing `theta_z` ([`mixture`]): `alpha_x1`, `alpha_y1`, `alpha_x2`, `alpha_y2`,
+    /// `theta_z`, `weight`.
+    #[serde(rename = "ggx2")]
+    Ggx2,
+    /// Two anisotropic Beckmann lobes sharing `theta_z`, parameters as `ggx2`.
+    #[serde(rename = "beckmann2")]
+    Beckmann2,
+    /// An ellipsoid core and an isotropic GGX tail ([`mixture`]): `alpha_x1`, `alpha_y1`, `theta_x`, `theta_y`,
+    /// `theta_z`, `alpha2`, `weight`.
+    #[serde(rename = "ellipsoid+ggx")]
+    EllipsoidGgx,
 }
 
 impl ModelId {
-    /// Every model id, simplest first.
+    /// Every single-lobe model id, simplest first.
     pub const ALL: [ModelId; 5] =
         [ModelId::Ggx, ModelId::Beckmann, ModelId::GgxAniso, ModelId::BeckmannAniso, ModelId::Ellipsoid];
+
+    /// The two-lobe mixtures ([`mixture`]), simplest first.
+    pub const MIXTURES: [ModelId; 3] = [ModelId::Ggx2, ModelId::Beckmann2, ModelId::EllipsoidGgx];
+
+    /// The mixture kind of a mixture id.
+    pub fn mixture_kind(self) -> Option<MixtureKind> {
+        match self {
+            ModelId::Ggx2 => Some(MixtureKind::Ggx2),
+            ModelId::Beckmann2 => Some(MixtureKind::Beckmann2),
+            ModelId::EllipsoidGgx => Some(MixtureKind::EllipsoidGgx),
+            _ => None,
+        }
+    }
+
+    /// Whether the id is a two-lobe mixture.
+    pub fn is_mixture(self) -> bool {
+        self.mixture_kind().is_some()
+    }
 
     /// The id as the contract spells it.
     pub fn as_str(self) -> &'static str {
@@ -92,6 +123,9 @@ impl ModelId {
             ModelId::Beckmann => "beckmann",
             ModelId::BeckmannAniso => "beckmann-aniso",
             ModelId::Ellipsoid => "ellipsoid",
+            ModelId::Ggx2 => "ggx2",
+            ModelId::Beckmann2 => "beckmann2",
+            ModelId::EllipsoidGgx => "ellipsoid+ggx",
         }
     }
 
@@ -101,6 +135,8 @@ impl ModelId {
             ModelId::Ggx | ModelId::Beckmann => &["alpha"],
             ModelId::GgxAniso | ModelId::BeckmannAniso => &["alpha_x", "alpha_y", "theta_z"],
             ModelId::Ellipsoid => &["alpha_x", "alpha_y", "theta_x", "theta_y", "theta_z"],
+            ModelId::Ggx2 | ModelId::Beckmann2 => &["alpha_x1", "alpha_y1", "alpha_x2", "alpha_y2", "theta_z", "weight"],
+            ModelId::EllipsoidGgx => &["alpha_x1", "alpha_y1", "theta_x", "theta_y", "theta_z", "alpha2", "weight"],
         }
     }
 
@@ -138,7 +174,7 @@ impl std::str::FromStr for ModelChoice {
         }
         s.parse::<ModelId>()
             .map(ModelChoice::Model)
-            .map_err(|_| Error::invalid(format!("unknown model '{s}' (expected auto, ggx, ggx-aniso, beckmann, beckmann-aniso or ellipsoid)")))
+            .map_err(|_| Error::invalid(format!("unknown model '{s}' (expected auto, ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid, ggx2, beckmann2 or ellipsoid+ggx)")))
     }
 }
 
@@ -147,8 +183,11 @@ impl std::str::FromStr for ModelId {
     fn from_str(s: &str) -> Result<Self> {
         ModelId::ALL
             .into_iter()
+            .chain(ModelId::MIXTURES)
             .find(|id| id.as_str() == s)
-            .ok_or_else(|| Error::invalid(format!("unknown model '{s}' (expected ggx, ggx-aniso, beckmann, beckmann-aniso or ellipsoid)")))
+            .ok_or_else(|| {
+                Error::invalid(format!("unknown model '{s}' (expected ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid, ggx2, beckmann2 or ellipsoid+ggx)"))
+            })
     }
 }
 
@@ -172,6 +211,9 @@ pub trait Masking {
 }
 
 /// One fitted or hand-written model: the id and its parameters, as one value.
+// A mixture holds two lobes (each up to an ellipsoid with its matrices), so it is the largest variant; a
+// box would take `Copy` from every model for no measurable gain (models are copied a few times per fit).
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Model {
     /// `ggx`.
@@ -184,6 +226,8 @@ pub enum Model {
     BeckmannAniso(Beckmann),
     /// `ellipsoid`.
     Ellipsoid(Ellipsoid),
+    /// `ggx2`, `beckmann2`, `ellipsoid+ggx`.
+    Mixture(Mixture),
 }
 
 impl Model {
@@ -201,6 +245,9 @@ impl Model {
             ModelId::Beckmann => Model::Beckmann(Beckmann::new(p[0], p[0], 0.0)?),
             ModelId::BeckmannAniso => Model::BeckmannAniso(Beckmann::new(p[0], p[1], p[2])?),
             ModelId::Ellipsoid => Model::Ellipsoid(Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4])?),
+            ModelId::Ggx2 => Model::Mixture(Mixture::from_params(MixtureKind::Ggx2, p)?),
+            ModelId::Beckmann2 => Model::Mixture(Mixture::from_params(MixtureKind::Beckmann2, p)?),
+            ModelId::EllipsoidGgx => Model::Mixture(Mixture::from_params(MixtureKind::EllipsoidGgx, p)?),
         })
     }
 
@@ -212,6 +259,11 @@ impl Model {
             Model::Beckmann(_) => ModelId::Beckmann,
             Model::BeckmannAniso(_) => ModelId::BeckmannAniso,
             Model::Ellipsoid(_) => ModelId::Ellipsoid,
+            Model::Mixture(x) => match x.kind {
+                MixtureKind::Ggx2 => ModelId::Ggx2,
+                MixtureKind::Beckmann2 => ModelId::Beckmann2,
+                MixtureKind::EllipsoidGgx => ModelId::EllipsoidGgx,
+            },
         }
     }
 
@@ -223,6 +275,7 @@ impl Model {
             Model::Beckmann(b) => vec![b.alpha_x],
             Model::BeckmannAniso(b) => vec![b.alpha_x, b.alpha_y, b.theta_z],
             Model::Ellipsoid(e) => e.params().to_vec(),
+            Model::Mixture(x) => x.params(),
         }
     }
 
@@ -232,7 +285,7 @@ impl Model {
         match self {
             Model::Ggx(g) | Model::GgxAniso(g) => Some(g.to_ellipsoid().a()),
             Model::Ellipsoid(e) => Some(e.a()),
-            Model::Beckmann(_) | Model::BeckmannAniso(_) => None,
+            Model::Beckmann(_) | Model::BeckmannAniso(_) | Model::Mixture(_) => None,
         }
     }
 }
@@ -245,6 +298,7 @@ impl Model {
             Model::Ggx(g) | Model::GgxAniso(g) => g.g1(u, m),
             Model::Beckmann(b) | Model::BeckmannAniso(b) => b.g1(u, m),
             Model::Ellipsoid(e) => e.g1(u, m),
+            Model::Mixture(x) => x.g1(u, m),
         }
     }
 
@@ -257,6 +311,7 @@ impl Model {
             Model::Ggx(g) | Model::GgxAniso(g) => g.lambda(u),
             Model::Beckmann(b) | Model::BeckmannAniso(b) => b.lambda(u),
             Model::Ellipsoid(e) => e.lambda(u),
+            Model::Mixture(x) => x.lambda(u),
         }
     }
 
@@ -276,6 +331,7 @@ impl Model {
                 Model::BeckmannAniso(Beckmann { alpha_x: ax, alpha_y: ay, theta_z: tz })
             }
             Model::Ellipsoid(e) => Model::Ellipsoid(e.canonical()),
+            Model::Mixture(x) => Model::Mixture(x.canonical()),
         }
     }
 
@@ -296,7 +352,7 @@ impl Model {
         match self {
             Model::Ggx(g) | Model::GgxAniso(g) => Some(g.to_ellipsoid()),
             Model::Ellipsoid(e) => Some(*e),
-            Model::Beckmann(_) | Model::BeckmannAniso(_) => None,
+            Model::Beckmann(_) | Model::BeckmannAniso(_) | Model::Mixture(_) => None,
         }
     }
 }
@@ -316,6 +372,7 @@ impl Ndf for Model {
             Model::Ggx(g) | Model::GgxAniso(g) => g.d(m),
             Model::Beckmann(b) | Model::BeckmannAniso(b) => b.d(m),
             Model::Ellipsoid(e) => e.d(m),
+            Model::Mixture(x) => x.d(m),
         }
     }
 }

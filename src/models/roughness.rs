@@ -88,6 +88,7 @@ pub fn slope_form(model: &Model) -> Result<SlopeForm> {
             Ok(SlopeForm { a2: aniso_matrix(b.alpha_x, b.alpha_y, b.theta_z), mu: Vector2::zeros() })
         }
         Model::Ellipsoid(e) => ellipsoid_slope_form(&e.a()),
+        Model::Mixture(_) => Err(Error::invalid(format!("{}: a two-lobe mixture has no single slope form (filter its lobes)", model.id()))),
     }
 }
 
@@ -157,6 +158,7 @@ pub fn add_kernel_matrix(model: &Model, k: &Matrix2<f64>) -> Result<Model> {
             let p = ellipsoid_params_from_ata(&ellipsoid_ata(&f))?;
             Ok(Model::Ellipsoid(Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4])?))
         }
+        Model::Mixture(x) => super::mixture::add_kernel_matrix_mixture(x, &k),
     }
 }
 
@@ -180,6 +182,9 @@ pub fn model_from_slope_form(id: ModelId, f: &SlopeForm) -> Result<Model> {
             let g = SlopeForm { a2: floor_matrix(&f.a2), mu: f.mu };
             let p = ellipsoid_params_from_ata(&ellipsoid_ata(&g))?;
             Ok(Model::Ellipsoid(Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4])?))
+        }
+        ModelId::Ggx2 | ModelId::Beckmann2 | ModelId::EllipsoidGgx => {
+            Err(Error::invalid(format!("{id}: a two-lobe mixture is not determined by one slope form")))
         }
     }
 }

@@ -602,8 +602,48 @@ pub fn recommend(results: &[FootprintResult], tolerance: f64) -> Recommendation 
             None => words.push("No model could be fitted; check the scan and the footprints.".into()),
         }
     }
+    if let Some(s) = one_lobe_suffices(results, chosen, tolerance) {
+        words.push(s);
+    }
     words.push("The blur samples use a fixed seed (--seed), so the same scan and options give the same recommendation.".into());
     Recommendation { model: chosen, tolerance, candidates: cands, explanation: words.join(" ") }
+}
+
+/// When two lobes are recommended: the footprint from which on (every larger footprint too) a single lobe
+/// meets the tolerance, in one sentence. Filtering convolves the slope distribution with the footprint's
+/// kernel, which widens the sharp core most (relative to its width) until the tail no longer needs a lobe of
+/// its own; a renderer working only at those footprints can use that single lobe.
+fn one_lobe_suffices(results: &[FootprintResult], chosen: Option<ModelId>, tolerance: f64) -> Option<String> {
+    if !chosen.is_some_and(|m| m.is_mixture()) {
+        return None;
+    }
+    let mut order: Vec<&FootprintResult> = results.iter().collect();
+    order.sort_by(|a, b| a.stats.footprint.total_cmp(&b.stats.footprint));
+    let singles = |r: &FootprintResult| -> Vec<ModelId> {
+        r.models
+            .iter()
+            .filter(|m| !m.id.is_mixture() && m.empirical.delta.is_some_and(|d| d.excess <= tolerance))
+            .map(|m| m.id)
+            .collect()
+    };
+    let mut from = None;
+    for (i, r) in order.iter().enumerate().rev() {
+        if singles(r).is_empty() {
+            break;
+        }
+        from = Some(i);
+    }
+    let i = from?;
+    let names: Vec<&str> = singles(order[i]).iter().map(|m| m.as_str()).collect();
+    Some(if i == 0 {
+        format!("One lobe would do too at every footprint here ({}), by its own error; the mixture is kept because the ranking above put it first.", names.join(", "))
+    } else {
+        format!(
+            "From {:.3e} m on, one lobe suffices ({}): filtering by the footprint widens the sharp core until the tail needs no lobe of its own; below it only two lobes meet the tolerance.",
+            order[i].stats.footprint,
+            names.join(", ")
+        )
+    })
 }
 
 /// `2 Sigma` as `(alpha_x, alpha_y, theta_z)` for reporting; None when it is singular.

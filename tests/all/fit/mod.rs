@@ -6,6 +6,7 @@ pub(crate) mod fixtures;
 
 mod cli;
 mod jacobian;
+mod mixture;
 mod compare;
 mod covariance;
 mod end_to_end;

@@ -10,5 +10,6 @@ mod equivalence;
 mod eval_cli;
 mod extremes;
 mod masking;
+mod mixture;
 mod normalization;
 mod sampling;

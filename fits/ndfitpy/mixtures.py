@@ -1,0 +1,111 @@
+"""Two-lobe mixtures in numpy, written from the definition (not from the Rust code):
+``D = w D1 + (1 - w) D2``, each lobe normalized (Heitz eq. 9), ``w`` the first (core) lobe's share.
+
+- ``ggx2`` / ``beckmann2``: two anisotropic GGX / Beckmann lobes sharing ``theta_z``:
+  ``alpha_x1, alpha_y1, alpha_x2, alpha_y2, theta_z, weight``;
+- ``ellipsoid+ggx``: an ellipsoid core and an isotropic GGX tail:
+  ``alpha_x1, alpha_y1, theta_x, theta_y, theta_z, alpha2, weight``.
+
+Canonical form: for ggx2/beckmann2 the lobe with the smaller ``alpha_x alpha_y`` first (``w -> 1 - w`` on a
+swap), then ``alpha_x1 >= alpha_y1`` (or the tail's, for a round core) with both lobes' alphas swapped together
+and ``theta_z + pi/2``, ``theta_z`` in (-pi/2, pi/2]; for ellipsoid+ggx the core by the ellipsoid's rules.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+PARAM_NAMES = {
+    "ggx2": ("alpha_x1", "alpha_y1", "alpha_x2", "alpha_y2", "theta_z", "weight"),
+    "beckmann2": ("alpha_x1", "alpha_y1", "alpha_x2", "alpha_y2", "theta_z", "weight"),
+    "ellipsoid+ggx": ("alpha_x1", "alpha_y1", "theta_x", "theta_y", "theta_z", "alpha2", "weight"),
+}
+
+#: The single lobe each mixture extends (its fit starts the mixture's).
+PARENT = {"ggx2": "ggx-aniso", "beckmann2": "beckmann-aniso", "ellipsoid+ggx": "ellipsoid"}
+
+
+def lobes(model: str, p: np.ndarray):
+    """((model1, params1), (model2, params2), w) of a mixture."""
+    if model == "ggx2":
+        return ("ggx-aniso", np.array([p[0], p[1], p[4]])), ("ggx-aniso", np.array([p[2], p[3], p[4]])), p[5]
+    if model == "beckmann2":
+        return ("beckmann-aniso", np.array([p[0], p[1], p[4]])), ("beckmann-aniso", np.array([p[2], p[3], p[4]])), p[5]
+    if model == "ellipsoid+ggx":
+        return ("ellipsoid", np.array(p[:5])), ("ggx", np.array([p[5]])), p[6]
+    raise ValueError(f"'{model}' is not a mixture")
+
+
+def log_d_and_grad(model: str, p: np.ndarray, m: np.ndarray, want_grad: bool, single):
+    """ln D of a mixture and its gradient in the natural parameters; ``single`` is models.log_d_and_grad.
+
+    ln D = logaddexp(ln w + ln D1, ln(1 - w) + ln D2); with the responsibilities p_i = w_i D_i / D, the gradient in
+    a lobe's parameters is p_i times the lobe's, and d ln D / d w = (D1 - D2) / D = p1 / w - p2 / (1 - w).
+    """
+    (m1, p1), (m2, p2), w = lobes(model, p)
+    if not (0.0 < w < 1.0):
+        raise ValueError(f"model '{model}': weight must lie in (0, 1), got {w}")
+    l1, g1 = single(m1, p1, m, want_grad)
+    l2, g2 = single(m2, p2, m, want_grad)
+    a = math.log(w) + l1
+    b = math.log1p(-w) + l2
+    logd = np.logaddexp(a, b)
+    if not want_grad:
+        return logd, None
+    with np.errstate(invalid="ignore"):
+        r1 = np.where(np.isfinite(logd), np.exp(a - logd), 0.0)
+        r2 = np.where(np.isfinite(logd), np.exp(b - logd), 0.0)
+    g = np.zeros((m.shape[0], len(p)))
+    if model in ("ggx2", "beckmann2"):
+        g[:, 0] = r1 * g1[:, 0]
+        g[:, 1] = r1 * g1[:, 1]
+        g[:, 2] = r2 * g2[:, 0]
+        g[:, 3] = r2 * g2[:, 1]
+        g[:, 4] = r1 * g1[:, 2] + r2 * g2[:, 2]
+        g[:, 5] = r1 / w - r2 / (1.0 - w)
+    else:
+        g[:, :5] = r1[:, None] * g1
+        g[:, 5] = r2 * g2[:, 0]
+        g[:, 6] = r1 / w - r2 / (1.0 - w)
+    return logd, g
+
+
+def starts(model: str, parent: np.ndarray):
+    """Starting points from the parent's fit: a core narrower and a tail wider than the one lobe, the tail's share
+    from a tenth to a third, and a narrow spike (chosen here independently of the Rust fitter's starts)."""
+    out = []
+    # The last: a spike of a few percent five times narrower than the one lobe (a specular patch on a rough scan).
+    for kc, kt, w in ((0.8, 2.5, 0.8), (0.6, 4.0, 0.9), (0.9, 1.8, 0.6), (0.2, 1.05, 0.03)):
+        if model == "ellipsoid+ggx":
+            ax, ay = parent[0], parent[1]
+            out.append(np.array([kc * ax, kc * ay, parent[2], parent[3], parent[4], kt * math.sqrt(ax * ay), w]))
+        else:
+            ax, ay, tz = parent
+            out.append(np.array([kc * ax, kc * ay, kt * ax, kt * ay, tz, w]))
+    return out
+
+
+def _wrap(t: float) -> float:
+    w = math.fmod(t + 0.5 * math.pi, math.pi)
+    if w <= 0.0:
+        w += math.pi
+    return w - 0.5 * math.pi
+
+
+def canonical(model: str, p: np.ndarray, ellipsoid_canonical) -> np.ndarray:
+    """Canonical parameters (module notes); ``ellipsoid_canonical`` maps the five ellipsoid parameters."""
+    p = np.array(p, dtype=float)
+    if model == "ellipsoid+ggx":
+        p[:5] = ellipsoid_canonical(p[:5])
+        return p
+    ax1, ay1, ax2, ay2, tz, w = p
+    if ax2 * ay2 < ax1 * ay1:
+        ax1, ay1, ax2, ay2, w = ax2, ay2, ax1, ay1, 1.0 - w
+    tie = lambda a, b: abs(a - b) <= 1e-9 * max(a, b)  # noqa: E731
+    swap = (ax1 < ay1) if not tie(ax1, ay1) else (not tie(ax2, ay2) and ax2 < ay2)
+    if swap:
+        ax1, ay1, ax2, ay2, tz = ay1, ax1, ay2, ax2, tz + 0.5 * math.pi
+    tz = 0.0 if tie(ax1, ay1) and tie(ax2, ay2) else _wrap(tz)
+    return np.array([ax1, ay1, ax2, ay2, tz, w])

@@ -1,0 +1,156 @@
+//! Fitting the two-lobe mixtures ([`crate::models::mixture`]): starts from the single-lobe fit they
+//! extend, and the ladder step of `--model auto` (one lobe or two), derived in
+//! `data_formats/objective.md` ("Mixtures and the ladder").
+
+use super::{fit_chain, fit_from, public, Fitted, FitOptions, Session};
+use crate::error::Result;
+use crate::models::ModelId;
+
+/// The single-lobe model a mixture extends (its first stage, and its parent in the selection report):
+/// `ggx2` -> `ggx-aniso`, `beckmann2` -> `beckmann-aniso`, `ellipsoid+ggx` -> `ellipsoid`.
+pub fn parent_of(id: ModelId) -> Option<ModelId> {
+    match id {
+        ModelId::Ggx2 => Some(ModelId::GgxAniso),
+        ModelId::Beckmann2 => Some(ModelId::BeckmannAniso),
+        ModelId::EllipsoidGgx => Some(ModelId::Ellipsoid),
+        _ => None,
+    }
+}
+
+/// The (core scale, tail scale, core weight) of each start: the core narrower and the tail wider than
+/// the one lobe that fits both, the tail's share from a few percent to a half; and a spike of a few percent
+/// five times narrower than the one lobe (a specular patch on a rough scan).
+const SPLITS: [(f64, f64, f64); 4] = [(0.7, 3.0, 0.7), (0.9, 2.0, 0.5), (0.85, 5.0, 0.9), (0.2, 1.05, 0.03)];
+
+/// Starting points (contract parameters) of mixture `id` from its parent's fit (contract parameters).
+pub fn starts(id: ModelId, parent: &[f64]) -> Vec<Vec<f64>> {
+    SPLITS
+        .iter()
+        .map(|&(kc, kt, w)| match id {
+            ModelId::EllipsoidGgx => {
+                let (ax, ay) = (parent[0], parent[1]);
+                vec![kc * ax, kc * ay, parent[2], parent[3], parent[4], kt * (ax * ay).sqrt(), w]
+            }
+            _ => {
+                let (ax, ay, tz) = (parent[0], parent[1], parent[2]);
+                vec![kc * ax, kc * ay, kt * ax, kt * ay, tz, w]
+            }
+        })
+        .collect()
+}
+
+/// The parent as a mixture of two copies of itself (weight one half): the same D, so the same objective.
+fn degenerate(id: ModelId, parent: &[f64]) -> Vec<f64> {
+    match id {
+        ModelId::EllipsoidGgx => vec![parent[0], parent[1], parent[2], parent[3], parent[4], (parent[0] * parent[1]).sqrt(), 0.5],
+        _ => vec![parent[0], parent[1], parent[0], parent[1], parent[2], 0.5],
+    }
+}
+
+/// LM patience of a mixture start (evaluations are limited to `patience * (p + 1)`): on data one lobe
+/// describes, the mixture's weight and second lobe are nearly free and LM creeps along that flat valley
+/// for its whole budget (1,660 evaluations, 0.9 s, for `ellipsoid+ggx` on a 5,000-bin scan at the default
+/// 200) without lowering the deviance by more than its tolerance.
+pub const MIXTURE_PATIENCE: usize = 40;
+
+/// Fit mixture `id` from the fit of its parent. A mixture holds its parent (two equal lobes), so its
+/// optimum can be no worse: should every start end above the parent's objective (a local optimum, e.g.
+/// on data one lobe describes), the parent written as a mixture is the result, said so in a warning.
+pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitOptions) -> Result<Fitted> {
+    let p = public(parent);
+    let mut o = *opts;
+    o.tolerances.max_iter = o.tolerances.max_iter.min(MIXTURE_PATIENCE);
+    let fit = fit_from(s, id, &starts(id, &p), &o);
+    // A usable fit no worse than the parent stands. Otherwise (every start above the parent, no finite
+    // start, or a lobe run off beyond the alpha range, e.g. a tail widening without bound to take up a flat
+    // background) the parent written as a mixture is the result, said so in a warning.
+    let valid = |f: &Fitted| crate::models::Model::from_params(id, &public(f)).is_ok();
+    if let Ok(fit) = &fit {
+        if fit.f <= parent.f && valid(fit) {
+            return Ok(fit.clone());
+        }
+    }
+    let x = super::params::to_internal(id, &degenerate(id, &p));
+    let mut r = vec![0.0; s.data.bins.len()];
+    let f = super::problem::residuals_into(&s.data, id, &x, &mut r);
+    let why = match &fit {
+        Ok(g) if valid(g) => format!("every start ended above the one-lobe {} fit", parent.id),
+        Ok(_) => "the fit ran out of the model's domain (a lobe beyond the alpha range)".to_string(),
+        Err(e) => format!("no start gave a usable fit ({})", e.message()),
+    };
+    let mut warnings = fit.as_ref().map(|g| g.warnings.clone()).unwrap_or_default();
+    warnings.push(format!("{id}: {why}; reported as the {} lobe twice (the data show no second lobe it can fit)", parent.id));
+    let local = super::solve::Local { x: x.clone(), f, termination: format!("{id}: the one-lobe {} fit as two equal lobes", parent.id), converged: true, evaluations: 0 };
+    let (evaluations, start_objectives, best_start) = match &fit {
+        Ok(g) => (g.evaluations, g.start_objectives.clone(), g.best_start),
+        Err(_) => (0, Vec::new(), 0),
+    };
+    Ok(Fitted { id, x, f, local, evaluations, start_objectives, best_start, warnings, delta: false })
+}
+
+/// Fit mixture `id` with its parent's chain first.
+pub(super) fn fit_mixture_chain(s: &Session, id: ModelId, opts: &FitOptions) -> Result<Fitted> {
+    let parent = parent_of(id).expect("a mixture id");
+    let p = fit_chain(s, parent, opts)?;
+    fit_mixture(s, id, &p, opts)
+}
+
+/// The ladder step of `--model auto`: the best single lobe (chosen among the single lobes by the QBIC
+/// with their own overdispersion, unchanged) against the mixtures, by `F / c_data + p ln N` with the
+/// data's own overdispersion `c_data = max(1, dispersion)` ([`super::verdict::data_dispersion`]): a
+/// mixture wins only when its deviance, measured in the data's own noise, drops by more than `ln N` per
+/// added parameter. Derivation in `data_formats/objective.md` ("Mixtures and the ladder").
+pub(super) struct Ladder {
+    /// `c_data`.
+    pub c_data: f64,
+    /// The ladder criterion of every fit.
+    pub criterion: Vec<f64>,
+    /// The index of the fit chosen.
+    pub chosen: usize,
+    /// One sentence for the report.
+    pub summary: String,
+}
+
+impl Ladder {
+    /// The ladder over `fits` (single lobes first, `n_single` of them, the best of which is
+    /// `best_single`); `c_single` is the single lobes' overdispersion, used when the NDF has no split.
+    pub fn new(ndf: &crate::ndf::EmpiricalNdf, s: &Session, fits: &[Fitted], n_single: usize, best_single: usize, c_single: f64) -> Ladder {
+        let c_data = super::verdict::data_dispersion(ndf, s.data.max_theta).filter(|d| d.is_finite()).map_or(c_single, |d| d.max(1.0));
+        let criterion: Vec<f64> = fits.iter().map(|f| super::qbic::qbic(f.f, c_data, f.id.n_params(), s.data.n)).collect();
+        let mut chosen = best_single;
+        for i in n_single..fits.len() {
+            if criterion[i] < criterion[chosen] {
+                chosen = i;
+            }
+        }
+        let best_mix = (n_single..fits.len()).min_by(|&a, &b| criterion[a].total_cmp(&criterion[b]));
+        let summary = match best_mix {
+            None => format!("one lobe: no mixture could be fitted; {} chosen", fits[best_single].id),
+            Some(m) => {
+                let d = criterion[m] - criterion[best_single];
+                if chosen == m {
+                    format!(
+                        "two lobes: {} beats the best single lobe {} by {:.1} in F / c_data + p ln N (c_data = {c_data:.3})",
+                        fits[m].id, fits[best_single].id, -d
+                    )
+                } else {
+                    format!(
+                        "one lobe: the best mixture {} does not pay for its {} extra parameters over {} (criterion {:+.1}, c_data = {c_data:.3})",
+                        fits[m].id,
+                        fits[m].id.n_params() as i64 - fits[best_single].id.n_params() as i64,
+                        fits[best_single].id,
+                        d
+                    )
+                }
+            }
+        };
+        Ladder { c_data, criterion, chosen, summary }
+    }
+
+    /// `(F_parent - F) / (c_data (p - p_parent))`: the deviance, in the data's noise, that each added
+    /// parameter removes (worth keeping when above `ln N`).
+    pub fn gain_per_param(&self, parent: &Fitted, f: &Fitted) -> f64 {
+        let dp = (f.id.n_params() as f64 - parent.id.n_params() as f64).max(1.0);
+        (parent.f - f.f) / (self.c_data * dp)
+    }
+}

@@ -1,0 +1,276 @@
+//! The two-lobe mixtures (`ggx2`, `beckmann2`, `ellipsoid+ggx`): their `ln D` against the models' own D,
+//! the analytic Jacobians against central differences, recovery of known two-lobe truths (heightfields
+//! built of two ellipsoid caps, whose NDF is exactly the area-weighted mixture of two ellipsoid NDFs;
+//! Poisson counts of a Beckmann mixture), and the one-or-two-lobe ladder of `--model auto`.
+
+use nalgebra::{DMatrix, Vector3};
+use ndfit::fit::lnd::LnD;
+use ndfit::fit::objective::{FitData, Objective};
+use ndfit::fit::params::{to_internal, to_public};
+use ndfit::fit::problem::{jacobian_into, residuals_into};
+use ndfit::fit::{fit_auto, fit_model, FitOptions};
+use ndfit::heightfield::Heightfield;
+use ndfit::models::{Model, ModelId, Ndf};
+use ndfit::ndf::{empirical_ndf, NdfOptions};
+use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings};
+
+use rand::{RngExt, SeedableRng};
+
+use super::fixtures::{delta_to_truth, model};
+
+const H: f64 = 1e-5;
+
+fn random_params(id: ModelId, rng: &mut rand::rngs::StdRng) -> Vec<f64> {
+    let a = |rng: &mut rand::rngs::StdRng| 10f64.powf(rng.random_range(-2.0..0.3));
+    let t = |rng: &mut rand::rngs::StdRng, r: f64| rng.random_range(-r..r);
+    let w = |rng: &mut rand::rngs::StdRng| rng.random_range(0.05..0.95);
+    match id {
+        ModelId::Ggx2 | ModelId::Beckmann2 => vec![a(rng), a(rng), a(rng), a(rng), t(rng, 3.0), w(rng)],
+        _ => vec![a(rng), a(rng), t(rng, 1.0), t(rng, 1.0), t(rng, 3.0), a(rng), w(rng)],
+    }
+}
+
+/// Independent source: the models module's D of each lobe (Walter eq. 1, Heitz eq. 82), mixed by hand.
+#[test]
+fn mixture_ln_d_matches_the_lobes_mixed_by_hand() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    for id in ModelId::MIXTURES {
+        for _ in 0..50 {
+            let p = random_params(id, &mut rng);
+            let (d1, d2, w): (Model, Model, f64) = match id {
+                ModelId::Ggx2 => (model(ModelId::GgxAniso, &[p[0], p[1], p[4]]), model(ModelId::GgxAniso, &[p[2], p[3], p[4]]), p[5]),
+                ModelId::Beckmann2 => {
+                    (model(ModelId::BeckmannAniso, &[p[0], p[1], p[4]]), model(ModelId::BeckmannAniso, &[p[2], p[3], p[4]]), p[5])
+                }
+                _ => (model(ModelId::Ellipsoid, &p[..5]), model(ModelId::Ggx, &[p[5]]), p[6]),
+            };
+            let f = LnD::new(id, &to_internal(id, &p));
+            let m = model(id, &p);
+            let dir = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(0.05..1.0)).normalize();
+            let want = w * d1.d(dir) + (1.0 - w) * d2.d(dir);
+            if want > 1e-300 {
+                let got = f.value(&dir).exp();
+                assert!((got / want - 1.0).abs() < 1e-11, "{id} {p:?} at {dir:?}: {got} vs {want}");
+                assert!((m.d(dir) / want - 1.0).abs() < 1e-13, "{id}: Model::d");
+            }
+        }
+    }
+}
+
+/// Tolerance as in jacobian.rs: central differences with `h = 1e-5` err by far less than `2e-5 (1 + |g|)`.
+#[test]
+fn mixture_ln_d_gradient_matches_central_differences() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(12);
+    for id in ModelId::MIXTURES {
+        for _ in 0..40 {
+            let x = to_internal(id, &random_params(id, &mut rng));
+            let dir = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(0.2..1.0)).normalize();
+            let mut g = vec![0.0; x.len()];
+            LnD::new(id, &x).value_grad(&dir, &mut g);
+            for j in 0..x.len() {
+                let (mut xp, mut xm) = (x.clone(), x.clone());
+                xp[j] += H;
+                xm[j] -= H;
+                let fd = (LnD::new(id, &xp).value(&dir) - LnD::new(id, &xm).value(&dir)) / (2.0 * H);
+                assert!((fd - g[j]).abs() < 2e-5 * (1.0 + g[j].abs()), "{id} x={x:?} m={dir:?} param {j}: analytic {} vs FD {fd}", g[j]);
+            }
+        }
+    }
+}
+
+#[test]
+fn mixture_residual_jacobian_matches_central_differences() {
+    for (objective, max_theta) in [(Objective::Poisson, 90f64), (Objective::Logd, 90.0), (Objective::Poisson, 40.0)] {
+        for (id, truth, at) in [
+            (ModelId::Ggx2, vec![0.1, 0.06, 0.4, 0.3, 0.3, 0.7], vec![0.12, 0.05, 0.35, 0.33, 0.2, 0.6]),
+            (ModelId::Beckmann2, vec![0.1, 0.06, 0.4, 0.3, 0.3, 0.7], vec![0.12, 0.05, 0.35, 0.33, 0.2, 0.6]),
+            (ModelId::EllipsoidGgx, vec![0.12, 0.07, 0.1, -0.1, 0.4, 0.4, 0.7], vec![0.1, 0.08, 0.05, -0.15, 0.5, 0.35, 0.6]),
+        ] {
+            let t = model(id, &truth);
+            let ndf = ndfit::fit::synthetic::binned_ndf(&t, &ndfit::fit::synthetic::Grid::for_model(&t, 48), 2e4, 3);
+            let data = FitData::new(&ndf, objective, max_theta.to_radians()).expect("data");
+            let x = to_internal(id, &at);
+            let k = data.bins.len();
+            let mut r = vec![0.0; k];
+            let mut j = DMatrix::zeros(k, x.len());
+            jacobian_into(&data, id, &x, &mut r, &mut j);
+            for p in 0..x.len() {
+                let (mut xp, mut xm) = (x.clone(), x.clone());
+                xp[p] += H;
+                xm[p] -= H;
+                let (mut rp, mut rm) = (vec![0.0; k], vec![0.0; k]);
+                residuals_into(&data, id, &xp, &mut rp);
+                residuals_into(&data, id, &xm, &mut rm);
+                for b in 0..k {
+                    let fd = (rp[b] - rm[b]) / (2.0 * H);
+                    let tol = 2e-5 * (1.0 + j[(b, p)].abs() + r[b].abs());
+                    assert!((fd - j[(b, p)]).abs() < tol, "{objective:?} {id} bin {b} param {p}: {} vs {fd}", j[(b, p)]);
+                }
+            }
+            let back = to_internal(id, &to_public(id, &x));
+            for (a, b) in x.iter().zip(&back) {
+                assert!((a - b).abs() < 1e-9, "{id}: parameter map round trip {x:?} vs {back:?}");
+            }
+        }
+    }
+}
+
+/// Canonical form: the same D everywhere, idempotent, the narrower lobe first, `alpha_x1 >= alpha_y1`
+/// (or, for a round core, the tail's), `theta_z` in `(-pi/2, pi/2]`.
+#[test]
+fn mixture_canonical_form_keeps_d_and_orders_the_lobes() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(13);
+    for id in ModelId::MIXTURES {
+        for _ in 0..200 {
+            let p = random_params(id, &mut rng);
+            let m = model(id, &p);
+            let c = m.canonical();
+            let q = c.params();
+            for _ in 0..5 {
+                let dir = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(0.05..1.0)).normalize();
+                let (a, b) = (m.d(dir), c.d(dir));
+                assert!((a - b).abs() <= 1e-10 * a.max(1e-300), "{id} {p:?} -> {q:?}: D {a} vs {b}");
+            }
+            let again = c.canonical().params();
+            for (u, v) in q.iter().zip(&again) {
+                assert!((u - v).abs() <= 1e-12 * u.abs().max(1.0), "{id}: canonical form not idempotent {q:?} vs {again:?}");
+            }
+            if matches!(id, ModelId::Ggx2 | ModelId::Beckmann2) {
+                assert!(q[0] * q[1] <= q[2] * q[3], "{id}: narrower lobe first {q:?}");
+                assert!(q[0] >= q[1], "{id}: alpha_x1 >= alpha_y1 {q:?}");
+                assert!(q[4] > -std::f64::consts::FRAC_PI_2 && q[4] <= std::f64::consts::FRAC_PI_2, "{id}: theta_z {q:?}");
+            }
+        }
+    }
+}
+
+/// A lobe to draw facet slopes from.
+// Two values per test case: their size does not matter.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy)]
+enum Draw {
+    /// GTR2aniso `(alpha_x, alpha_y, theta_z)`, drawn here from its slope distribution (Heitz eq. 84-85:
+    /// the stretched unit GGX, whose radial slope has `P(|s| < R) = R^2 / (1 + R^2)`).
+    Ggx(f64, f64, f64),
+    /// Any ellipsoid special case, drawn by the models' exact visible-normal sampler with `u = n`, whose
+    /// density is `D(m) (m.n)` (Walter et al. sec. 4.1; chi-square tested in models/sampling.rs).
+    Sampler(Model),
+}
+
+impl Draw {
+    /// The slope `(dh/dx, dh/dy)` for the point `(u1, u2)` of the unit square.
+    fn slope(&self, u1: f64, u2: f64) -> (f64, f64) {
+        match *self {
+            Draw::Ggx(ax, ay, tz) => {
+                let r = (u1 / (1.0 - u1)).sqrt();
+                let phi = 2.0 * std::f64::consts::PI * u2;
+                // Local slopes, then back to the scan frame: the local frame is s' = Rz(theta_z) s.
+                let (lx, ly) = (ax * r * phi.cos(), ay * r * phi.sin());
+                let (sn, c) = tz.sin_cos();
+                (c * lx + sn * ly, -sn * lx + c * ly)
+            }
+            Draw::Sampler(m) => {
+                let n = m.sample_visible_normal(Vector3::z(), [u1, u2]).expect("an ellipsoid special case");
+                (-n.x / n.z, -n.y / n.z)
+            }
+        }
+    }
+}
+
+/// A heightfield of `n` plane facets of 2 x 2 points, each followed by a row and a column of NaN, so that
+/// the `triangles` scheme sees every facet as two triangles with its exact normal and no triangle spans
+/// two facets. The first `round(w n)` facets draw their slopes from `first`, the rest from `second`, each
+/// by the R2 low-discrepancy sequence (so the empirical NDF is the mixture `w D1 + (1 - w) D2` with
+/// almost no sampling noise), placed in a seeded random order (so the two triangles of a facet are the
+/// only correlated normals: the data's overdispersion is about 2).
+fn facet_mixture(first: Draw, second: Draw, w: f64, n: usize) -> Heightfield {
+    let g = 1.324_717_957_244_746_f64;
+    let (a1, a2) = (1.0 / g, 1.0 / (g * g));
+    let n1 = (w * n as f64).round() as usize;
+    let mut slopes: Vec<(f64, f64)> = (0..n)
+        .map(|k| {
+            let (lobe, j) = if k < n1 { (first, k) } else { (second, k - n1) };
+            let (u1, u2) = ((0.5 + j as f64 * a1).fract(), (0.5 + j as f64 * a2).fract());
+            lobe.slope(u1, u2)
+        })
+        .collect();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+    for i in (1..slopes.len()).rev() {
+        slopes.swap(i, rng.random_range(0..=i));
+    }
+    let side = (n as f64).sqrt().ceil() as usize;
+    let (nx, ny) = (3 * side, 3 * side);
+    let dx = 1e-6;
+    let mut z = vec![f64::NAN; nx * ny];
+    for (k, &(p, q)) in slopes.iter().enumerate() {
+        let (bi, bj) = (3 * (k / side), 3 * (k % side));
+        for (di, dj) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+            z[(bi + di) * nx + bj + dj] = p * dj as f64 * dx + q * di as f64 * dx;
+        }
+    }
+    Heightfield::new(nx, ny, dx, dx, z).expect("heightfield")
+}
+
+/// The bar: a mixture fitted to a two-lobe heightfield is within 0.5% of the truth in NDF, and
+/// `auto` takes two lobes. Tail weights 0.05, 0.2 and 0.5; anisotropic GGX pairs sharing their frame and a
+/// skewed ellipsoid core with a round GGX tail.
+#[test]
+fn two_lobe_heightfields_recover_the_mixture_and_auto_takes_two_lobes() {
+    let tri = NdfOptions { scheme: ndfit::ndf::NormalScheme::Triangles, cells_across: Some(255), ..NdfOptions::default() };
+    let skewed = model(ModelId::Ellipsoid, &[0.12, 0.07, 0.1, -0.08, 0.5]);
+    let cases: [(ModelId, Draw, Draw, f64, Vec<f64>); 4] = [
+        (ModelId::Ggx2, Draw::Ggx(0.1, 0.06, 0.3), Draw::Ggx(0.4, 0.25, 0.3), 0.95, vec![0.1, 0.06, 0.4, 0.25, 0.3, 0.95]),
+        (ModelId::Ggx2, Draw::Ggx(0.08, 0.08, 0.0), Draw::Ggx(0.3, 0.3, 0.0), 0.8, vec![0.08, 0.08, 0.3, 0.3, 0.0, 0.8]),
+        (ModelId::Ggx2, Draw::Ggx(0.15, 0.05, -0.6), Draw::Ggx(0.5, 0.2, -0.6), 0.5, vec![0.15, 0.05, 0.5, 0.2, -0.6, 0.5]),
+        (ModelId::EllipsoidGgx, Draw::Sampler(skewed), Draw::Ggx(0.45, 0.45, 0.0), 0.7, vec![0.12, 0.07, 0.1, -0.08, 0.5, 0.45, 0.7]),
+    ];
+    for (id, first, second, w, p) in cases {
+        let truth = model(id, &p);
+        let hf = facet_mixture(first, second, w, 250_000);
+        let ndf = empirical_ndf(&hf, &tri).expect("ndf");
+        let rep = fit_model(&ndf, id, &FitOptions::default()).expect("fit");
+        let d = delta_to_truth(&rep.to_model().expect("model"), &truth);
+        eprintln!("{id} tail weight {:.2}: fit {:?} truth {:?} delta {d:.2e} dispersion {:?}", 1.0 - w, rep.param_vec(), truth.canonical().params(), rep.quality.dispersion);
+        assert!(d <= 0.005, "{id} tail weight {:.2}: delta {d}", 1.0 - w);
+        let auto = fit_auto(&ndf, &FitOptions::default()).expect("auto");
+        let sel = auto.selection.as_ref().expect("selection");
+        assert!(auto.model.is_mixture(), "{id} tail weight {:.2}: auto chose {} ({:?})", 1.0 - w, auto.model, sel.ladder);
+        let da = delta_to_truth(&auto.to_model().expect("model"), &truth);
+        assert!(da <= 0.01, "{id}: auto's {} is {da} from the truth", auto.model);
+    }
+}
+
+/// Poisson counts of a Beckmann mixture (no heightfield has a Beckmann mixture NDF exactly): `beckmann2`
+/// recovers it within 0.5%, `auto` takes two lobes.
+#[test]
+fn beckmann_mixture_counts_recover_the_truth() {
+    let truth = model(ModelId::Beckmann2, &[0.08, 0.05, 0.35, 0.25, 0.4, 0.8]);
+    let ndf = super::fixtures::ndf_of(&truth, 1e6, 21);
+    let rep = fit_model(&ndf, ModelId::Beckmann2, &FitOptions::default()).expect("fit");
+    let d = delta_to_truth(&rep.to_model().expect("model"), &truth);
+    eprintln!("beckmann2: fit {:?} delta {d:.2e}", rep.param_vec());
+    assert!(d <= 0.005, "delta {d}");
+    let auto = fit_auto(&ndf, &FitOptions::default()).expect("auto");
+    assert!(auto.model.is_mixture(), "auto chose {}", auto.model);
+}
+
+/// Single-lobe truths keep a single lobe under `auto`: ellipsoid caps (round, strongly anisotropic,
+/// skewed) and Poisson counts of strongly anisotropic GGX and Beckmann lobes.
+#[test]
+fn single_lobe_truths_keep_one_lobe() {
+    for p in [[0.2, 0.2, 0.0, 0.0, 0.0], [0.4, 0.04, 0.0, 0.0, 0.7], [0.25, 0.1, 0.2, -0.15, 0.3]] {
+        let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+        let (hf, _) = ellipsoid_surface(&SynthSettings { nx: 512, ny: 512, seed: 3, ..SynthSettings::default() }, &ep).expect("synth");
+        let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
+        let auto = fit_auto(&ndf, &FitOptions::default()).expect("auto");
+        let sel = auto.selection.as_ref().expect("selection");
+        assert!(!auto.model.is_mixture(), "cap {p:?}: auto chose {} ({:?})", auto.model, sel.ladder);
+    }
+    for (id, p) in [(ModelId::GgxAniso, [0.3, 0.02, 0.4]), (ModelId::BeckmannAniso, [0.25, 0.03, -0.9])] {
+        let truth = model(id, &p);
+        let ndf = super::fixtures::ndf_of(&truth, 1e6, 22);
+        let auto = fit_auto(&ndf, &FitOptions::default()).expect("auto");
+        let sel = auto.selection.as_ref().expect("selection");
+        assert!(!auto.model.is_mixture(), "{id} {p:?}: auto chose {} ({:?})", auto.model, sel.ladder);
+    }
+}
