@@ -16,6 +16,8 @@ fn main() {
         [1.5, 0.15, -0.5, 0.5, -1.0],
         [0.9, 0.5, 0.0, 0.0, 0.2],
     ];
+    let cases256 = [[0.05, 0.05, 0.0, 0.0, 0.0], [0.3, 0.3, 0.0, 0.0, 0.0], [1.2, 1.2, 0.0, 0.0, 0.0], [0.4, 0.1, 0.0, 0.0, 0.6], [0.25, 0.25, 0.45, 0.0, 0.0], [0.35, 0.2, 0.0, -0.35, 1.0]];
+    let cases: Vec<[f64; 5]> = if std::env::var("SET256").is_ok() { cases256.to_vec() } else { cases.to_vec() };
     let n: usize = std::env::var("N").ok().map(|s| s.parse().unwrap()).unwrap_or(1024);
     let tols: Vec<f64> = std::env::var("TOLS").ok().map(|s| s.split(',').map(|t| t.parse().unwrap()).collect()).unwrap_or(vec![0.002, 0.005, 0.01]);
     for p in cases {

@@ -34,9 +34,16 @@ pub struct Args {
     extra_starts: usize,
     /// Largest polar angle (degrees, 0-90] of the NDF bins the fit uses; the model is normalized over
     /// them (data_formats/objective.md). Lower it to the instrument's numerical aperture
-    /// (asin(NA)) when the scan cannot see steeper slopes.
-    #[arg(long, default_value_t = ndfit::fit::objective::DEFAULT_MAX_THETA_DEG)]
-    max_theta: f64,
+    /// (asin(NA)) when the scan cannot see steeper slopes. Default 70.
+    #[arg(long)]
+    max_theta: Option<f64>,
+    /// The objective's numerical aperture NA (0-1]: sets --max-theta to asin(NA); both given must agree.
+    #[arg(long)]
+    na: Option<f64>,
+    /// The tail: `all` (default) keeps every bin within --max-theta; `unresolved` leaves out the bins
+    /// where most normals are not resolved by the sampling (data_formats/objective.md).
+    #[arg(long, default_value = "all")]
+    tail: String,
     /// Plot of the data against the fit, with residuals (PNG).
     #[arg(long)]
     plot: Option<PathBuf>,
@@ -59,11 +66,15 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         objective: args.objective.parse::<Objective>().map_err(|e| anyhow!("--objective: {}", e.message()))?,
         solver: args.solver.parse::<Solver>().map_err(|e| anyhow!("--solver: {}", e.message()))?,
         extra_starts: args.extra_starts,
-        max_theta: args.max_theta.to_radians(),
+        max_theta: max_theta_deg(args.max_theta, args.na)?.to_radians(),
+        cut_unresolved: match args.tail.as_str() {
+            "unresolved" => true,
+            "all" => false,
+            other => anyhow::bail!("--tail {other:?}: use unresolved or all"),
+        },
         ..FitOptions::default()
     };
     anyhow::ensure!(args.extra_starts <= 4, "--extra-starts {} must be between 0 and 4", args.extra_starts);
-    anyhow::ensure!(args.max_theta > 0.0 && args.max_theta <= 90.0, "--max-theta {} must be in (0, 90] degrees", args.max_theta);
     let model = match args.model.parse::<ndfit::models::ModelChoice>().map_err(|e| anyhow!("--model: {}", e.message()))? {
         ndfit::models::ModelChoice::Auto => None,
         ndfit::models::ModelChoice::Model(id) => Some(id),
@@ -113,6 +124,29 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         eprintln!("ndfit: {path}: {}", summary_line(&report));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The fit region's largest polar angle (degrees) from `--max-theta` and `--na` (`asin(NA)`); both
+/// given must agree to 1e-6 degrees.
+pub fn max_theta_deg(max_theta: Option<f64>, na: Option<f64>) -> anyhow::Result<f64> {
+    if let Some(t) = max_theta {
+        anyhow::ensure!(t > 0.0 && t <= 90.0, "--max-theta {t} must be in (0, 90] degrees");
+    }
+    let from_na = match na {
+        Some(a) => {
+            anyhow::ensure!(a > 0.0 && a <= 1.0, "--na {a} must be in (0, 1]");
+            Some(a.asin().to_degrees())
+        }
+        None => None,
+    };
+    match (max_theta, from_na) {
+        (Some(t), Some(n)) if (t - n).abs() > 1e-6 => {
+            anyhow::bail!("--max-theta {t} and --na disagree: the aperture sets max_theta = asin(NA) = {n:.6} degrees")
+        }
+        (Some(t), _) => Ok(t),
+        (None, Some(n)) => Ok(n),
+        (None, None) => Ok(ndfit::fit::objective::DEFAULT_MAX_THETA_DEG),
+    }
 }
 
 /// One line on a fit: the model, its main parameters and the verdict.

@@ -64,7 +64,7 @@ pub struct FitOptions {
     /// (objective.md). Default [`objective::DEFAULT_MAX_THETA_DEG`].
     pub max_theta: f64,
     /// Leave the bins where most normals are unresolved by the sampling out of the region ([`tail`],
-    /// objective.md). Default true.
+    /// objective.md). Default false: measured, it helps narrow and anisotropic caps but not skewed ones.
     pub cut_unresolved: bool,
 }
 
@@ -76,7 +76,7 @@ impl Default for FitOptions {
             tolerances: Tolerances::default(),
             extra_starts: 0,
             max_theta: objective::DEFAULT_MAX_THETA_DEG.to_radians(),
-            cut_unresolved: true,
+            cut_unresolved: false,
         }
     }
 }

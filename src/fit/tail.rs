@@ -5,6 +5,11 @@
 
 use crate::ndf::{EmpiricalNdf, NdfBin};
 
+/// Largest share of all normals unresolved for which the cut applies. Beyond it the surface is rough at
+/// the sampling step itself (the Richardson estimate measures the surface, not a truncation error), the NDF
+/// is by definition that of the pixel footprint, and every bin is kept.
+pub const MAX_UNRESOLVED_SHARE: f64 = 0.25;
+
 /// What the tail cut left out of the region (the fit JSON's `quality.tail`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TailCut {
@@ -13,6 +18,8 @@ pub struct TailCut {
     /// The relative slope error above which a normal counts as unresolved
     /// ([`crate::ndf::resolution::RESOLUTION_TOLERANCE`]).
     pub tolerance: f64,
+    /// Share of all the NDF's normals that are unresolved (the cut applies up to [`MAX_UNRESOLVED_SHARE`]).
+    pub unresolved_fraction: f64,
     /// Normals in the bins left out (inside `max_theta`).
     pub n_excluded: f64,
     /// Their share of the normals inside `max_theta`.
@@ -24,7 +31,7 @@ pub struct TailCut {
 impl TailCut {
     /// No cut.
     pub fn none() -> TailCut {
-        TailCut { rule: "none".into(), tolerance: 0.0, n_excluded: 0.0, excluded_fraction: 0.0, bins_excluded: 0 }
+        TailCut { rule: "none".into(), tolerance: 0.0, unresolved_fraction: 0.0, n_excluded: 0.0, excluded_fraction: 0.0, bins_excluded: 0 }
     }
 }
 
@@ -45,6 +52,11 @@ pub fn tail_cut(ndf: &EmpiricalNdf, cos_max: f64, enabled: bool) -> TailCut {
     if !enabled || ndf.unresolved.len() != ndf.bins.len() {
         return TailCut::none();
     }
+    let all: u64 = ndf.bins.iter().map(|b| b.count).sum();
+    let share = ndf.unresolved.iter().sum::<u64>() as f64 / all.max(1) as f64;
+    if !(share <= MAX_UNRESOLVED_SHARE) {
+        return TailCut { rule: "none (rough at the sampling step)".into(), tolerance: ndf.resolution_tolerance, unresolved_fraction: share, ..TailCut::none() };
+    }
     let (mut n, mut cut, mut k) = (0.0, 0.0, 0usize);
     for (i, b) in ndf.bins.iter().enumerate() {
         if !(usable(b) && b.m.z >= cos_max * b.m.norm()) {
@@ -59,6 +71,7 @@ pub fn tail_cut(ndf: &EmpiricalNdf, cos_max: f64, enabled: bool) -> TailCut {
     TailCut {
         rule: "unresolved".into(),
         tolerance: ndf.resolution_tolerance,
+        unresolved_fraction: share,
         n_excluded: cut,
         excluded_fraction: if n > 0.0 { cut / n } else { 0.0 },
         bins_excluded: k,
