@@ -22,16 +22,25 @@ pub mod budget;
 pub mod error;
 pub mod export;
 pub mod fit;
-pub mod heightfield;
-pub mod heights;
 pub mod io;
 pub mod models;
 pub mod ndf;
 pub mod plot;
 pub mod preprocess;
 pub mod scale;
+pub mod scan;
 pub mod stats;
 pub mod synth;
 
 pub use error::{Error, ErrorKind, Result};
-pub use heightfield::{Heightfield, ScanMeta};
+pub use scan::{Heightfield, ScanMeta};
+
+/// Old home of the scan type, kept so existing paths compile; the type lives in [`scan`].
+pub mod heightfield {
+    pub use crate::scan::{Heightfield, ScanMeta};
+}
+
+/// Old home of the heights storage, kept so existing paths compile; it lives in [`scan::heights`].
+pub mod heights {
+    pub use crate::scan::heights::Heights;
+}

@@ -7,7 +7,7 @@
 pub mod form;
 
 use crate::error::{Error, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 
 /// Which preprocessing steps to apply, in the order crop, subsample, form removal.
 #[derive(Debug, Clone, PartialEq)]

@@ -6,7 +6,7 @@
 //!   eq. 61-62), so no invalid point is ever filled in. Called `Sdq_central` in the peer readings.
 
 use crate::error::Result;
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 use crate::preprocess::form::remove_plane;
 
 /// Statistics reported by `ndfit info`.

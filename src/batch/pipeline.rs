@@ -10,7 +10,7 @@ use super::quality::{model_of_fit, quality};
 use crate::error::{Error, ErrorKind, Result};
 use crate::fit::FitOptions;
 use crate::models::ModelId;
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 use crate::io::ReadOptions;
 use crate::ndf::{EmpiricalNdf, NdfOptions};
 use crate::preprocess::Preprocess;

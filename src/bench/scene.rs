@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 use crate::models::Model;
 use crate::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
 

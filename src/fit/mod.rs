@@ -20,6 +20,7 @@ pub mod objective;
 pub mod params;
 pub mod plot;
 pub mod problem;
+pub mod qbic;
 pub mod report;
 pub mod solve;
 pub mod start;
@@ -468,7 +469,7 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 }
 
 /// Fit every model of the two nested chains (ggx -> ggx-aniso -> ellipsoid, beckmann -> beckmann-aniso)
-/// and choose by the quasi-likelihood BIC: `F / c + p ln N`, with the overdispersion
+/// and choose by the quasi-likelihood BIC ([`qbic`]): `F / c + p ln N`, with the overdispersion
 /// `c = max(1, smallest reduced chi-square among the candidates)`.
 ///
 /// Why BIC: the user's rule is that the simplest model that explains the data wins; BIC's penalty
@@ -514,17 +515,11 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
         return Err(Error::new(ErrorKind::Numerical, format!("no model could be fitted ({})", warnings.join("; "))));
     }
     let k = s.data.k_nonzero as f64;
-    let c = fits
-        .iter()
-        .filter_map(|f| {
-            let dof = k - f.id.n_params() as f64 - 1.0;
-            (dof > 0.0).then(|| f.f / dof)
-        })
-        .fold(f64::INFINITY, f64::min)
-        .max(1.0);
-    let c = if c.is_finite() { c } else { 1.0 };
-    let ln_n = s.data.n.ln();
-    let crit: Vec<f64> = fits.iter().map(|f| f.f / c + f.id.n_params() as f64 * ln_n).collect();
+    let c = qbic::overdispersion(fits.iter().filter_map(|f| {
+        let dof = k - f.id.n_params() as f64 - 1.0;
+        (dof > 0.0).then(|| f.f / dof)
+    }));
+    let crit: Vec<f64> = fits.iter().map(|f| qbic::qbic(f.f, c, f.id.n_params(), s.data.n)).collect();
     let mut chosen = 0;
     for i in 1..fits.len() {
         if crit[i] < crit[chosen] {

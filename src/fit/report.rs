@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 use crate::models::ModelId;
 
 /// The schema id of a fit result.
@@ -161,7 +161,7 @@ pub struct Candidate {
 pub struct Selection {
     /// The criterion: `qbic` = `F / c + p ln N` (BIC with the quasi-likelihood overdispersion `c`).
     pub criterion: String,
-    /// The overdispersion `c = max(1, reduced_chi2 of the richest model)`.
+    /// The overdispersion `c = max(1, smallest reduced_chi2 among the candidates)` ([`crate::fit::qbic`]).
     pub overdispersion: f64,
     /// Every model fitted, simplest first.
     pub candidates: Vec<Candidate>,

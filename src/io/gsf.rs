@@ -6,7 +6,7 @@
 //! 4, then `XRes * YRes` little-endian float32, x fastest. NaN points are invalid.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::{Heightfield, ScanMeta};
+use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::check_grid;
 use crate::io::units::metres_per;
 

@@ -8,7 +8,7 @@
 //! what the compressed bytes can hold before any pixel is decoded.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::{Heightfield, ScanMeta};
+use crate::scan::{Heightfield, ScanMeta};
 use crate::io::raw_opts::{spacing, z_scale};
 use crate::io::ReadOptions;
 

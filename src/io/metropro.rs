@@ -12,7 +12,7 @@
 //! Values at or above 2147483640 are invalid.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::{Heightfield, ScanMeta};
+use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, field_text, Cursor};
 
 /// Phase values at or above this are "no data".

@@ -9,7 +9,6 @@ pub mod al3d;
 pub mod atomic;
 pub mod bytes;
 pub mod gsf;
-pub(crate) mod heights;
 pub mod image;
 pub mod md5;
 pub mod metropro;
@@ -28,7 +27,7 @@ pub mod xml;
 use std::path::Path;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 
 pub use atomic::{write_atomic, write_bytes_atomic};
 pub use x3p_write::write_x3p;

@@ -10,10 +10,10 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heights::Heights;
-use crate::heightfield::{Heightfield, ScanMeta};
+use crate::scan::heights::Heights;
+use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, Cursor};
-use crate::io::heights;
+use crate::scan::heights;
 use crate::io::raw_opts::{spacing, z_scale};
 use crate::io::ReadOptions;
 

@@ -11,7 +11,7 @@
 //! (Wyko writes 1.7e38), and 32767 for 16-bit data.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::{Heightfield, ScanMeta};
+use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, field_text, Cursor};
 
 const ENTRY: usize = 24;

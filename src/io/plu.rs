@@ -9,7 +9,7 @@
 //! Invalid points hold 1000001. Only topography measurements (type 3) are read; layer 0 is taken.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::{Heightfield, ScanMeta};
+use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, field_text, Cursor};
 
 /// The marker Sensofar writes for a point that was not measured.

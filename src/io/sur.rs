@@ -15,7 +15,7 @@
 use std::io::Read;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::{Heightfield, ScanMeta};
+use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, checked_size, Cursor};
 use crate::io::units::{latin1, metres_per};
 

@@ -9,7 +9,7 @@
 //! Row 0 is the first row in the file (y grows down the file).
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::{Heightfield, ScanMeta};
+use crate::scan::{Heightfield, ScanMeta};
 use crate::io::raw_opts::{spacing, z_scale};
 use crate::io::ReadOptions;
 

@@ -7,7 +7,7 @@
 //! the 18.96 mm field of the shared scan). Spacing = length / count. NaN points are invalid.
 
 use crate::error::{Error, Result};
-use crate::heightfield::{Heightfield, ScanMeta};
+use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, Cursor};
 
 /// The TMD signature.

@@ -21,9 +21,9 @@
 use std::io::Read;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::{Heightfield, ScanMeta};
+use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::checked_size;
-use crate::io::heights;
+use crate::scan::heights;
 use crate::io::xml::{self, Element};
 
 /// Largest `main.xml` read (an inline `DataList` of a big scan can be large; this bounds memory).

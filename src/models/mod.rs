@@ -31,6 +31,7 @@ pub mod canonical;
 pub mod ellipsoid;
 pub mod fresnel;
 pub mod ggx;
+pub mod roughness;
 pub mod roughness_matrix;
 pub mod sampling;
 pub mod sel;

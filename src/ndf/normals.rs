@@ -4,7 +4,7 @@
 //! stencil, `dx dy / 2` per triangle), so a count of samples is a projected-area measure and the
 //! empirical NDF is `D_k = count_k / (N W_k)` (Heitz eq. 9; Walter et al. eq. 9).
 
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 
 /// Row access to a grid of stored heights, generic over the stored float type: the NDF pass runs over
 /// [`Heightfield`] (f64) and [`super::HeightsF32`] (f32 storage, issue 8) with the same kernel. Every
@@ -23,7 +23,7 @@ pub trait HeightRows: Sync {
     /// Row `i`.
     fn row(&self, i: usize) -> &[Self::T];
     /// The height quantum found before form removal, when the heights were on a lattice then
-    /// ([`crate::heightfield::ScanMeta::height_quantum`]); `None` lets the NDF look for one itself.
+    /// ([`crate::scan::ScanMeta::height_quantum`]); `None` lets the NDF look for one itself.
     fn known_quantum(&self) -> Option<f64> {
         None
     }

@@ -9,7 +9,7 @@
 //! refused by [`super::empirical_ndf_f32`] when it exceeds [`MAX_ROUNDING_FRACTION`] of the slope scale.
 
 use super::normals::HeightRows;
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 
 /// The largest slope rounding bound accepted, as a fraction of the robust slope scale (smallest
 /// principal standard deviation of the binning frame): beyond it the f32 rounding would widen the NDF

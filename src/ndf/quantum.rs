@@ -2,7 +2,7 @@
 //! put the central-difference slopes on a lattice of step `q / (2 dx)`, `q / (2 dy)`
 //! ([`NormalScheme::slope_step`]). Bins finer than the lattice then alternate between full and empty (a
 //! comb) instead of estimating D. This module finds `q` from the data (or takes it from the reader's
-//! pass before form removal, [`crate::heightfield::ScanMeta::height_quantum`]) and the lattice's offset
+//! pass before form removal, [`crate::scan::ScanMeta::height_quantum`]) and the lattice's offset
 //! from the slopes. A rigid lattice (a plane removal shifts it, nothing more) gets bins that respect it
 //! ([`super::lattice`]); a lattice smeared by a curved form removal caps the automatic grid so that every
 //! central bin spans at least two lattice cells. Derivation: `data_formats/objective.md` ("Quantized

@@ -10,7 +10,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 
 /// Legendre polynomials P_0..P_3 at `u`.
 #[inline]

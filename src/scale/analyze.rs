@@ -6,11 +6,11 @@ use super::footprint::{footprint_field, footprint_stats, kernel_sigma, slope_fie
 use super::ndf_at::{
     bin_slopes, counts_on, gaussian_slopes, sample_slopes, sample_slopes_with, slope_moments, Blur, SlopeMoments,
 };
-use super::roughness::{
+use crate::models::roughness::{
     add_kernel_matrix, aniso_params, filter_isotropic, model_from_slope_form, skew_offset, slope_form, IsoRule, SlopeForm,
 };
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 use crate::models::{Model, ModelId, Ndf};
 use crate::ndf::{EmpiricalNdf, NdfOptions};
 
@@ -27,13 +27,7 @@ pub struct Fitted {
     pub n_samples: f64,
 }
 
-/// The information criterion of the fitting code (`src/fit`, `fit_auto`): the quasi-likelihood BIC
-/// `F / c + p ln N`, with the overdispersion `c = max(1, reduced chi-square of the richest model)`
-/// fitted at the same footprint (neighbouring slopes, and here the blur samples of one point, are
-/// correlated, so the deviance of even the right model exceeds its Poisson expectation by `c`).
-pub fn qbic(objective: f64, c: f64, n_params: usize, n_samples: f64) -> f64 {
-    objective / c.max(1.0) + n_params as f64 * n_samples.max(1.0).ln()
-}
+pub use crate::fit::qbic::qbic;
 
 /// Fits a model of a given kind to an empirical NDF (the fitter of `src/fit/`, or a test double).
 pub trait Fitter: Sync {
@@ -319,7 +313,7 @@ fn model_at_footprint(
     let failed = |source, e: String| RouteResult { model: None, ic: None, delta: None, source, error: Some(e) };
     let empirical = match fitter.map(|f| f.fit(ndf_at, id)) {
         Some(Ok(f)) => {
-            // The criterion needs the overdispersion of the richest model; `analyze` fills `ic` in.
+            // The criterion needs the overdispersion of all candidates; `analyze` fills `ic` in.
             let r = RouteResult { model: Some(f.model), ic: None, delta: Some(delta(&f.model)), source: "fit", error: None };
             (r, Some(f))
         }
@@ -460,12 +454,7 @@ fn summary(models: &[ModelAtFootprint]) -> String {
 
 /// Fill in the QBIC of every empirical fit at one footprint (see [`qbic`]).
 fn fill_ic(models: &mut [(ModelAtFootprint, Option<Fitted>)]) {
-    let c = models
-        .iter()
-        .filter_map(|(m, f)| f.and_then(|f| f.reduced_chi2).map(|r| (m.id.n_params(), r)))
-        .max_by_key(|(p, _)| *p)
-        .map(|(_, r)| r.max(1.0))
-        .unwrap_or(1.0);
+    let c = crate::fit::qbic::overdispersion(models.iter().filter_map(|(_, f)| f.and_then(|f| f.reduced_chi2)));
     for (m, f) in models.iter_mut() {
         if let Some(f) = f {
             if let Some(obj) = f.objective {

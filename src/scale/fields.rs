@@ -13,7 +13,7 @@ use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 
 use crate::error::{Error, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 use crate::models::ellipsoid::rotation_xyz;
 
 /// One cosine mode `amp * cos(kx x + ky y + phase)`.

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use super::filter::filter_channels;
 use crate::error::{Error, ErrorKind, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 
 /// Central-difference slopes `(dh/dx, dh/dy)` at every sample (NaN where a neighbour is missing or at the
 /// border). Microfacet normal `m = (-s_x, -s_y, 1)/|..|` (CONTRACT.md; Heitz eq. 61-62).
@@ -127,12 +127,7 @@ pub fn footprint_field(
     Ok(FootprintField { nx, ny, sfx, sfy, wxx, wxy, wyy })
 }
 
-/// The symmetric positive semi-definite part of a symmetric 2x2 matrix (negative eigenvalues set to 0).
-pub fn psd_part(m: Matrix2<f64>) -> Matrix2<f64> {
-    let (l1, l2, v1) = crate::models::GgxMatrix::eigen(&m);
-    let v2 = nalgebra::Vector2::new(-v1.y, v1.x);
-    v1 * v1.transpose() * l1.max(0.0) + v2 * v2.transpose() * l2.max(0.0)
-}
+pub use crate::models::roughness::psd_part;
 
 /// Scalar summary of one footprint: the matrices the two routes need.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

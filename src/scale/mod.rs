@@ -7,7 +7,7 @@
 //!
 //! - [`filter`]: normalized separable Gaussian convolution of fields with holes;
 //! - [`footprint`]: slopes, resolved slopes `s_F` and within-footprint covariances `Sigma_w`, `Sigma_F`;
-//! - [`roughness`]: the roughness matrix algebra (Tokuyoshi eq. 3, 10, 13, 15-18) and the ellipsoid's
+//! - [`roughness`] (in `models`): the roughness matrix algebra (Tokuyoshi eq. 3, 10, 13, 15-18) and the ellipsoid's
 //!   slope form through `A^T A`;
 //! - [`scene`]: the footprints a scene implies.
 
@@ -19,7 +19,8 @@ pub mod ndf_at;
 pub mod footprint;
 pub mod plot;
 pub mod report;
-pub mod roughness;
+/// The roughness matrix algebra now lives in [`crate::models::roughness`]; this path is kept for old callers.
+pub use crate::models::roughness;
 pub mod scene;
 
 /// The fitter of `src/fit/` behind [`analyze::Fitter`].

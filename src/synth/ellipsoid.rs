@@ -16,7 +16,7 @@ use serde_json::json;
 
 use super::{SynthSettings, Truth};
 use crate::error::{Error, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 use crate::models::{Ellipsoid, Model};
 
 /// Parameters of the ellipsoid surface (contract names, Walter et al. eq. 2-3).

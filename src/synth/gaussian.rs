@@ -20,7 +20,7 @@ use serde_json::json;
 use super::fft::fft2;
 use super::{SynthSettings, Truth};
 use crate::error::{Error, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 use crate::models::{Beckmann, Model};
 use rand::RngExt;
 

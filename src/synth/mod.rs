@@ -25,7 +25,7 @@ use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::{Error, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 
 /// The random generator of every synthetic scan: xoshiro256++ (portable, so a seed gives the same
 /// scan on every platform and version).

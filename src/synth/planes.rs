@@ -10,7 +10,7 @@ use serde_json::json;
 
 use super::{FacetTruth, SynthSettings, Truth};
 use crate::error::{Error, Result};
-use crate::heightfield::Heightfield;
+use crate::scan::Heightfield;
 
 /// One plane facet: its slope `grad h` and its relative share of the grid's columns.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

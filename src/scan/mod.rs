@@ -4,10 +4,12 @@
 //! `z = h[i][j]`, all in metres; row index grows with y, column index with x; the macro normal is `+z`.
 //! Invalid points are stored as NaN and are never read as heights.
 
+pub mod heights;
+
 use std::collections::BTreeMap;
 
 use crate::error::{Error, Result};
-use crate::heights::Heights;
+pub use heights::Heights;
 
 /// What a reader learned about the file besides the heights (for `ndfit info`).
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -8,6 +8,13 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::models::ellipsoid::rotation_xyz;
 use crate::models::{canonical, Beckmann, Ellipsoid, Ggx, GgxMatrix, Model, ModelId, ALPHA_MIN};
 
+/// The symmetric positive semi-definite part of a symmetric 2x2 matrix (negative eigenvalues set to 0).
+pub fn psd_part(m: Matrix2<f64>) -> Matrix2<f64> {
+    let (l1, l2, v1) = GgxMatrix::eigen(&m);
+    let v2 = nalgebra::Vector2::new(-v1.y, v1.x);
+    v1 * v1.transpose() * l1.max(0.0) + v2 * v2.transpose() * l2.max(0.0)
+}
+
 /// A model in slope space: the roughness matrix `A2` (Tokuyoshi eq. 3, 17) and the centre `mu` of the
 /// lobe in slope space (zero except for a tilted ellipsoid, eq. S4).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -121,7 +128,7 @@ pub fn filter_isotropic(alpha: f64, sigma: &Matrix2<f64>, rule: IsoRule) -> f64 
 /// eq. 3), `mu` unchanged; isotropic models by [`IsoRule::MomentMatched`]. The result has the same id.
 pub fn filter_model(model: &Model, sigma: &Matrix2<f64>) -> Result<Model> {
     check_finite2(sigma)?;
-    let sigma = super::footprint::psd_part(0.5 * (sigma + sigma.transpose()));
+    let sigma = psd_part(0.5 * (sigma + sigma.transpose()));
     add_kernel_matrix(model, &(2.0 * sigma))
 }
 
@@ -131,7 +138,7 @@ pub fn filter_model(model: &Model, sigma: &Matrix2<f64>) -> Result<Model> {
 /// (data_formats/scale.md sec. 4a). The result has the same id.
 pub fn add_kernel_matrix(model: &Model, k: &Matrix2<f64>) -> Result<Model> {
     check_finite2(k)?;
-    let k = super::footprint::psd_part(0.5 * (k + k.transpose()));
+    let k = psd_part(0.5 * (k + k.transpose()));
     let iso = |alpha: f64| (alpha * alpha + 0.5 * k.trace()).sqrt();
     match model {
         Model::Ggx(g) => Ok(Model::Ggx(Ggx::new(iso(g.alpha_x), iso(g.alpha_x), 0.0)?)),
