@@ -31,6 +31,9 @@ pub struct InputInfo {
     /// (`nx`, `ny`, `dx`, `dy` are then those of the kept points).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub file_grid: Option<[usize; 2]>,
+    /// What spike removal masked (preprocessing), when it ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub despike: Option<crate::preprocess::DespikeReport>,
 }
 
 impl InputInfo {
@@ -45,6 +48,7 @@ impl InputInfo {
             dy: hf.dy,
             invalid: hf.invalid_count(),
             file_grid: hf.meta.file_grid.filter(|g| *g != [hf.nx, hf.ny]),
+            despike: hf.meta.despike.clone(),
         }
     }
 }

@@ -15,3 +15,4 @@ mod quantized;
 mod readers;
 mod scale;
 mod synth;
+mod tails;
