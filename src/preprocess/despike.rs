@@ -1,7 +1,7 @@
-//! Spike removal (`data_formats/formats.md`, "Spikes"): isolated height outliers (optical spikes, single
+//! Spike removal (`data_formats/objective.md`, "Spikes"): isolated height outliers (optical spikes, single
 //! bad pixels) are masked (set invalid), never replaced.
 //!
-//! A valid point with at least [`MIN_NEIGHBOURS`] valid points among its 8 neighbours is a spike when its
+//! A valid point with all 8 neighbours valid ([`MIN_NEIGHBOURS`]; the rim of the data is not tested, where a smooth surface ends steeply) is a spike when its
 //! height departs from the median `m` of those neighbours by more than [`SPIKE_THRESHOLD`] times their
 //! own spread, `1.4826 median |h_n - m|` (the Gaussian-consistent MAD), floored by the scan's typical
 //! departure (the same statistic's median over the scan) and by the height quantum. A smooth surface,
@@ -14,9 +14,9 @@ use rayon::prelude::*;
 use crate::scan::Heightfield;
 
 /// Departure from the neighbours' median, in units of their spread, beyond which a point is a spike.
-pub const SPIKE_THRESHOLD: f64 = 10.0;
+pub const SPIKE_THRESHOLD: f64 = 30.0;
 /// Fewest valid neighbours (of 8) for a point to be tested.
-pub const MIN_NEIGHBOURS: usize = 5;
+pub const MIN_NEIGHBOURS: usize = 8;
 /// Gaussian-consistent MAD factor.
 const MAD_NORMAL: f64 = 1.482_602_218_505_602;
 

@@ -1,3 +1,8 @@
+//! Measurement tool (not a test): NDF error against truth of synthetic ellipsoid caps with the unresolved-tail
+//! cut off and on, per resolution tolerance (the table of data_formats/objective.md, "The tail the scan
+//! cannot resolve"). `cargo run --release --example measure_tails`; `N=256 SET256=1` for the batch set,
+//! `TOLS=0.005,0.01` the tolerances.
+
 use ndfit::fit::metric::delta_to_model;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
