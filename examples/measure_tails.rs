@@ -35,7 +35,7 @@ fn main() {
         for &t in &tols {
             ndf.resolution_tolerance = t;
             ndfit::ndf::resolution::assess(&hf, &mut ndf);
-            let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions::default()).unwrap();
+            let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions { cut_unresolved: true, ..FitOptions::default() }).unwrap();
             let d = delta_to_model(&rep.to_model().unwrap(), &truth).unwrap();
             line += &format!(" {t}:{:.3}% (cut {:.3})", d * 100.0, rep.quality.tail.as_ref().unwrap().excluded_fraction);
         }
