@@ -130,3 +130,43 @@ fn unresolved_tail_cut_leaves_out_flagged_bins_and_helps_a_narrow_cap() {
     eprintln!("tail cut: {:.2}% of the normals left out; NDF error {:.3}% -> {:.3}%", 100.0 * data.tail.excluded_fraction, 100.0 * off, 100.0 * on);
     assert!(on < 0.5 * off, "{on} vs {off}");
 }
+
+/// The CLI: `--na` sets max_theta = asin(NA) (asin 0.5 = 30 degrees exactly); `--na` and `--max-theta` that
+/// disagree are refused in one line with no output written; `--despike none` leaves no report; `--tail`
+/// is reported in `quality.tail`.
+#[test]
+fn cli_na_despike_and_tail_options() {
+    use std::process::Command;
+    let dir = std::env::temp_dir().join(format!("ndfit-tails-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let scan = dir.join("cap.x3p");
+    let bin = crate::common::ndfit_bin();
+    let o = Command::new(&bin).arg("synth").arg(&scan).args(["--surface", "ellipsoid", "--nx", "128", "--ny", "128", "--dx", "1e-6", "--alpha-x", "0.3"]).output().expect("synth");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let fit = |args: &[&str], out: &std::path::Path| Command::new(&bin).arg("fit").arg(&scan).args(["--model", "ggx", "-q", "-o"]).arg(out).args(args).output().expect("fit");
+    let json = |p: &std::path::Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).expect("json")).expect("parse") };
+
+    let a = dir.join("a.json");
+    let o = fit(&["--na", "0.5", "--tail", "unresolved"], &a);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j = json(&a);
+    assert!((j["quality"]["max_theta_deg"].as_f64().expect("max_theta") - 30.0).abs() < 1e-9, "{}", j["quality"]["max_theta_deg"]);
+    assert_eq!(j["input"]["despike"]["masked"], 0);
+    assert_eq!(j["quality"]["tail"]["rule"], "unresolved");
+
+    let b = dir.join("b.json");
+    let o = fit(&["--na", "0.5", "--max-theta", "40"], &b);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("disagree") && err.trim().lines().count() == 1, "{err}");
+    assert!(!b.exists());
+
+    let c = dir.join("c.json");
+    let o = fit(&["--despike", "none"], &c);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j = json(&c);
+    assert!(j["input"].get("despike").is_none());
+    assert_eq!(j["quality"]["tail"]["rule"], "none");
+    let o = fit(&["--tail", "bogus"], &dir.join("d.json"));
+    assert!(!o.status.success());
+    let _ = std::fs::remove_dir_all(&dir);
+}
