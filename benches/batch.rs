@@ -48,7 +48,7 @@ fn throughput(c: &mut Criterion) {
     let n = 8;
     make_set(&dir, n, SIDE);
     let specs: Vec<ScanSpec> = discover::walk(&dir, &[], &|_: &Path| false).expect("walk");
-    let opts = pipeline::PipelineOptions { model: "ellipsoid".into(), ..Default::default() };
+    let opts = pipeline::PipelineOptions { model: ndfit::ModelChoice::Model(ndfit::models::ModelId::Ellipsoid), ..Default::default() };
     let job = |s: &ScanSpec, ctx: &JobContext<'_>| {
         pipeline::fit_scan(&s.file, &opts, ctx.baseline).map(|r| r.output).map_err(batch::JobFailure::from)
     };

@@ -38,7 +38,7 @@ fn main() {
         // NDFIT_BALANCED=1: the binning `ndfit fit` uses by default (Preset::Balanced).
         // NDFIT_BINNING=target,maxcells: another binning.
         let nopts = if std::env::var("NDFIT_BALANCED").is_ok() {
-            ndfit::bench::Preset::Balanced.ndf_options(hf.valid_count() as u64)
+            ndfit::Preset::Balanced.ndf_options(hf.valid_count() as u64)
         } else if let Ok(b) = std::env::var("NDFIT_BINNING") {
             let v: Vec<f64> = b.split(',').map(|t| t.parse().expect("binning")).collect();
             let o = NdfOptions { target_count: v[0], ..NdfOptions::default() };

@@ -10,7 +10,7 @@ pub mod form;
 pub use despike::{Despike, DespikeReport};
 
 use crate::error::{Error, Result};
-use crate::scan::Heightfield;
+use crate::scan::{Heightfield, Scan};
 
 /// Which preprocessing steps to apply, in the order crop, subsample, form removal.
 #[derive(Debug, Clone, PartialEq)]
@@ -58,7 +58,7 @@ impl Default for Preprocess {
 }
 
 /// Apply `pre` to `hf`: crop, subsample, then remove the form. Never fills an invalid point.
-pub fn apply(hf: Heightfield, pre: &Preprocess) -> Result<Heightfield> {
+pub fn apply<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Scan<'a>> {
     let mut hf = hf;
     if let Some(c) = pre.crop {
         hf = crop(&hf, c)?;
@@ -85,7 +85,7 @@ pub fn apply(hf: Heightfield, pre: &Preprocess) -> Result<Heightfield> {
 }
 
 /// The window `c` of `hf` (origin moved so every kept point keeps its position).
-pub fn crop(hf: &Heightfield, c: Crop) -> Result<Heightfield> {
+pub fn crop(hf: &Scan, c: Crop) -> Result<Heightfield> {
     let fits = c.nx > 0
         && c.ny > 0
         && c.x.checked_add(c.nx).is_some_and(|e| e <= hf.nx)
@@ -109,7 +109,7 @@ pub fn crop(hf: &Heightfield, c: Crop) -> Result<Heightfield> {
 
 /// Every `step`-th point along both axes (point picking, no averaging: averaging would mix invalid
 /// points into valid ones or invent values). Spacing grows by `step`.
-pub fn subsample(hf: &Heightfield, step: usize) -> Result<Heightfield> {
+pub fn subsample(hf: &Scan, step: usize) -> Result<Heightfield> {
     if step == 0 {
         return Err(Error::invalid("subsampling step must be at least 1"));
     }

@@ -15,6 +15,14 @@ if [ ! -f ../shared/data/scans/peer_readings.json ]; then
   echo "      checks, and the real-scan parts below are skipped too (NDFIT_REQUIRE_SHARED=1 makes this a failure)"
 fi
 
+echo "== lints: clippy and rustdoc (warnings are errors); the library alone builds without clap, indicatif, plotters"
+cargo clippy --release --locked --all-targets -- -D warnings 2>&1
+RUSTDOCFLAGS=-Dwarnings cargo doc --locked --no-deps 2>&1
+if cargo tree --locked -e normal --no-default-features | grep -E '^[^a-z]*(clap|indicatif|plotters) '; then
+  echo "FAIL: the library without default features depends on clap, indicatif or plotters" >&2
+  exit 1
+fi
+
 echo "== batch regression against fits/baselines (synthetic set; real scans when ../shared is present)"
 NDFIT=target/release/ndfit bash fits/baselines/check.sh
 
@@ -42,3 +50,7 @@ if [ -f fits/pyproject.toml ]; then
   echo "== notebooks"
   NDFIT="$NDFIT_BIN" fits/.venv/bin/python fits/run_notebooks.py notebooks
 fi
+
+# Last, so a tree the lead has not formatted yet still runs every test above.
+echo "== rustfmt"
+cargo fmt --check

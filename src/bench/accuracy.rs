@@ -1,56 +1,10 @@
 //! Accuracy against the truth: the NDF difference metric of `data_formats/objective.md` and parameter
 //! errors.
 
-use nalgebra::Vector3;
-
-use crate::fit::metric::delta;
 use crate::models::{Model, Ndf};
-use crate::ndf::{BinGrid, EmpiricalNdf, QuadOrder, SlopeFrame};
+use crate::ndf::EmpiricalNdf;
 
-/// Fixed quadrature nodes `(m_k, W_k)` over the hemisphere, the same for every point of a sweep so that
-/// the fit errors of different knobs are measured on identical directions.
-#[derive(Debug, Clone)]
-pub struct RefNodes {
-    /// Central direction and projected solid angle of each cell.
-    pub nodes: Vec<(Vector3<f64>, f64)>,
-}
-
-impl RefNodes {
-    /// A `cells x cells` grid over the Lambert disk of `frame` (a frame that follows the lobe, so the
-    /// cells resolve it), each cell's `W` by the same Gauss-Legendre rule the NDF uses and its node at
-    /// the `W`-weighted centroid. `sum W_k = pi`, the projected solid angle of the hemisphere.
-    pub fn new(frame: &SlopeFrame, cells: usize) -> RefNodes {
-        let grid = BinGrid::new(cells);
-        let mut nodes = Vec::with_capacity(grid.cells());
-        let rim = frame.rim_shape();
-        for c in 0..grid.cells() {
-            if !grid.meets_disk(c) {
-                continue;
-            }
-            let (mut w, mut px, mut py) = (0.0, 0.0, 0.0);
-            grid.quadrature(c, QuadOrder::Standard, &rim, |p, wt| {
-                let dw = frame.proj_density(p) * wt;
-                w += dw;
-                px += p[0] * dw;
-                py += p[1] * dw;
-            });
-            if w > 0.0 {
-                nodes.push((frame.normal_at([px / w, py / w]), w));
-            }
-        }
-        RefNodes { nodes }
-    }
-
-    /// Sum of the projected solid angles (pi for a grid covering the hemisphere).
-    pub fn total(&self) -> f64 {
-        self.nodes.iter().map(|n| n.1).sum()
-    }
-
-    /// `delta(D_model; D_truth)` on these nodes.
-    pub fn delta_model(&self, model: &Model, truth: &Model) -> Option<f64> {
-        delta(|m| model.d(*m), |m| truth.d(*m), self.nodes.iter().copied())
-    }
-}
+pub use crate::fit::metric::RefNodes;
 
 /// `delta(D_empirical; D_truth)` on the empirical NDF's own bins: each bin's `d_k` against the truth at
 /// its centre, weighted by `D_truth(m_k) W_k`. It holds the counting noise and the binning error.
@@ -96,6 +50,8 @@ pub fn param_errors(fit: &Model, truth: &Model) -> Option<(f64, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ndf::SlopeFrame;
+    use nalgebra::Vector3;
 
     /// The nodes cover the hemisphere: `sum W = pi` (the projected solid angle of the hemisphere,
     /// closed form), to the quadrature accuracy of the NDF's bins (Gauss-Legendre, ~1e-9 here).

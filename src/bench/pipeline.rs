@@ -1,5 +1,5 @@
 //! One run of the pipeline scan -> (subsample) -> empirical NDF -> fit, timed per stage, with the peak
-//! resident memory of each stage.
+//! resident memory of each stage: the stage functions of [`crate::pipeline`], one at a time.
 
 use std::path::Path;
 use std::time::Instant;
@@ -7,9 +7,12 @@ use std::time::Instant;
 use super::knobs::{Knobs, Storage};
 use super::mem;
 use crate::error::Result;
-use crate::fit::{fit_model, FitReport};
-use crate::io::{read_scan, read_scan_subsampled, ReadOptions};
-use crate::ndf::{empirical_ndf, empirical_ndf_f32, EmpiricalNdf, HeightsF32};
+use crate::fit::FitReport;
+use crate::io::ReadOptions;
+use crate::models::ModelChoice;
+use crate::ndf::{empirical_ndf_f32, EmpiricalNdf, HeightsF32};
+use crate::pipeline::{self, read_preprocessed};
+use crate::preprocess::{FormRemoval, Preprocess};
 
 /// Wall-clock time of each stage (ms).
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
@@ -80,10 +83,11 @@ pub fn run(path: &Path, read_opts: &ReadOptions, knobs: &Knobs) -> Result<Outcom
         _ => None,
     };
 
-    // A stride subsamples as it reads (`read_scan_subsampled`: a large NPY file reads only the kept
-    // points); the time is the read's.
+    // The pipeline's own read stage, with the scan as stored (no form removal): a stride subsamples as it
+    // reads (a large NPY file reads only the kept points); the time is the read's.
     let t = Instant::now();
-    let hf = if knobs.stride > 1 { read_scan_subsampled(path, read_opts, knobs.stride)? } else { read_scan(path, read_opts)? };
+    let pre = Preprocess { form: FormRemoval::None, crop: None, subsample: knobs.stride.max(1), despike: crate::preprocess::Despike::None };
+    let hf = read_preprocessed(path, read_opts, &pre)?;
     times.read = ms(t);
     peaks.read = above(mem::peak_rss());
 
@@ -97,7 +101,7 @@ pub fn run(path: &Path, read_opts: &ReadOptions, knobs: &Knobs) -> Result<Outcom
         Storage::F64 => {
             mem::reset_peak();
             let t = Instant::now();
-            let ndf = empirical_ndf(&hf, &opts)?;
+            let ndf = pipeline::ndf(&hf, &opts)?;
             times.ndf = t_opts + ms(t);
             peaks.ndf = above(mem::peak_rss());
             drop(hf);
@@ -124,7 +128,7 @@ pub fn run(path: &Path, read_opts: &ReadOptions, knobs: &Knobs) -> Result<Outcom
         Some(id) => {
             mem::reset_peak();
             let t = Instant::now();
-            let r = fit_model(&ndf, id, &knobs.fit_options())?;
+            let r = pipeline::fit(&ndf, ModelChoice::Model(id), &knobs.fit_options())?;
             times.fit = ms(t);
             peaks.fit = above(mem::peak_rss());
             Some(r)

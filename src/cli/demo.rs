@@ -7,11 +7,13 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use anyhow::anyhow;
-use ndfit::fit::{fit_auto, fit_model, metric, FitOptions, InputInfo};
+use ndfit::fit::metric;
 use ndfit::models::{Model, ModelId, Ndf};
-use ndfit::ndf::{empirical_ndf, NdfOptions};
+use ndfit::preprocess::{FormRemoval, Preprocess};
 use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
+use ndfit::{Options, Outcome, Pipeline};
+
+use super::fit_args::parse_model;
 
 /// Arguments of `ndfit demo`.
 #[derive(Debug, clap::Args)]
@@ -45,16 +47,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     )?
     .canonical();
     let t1 = Instant::now();
-    let ndf = empirical_ndf(&hf, &NdfOptions::default())?;
-    let t2 = Instant::now();
-    let opts = FitOptions::default();
-    let mut report = match args.model.as_str() {
-        "auto" => fit_auto(&ndf, &opts)?,
-        m => fit_model(&ndf, m.parse::<ModelId>().map_err(|e| anyhow!("--model: {}", e.message()))?, &opts)?,
-    };
-    let t3 = Instant::now();
-    report.input = Some(InputInfo::new(std::path::Path::new("<built-in demo scan>"), &hf));
-    report.timings.ndf_ms = Some((t2 - t1).as_secs_f64() * 1e3);
+    // The synthetic surface has no form to remove.
+    let preprocess = Preprocess { form: FormRemoval::None, ..Preprocess::default() };
+    let pipeline = Pipeline::new(Options { preprocess, model: parse_model(&args.model)?, ..Options::default() });
+    let Outcome { ndf, fit: report } = pipeline.run(hf, "<built-in demo scan>")?;
+    let ndf_ms = report.timings.ndf_ms.unwrap_or(0.0);
     let fitted = report.to_model()?;
     let nodes = ndf.bins.iter().map(|b| (b.m, b.proj_solid_angle));
     let delta = metric::delta(|m| fitted.d(*m), |m| truth.d(*m), nodes);
@@ -83,8 +80,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         w,
         "time: synth {:.0} ms, NDF {:.0} ms, fit {:.0} ms; solver: {} ({} evaluations)",
         (t1 - t0).as_secs_f64() * 1e3,
-        (t2 - t1).as_secs_f64() * 1e3,
-        (t3 - t2).as_secs_f64() * 1e3,
+        ndf_ms,
+        report.timings.fit_ms,
         report.solver.termination,
         report.solver.evaluations
     );

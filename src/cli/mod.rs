@@ -15,6 +15,7 @@ mod demo;
 mod eval;
 mod export;
 mod fit;
+mod fit_args;
 mod info;
 mod ndf;
 mod scale;

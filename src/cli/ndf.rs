@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
-use ndfit::ndf::{empirical_ndf, output, plot, EmpiricalNdf, NdfOptions, NormalScheme};
+use ndfit::fit::InputInfo;
+use ndfit::ndf::{output, plot, EmpiricalNdf, NdfOptions, NormalScheme};
+use ndfit::{Options, Pipeline};
 
 use super::scan_args::ScanArgs;
 
@@ -61,10 +63,10 @@ pub struct Args {
 }
 
 /// The `input` block of the JSON output.
-fn input_json(path: &Path, hf: &ndfit::Heightfield) -> serde_json::Value {
+fn input_json(i: &InputInfo) -> serde_json::Value {
     serde_json::json!({
-        "path": path.display().to_string(), "format": hf.meta.format,
-        "nx": hf.nx, "ny": hf.ny, "dx": hf.dx, "dy": hf.dy, "invalid": hf.invalid_count(),
+        "path": i.path, "format": i.format,
+        "nx": i.nx, "ny": i.ny, "dx": i.dx, "dy": i.dy, "invalid": i.invalid,
     })
 }
 
@@ -89,8 +91,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     let pngs: Vec<PathBuf> = args.png.iter().flat_map(|p| ["map", "slices"].map(|s| PathBuf::from(format!("{}.{s}.png", p.display())))).collect();
     args.scan.check_outputs(args.output.as_deref().into_iter().chain(args.exr.as_deref()).chain(pngs.iter().map(|p| p.as_path())))?;
-    let hf = args.scan.load()?;
-    let ndf = empirical_ndf(&hf, &opts).map_err(|e| e.with_path(&args.scan.scan))?;
+    let pipeline = Pipeline::new(Options { read: args.scan.read_options(), preprocess: args.scan.preprocess(), ndf: opts, ..Options::default() });
+    let (input, ndf) = pipeline.ndf_path(&args.scan.scan)?;
     for w in &ndf.warnings {
         eprintln!("ndfit: {}: warning: {w}", args.scan.scan.display());
     }
@@ -107,7 +109,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             .with_context(|| format!("{}", p("slices").display()))?;
     }
     match &args.output {
-        Some(out) => write_ndf(out, &ndf, input_json(&args.scan.scan, &hf))?,
+        Some(out) => write_ndf(out, &ndf, input_json(&input))?,
         None => {
             let mut csv = Vec::new();
             output::write_csv_to(&mut csv, &ndf)?;

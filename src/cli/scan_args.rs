@@ -62,29 +62,13 @@ impl ScanArgs {
 
     /// Read the scan as stored (no preprocessing).
     pub fn load_raw(&self) -> anyhow::Result<ndfit::Heightfield> {
-        ndfit::io::atomic::protect_input(&self.scan);
-        Ok(ndfit::io::read_scan(&self.scan, &self.read_options())?)
+        Ok(ndfit::read(&self.scan, &self.read_options())?)
     }
 
-    /// Read the scan AND preprocess it (crop, subsample, form removal), the way every command wants it.
+    /// Read the scan AND preprocess it (crop, subsample, form removal), the way every command wants it
+    /// (the pipeline's first stage, [`ndfit::pipeline::read_preprocessed`]).
     pub fn load(&self) -> anyhow::Result<ndfit::Heightfield> {
-        self.load_with_stride(1)
-    }
-
-    /// [`ScanArgs::load`] keeping only every `extra`-th of the points `--subsample` keeps (a preset's
-    /// stride). Without a crop the subsampled points are all that is read
-    /// ([`ndfit::io::read_scan_subsampled`]); the form is then removed from them.
-    pub fn load_with_stride(&self, extra: usize) -> anyhow::Result<ndfit::Heightfield> {
-        // A `--subsample 0` stays 0, for `preprocess::apply` to refuse with its message.
-        let pre = Preprocess { subsample: self.subsample.saturating_mul(extra.max(1)), ..self.preprocess() };
-        if pre.crop.is_none() && pre.subsample > 1 {
-            ndfit::io::atomic::protect_input(&self.scan);
-            let hf = ndfit::io::read_scan_subsampled(&self.scan, &self.read_options(), pre.subsample)?;
-            let rest = Preprocess { subsample: 1, ..pre };
-            return Ok(ndfit::preprocess::apply(hf, &rest).map_err(|e| e.with_path(&self.scan))?);
-        }
-        let hf = self.load_raw()?;
-        Ok(ndfit::preprocess::apply(hf, &pre).map_err(|e| e.with_path(&self.scan))?)
+        Ok(ndfit::pipeline::read_preprocessed(&self.scan, &self.read_options(), &self.preprocess())?)
     }
 }
 

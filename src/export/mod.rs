@@ -30,7 +30,7 @@
 use nalgebra::Vector3;
 use serde_json::{json, Map, Value};
 
-use crate::bench::accuracy::RefNodes;
+use crate::fit::metric::RefNodes;
 use crate::error::{Error, Result};
 use crate::models::{LobeAxes, Model, ModelId, Ndf};
 use crate::ndf::SlopeFrame;

@@ -4,7 +4,7 @@
 use nalgebra::Vector3;
 
 use crate::models::{Model, Ndf};
-use crate::ndf::EmpiricalNdf;
+use crate::ndf::{BinGrid, EmpiricalNdf, QuadOrder, SlopeFrame};
 
 /// `delta` by quadrature on directions `m_k` with projected solid angles `W_k`:
 /// weights `w_k = D_ref(m_k) W_k`, `delta = sqrt( sum w_k (D/D_ref - 1)^2 / sum w_k )`.
@@ -52,4 +52,49 @@ pub fn delta_to_data(model: &Model, ndf: &EmpiricalNdf) -> Option<f64> {
         den += wk;
     }
     (den > 0.0).then(|| (num / den).sqrt())
+}
+
+/// Fixed quadrature nodes `(m_k, W_k)` over the hemisphere, the same for every point of a sweep so that
+/// the fit errors of different knobs are measured on identical directions.
+#[derive(Debug, Clone)]
+pub struct RefNodes {
+    /// Central direction and projected solid angle of each cell.
+    pub nodes: Vec<(Vector3<f64>, f64)>,
+}
+
+impl RefNodes {
+    /// A `cells x cells` grid over the Lambert disk of `frame` (a frame that follows the lobe, so the
+    /// cells resolve it), each cell's `W` by the same Gauss-Legendre rule the NDF uses and its node at
+    /// the `W`-weighted centroid. `sum W_k = pi`, the projected solid angle of the hemisphere.
+    pub fn new(frame: &SlopeFrame, cells: usize) -> RefNodes {
+        let grid = BinGrid::new(cells);
+        let mut nodes = Vec::with_capacity(grid.cells());
+        let rim = frame.rim_shape();
+        for c in 0..grid.cells() {
+            if !grid.meets_disk(c) {
+                continue;
+            }
+            let (mut w, mut px, mut py) = (0.0, 0.0, 0.0);
+            grid.quadrature(c, QuadOrder::Standard, &rim, |p, wt| {
+                let dw = frame.proj_density(p) * wt;
+                w += dw;
+                px += p[0] * dw;
+                py += p[1] * dw;
+            });
+            if w > 0.0 {
+                nodes.push((frame.normal_at([px / w, py / w]), w));
+            }
+        }
+        RefNodes { nodes }
+    }
+
+    /// Sum of the projected solid angles (pi for a grid covering the hemisphere).
+    pub fn total(&self) -> f64 {
+        self.nodes.iter().map(|n| n.1).sum()
+    }
+
+    /// `delta(D_model; D_truth)` on these nodes.
+    pub fn delta_model(&self, model: &Model, truth: &Model) -> Option<f64> {
+        delta(|m| model.d(*m), |m| truth.d(*m), self.nodes.iter().copied())
+    }
 }

@@ -18,6 +18,7 @@ pub mod lnd;
 pub mod metric;
 pub mod objective;
 pub mod params;
+#[cfg(feature = "plot")]
 pub mod plot;
 pub mod problem;
 pub mod qbic;

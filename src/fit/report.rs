@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::scan::Heightfield;
+use crate::scan::Scan;
 use crate::models::ModelId;
 
 /// The schema id of a fit result.
@@ -38,7 +38,7 @@ pub struct InputInfo {
 
 impl InputInfo {
     /// Describe `hf` read from `path`.
-    pub fn new(path: &Path, hf: &Heightfield) -> InputInfo {
+    pub fn new(path: &Path, hf: &Scan) -> InputInfo {
         InputInfo {
             path: path.display().to_string(),
             format: hf.meta.format.clone(),

@@ -1,6 +1,6 @@
 //! Analytic normal distribution functions (NDFs) and their masking functions.
 //!
-//! Papers (texts in `../shared/seeds/`, equation numbers cited throughout):
+//! Papers (equation numbers cited throughout):
 //! - Walter, Dong, Marschner, Greenberg, *The Ellipsoid Normal Distribution Function* (2014, rev. 2016):
 //!   the ellipsoid NDF, its G1, projected areas and exact visible-normal sampling.
 //! - Heitz, *Understanding the Masking-Shadowing Function in Microfacet-Based BRDFs* (JCGT 2014):

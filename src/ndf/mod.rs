@@ -31,6 +31,7 @@ mod histogram;
 pub mod lattice;
 pub mod normals;
 pub mod output;
+#[cfg(feature = "plot")]
 pub mod plot;
 pub mod precision;
 pub mod quantum;
@@ -44,7 +45,7 @@ pub use precision::{F32Storage, HeightsF32, Precision};
 pub use quantum::{HeightQuantum, SlopeLattice};
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::Heightfield;
+use crate::scan::Scan;
 pub(crate) use cells::build_bins;
 pub use cells::CHEAP_RULE_EPS;
 use histogram::histogram;
@@ -164,7 +165,7 @@ impl NdfOptions {
 ///
 /// Errors: [`ErrorKind::BadData`] when no stencil is valid (all points masked, or the grid is smaller
 /// than one stencil).
-pub fn empirical_ndf(hf: &Heightfield, opts: &NdfOptions) -> Result<EmpiricalNdf> {
+pub fn empirical_ndf(hf: &Scan, opts: &NdfOptions) -> Result<EmpiricalNdf> {
     let mut ndf = ndf_of(hf, opts, || hf.invalid_count())?;
     resolution::assess(hf, &mut ndf);
     Ok(ndf)
@@ -199,7 +200,7 @@ pub fn empirical_ndf_f32(h: &HeightsF32, opts: &NdfOptions) -> Result<EmpiricalN
 
 /// The NDF with heights stored as `precision` asks: f64 reads `hf` itself; f32 makes the f32 copy
 /// first (time and memory of the copy included; to save memory, build [`HeightsF32`] and drop `hf`).
-pub fn empirical_ndf_with(hf: &Heightfield, opts: &NdfOptions, precision: Precision) -> Result<EmpiricalNdf> {
+pub fn empirical_ndf_with(hf: &Scan, opts: &NdfOptions, precision: Precision) -> Result<EmpiricalNdf> {
     match precision {
         Precision::F64 => empirical_ndf(hf, opts),
         Precision::F32 => empirical_ndf_f32(&HeightsF32::from_heightfield(hf), opts),
@@ -404,7 +405,7 @@ mod tests {
     use super::*;
 
     /// The cost of the smaller frame subsample (2^15 instead of 2^17 normals): on the 1024^2 ellipsoid of
-    /// the issue-8 sweep the robust scales from 2^15 and from every normal differ by less than four
+    /// the benchmark sweep the robust scales from 2^15 and from every normal differ by less than four
     /// standard errors of an IQR scale from 2^15 independent samples (4 x 1.17 / sqrt(2^15) = 2.6%; a
     /// regular sub-grid of a smooth surface does better), and the centre by less than 2.6% of the scale.
     #[test]

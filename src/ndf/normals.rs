@@ -4,10 +4,10 @@
 //! stencil, `dx dy / 2` per triangle), so a count of samples is a projected-area measure and the
 //! empirical NDF is `D_k = count_k / (N W_k)` (Heitz eq. 9; Walter et al. eq. 9).
 
-use crate::scan::Heightfield;
+use crate::scan::Scan;
 
 /// Row access to a grid of stored heights, generic over the stored float type: the NDF pass runs over
-/// [`Heightfield`] (f64) and [`super::HeightsF32`] (f32 storage, issue 8) with the same kernel. Every
+/// [`Heightfield`] (f64) and [`super::HeightsF32`] (f32 storage) with the same kernel. Every
 /// height is widened to f64 before it is differenced.
 pub trait HeightRows: Sync {
     /// The stored float type.
@@ -29,7 +29,7 @@ pub trait HeightRows: Sync {
     }
 }
 
-impl HeightRows for Heightfield {
+impl HeightRows for Scan<'_> {
     type T = f64;
     fn nx(&self) -> usize {
         self.nx
@@ -45,7 +45,7 @@ impl HeightRows for Heightfield {
     }
     #[inline(always)]
     fn row(&self, i: usize) -> &[f64] {
-        Heightfield::row(self, i)
+        Scan::row(self, i)
     }
     fn known_quantum(&self) -> Option<f64> {
         self.meta.height_quantum

@@ -1,4 +1,4 @@
-//! f32 storage of the heights for the NDF pass (issue 8's "f32 versus f64 storage" knob).
+//! f32 storage of the heights for the NDF pass (the benchmark's "f32 versus f64 storage" knob).
 //!
 //! The heights are stored as `f32(h - mean)`, the mean of the valid heights taken in f64 first: a
 //! constant offset (0.5 m of stage height over 100 nm of detail) would otherwise leave the detail in
@@ -9,7 +9,7 @@
 //! refused by [`super::empirical_ndf_f32`] when it exceeds [`MAX_ROUNDING_FRACTION`] of the slope scale.
 
 use super::normals::HeightRows;
-use crate::scan::Heightfield;
+use crate::scan::Scan;
 
 /// The largest slope rounding bound accepted, as a fraction of the robust slope scale (smallest
 /// principal standard deviation of the binning frame): beyond it the f32 rounding would widen the NDF
@@ -50,7 +50,7 @@ pub struct HeightsF32 {
 
 impl HeightsF32 {
     /// The f32 copy of a heightfield (mean removed in f64 first).
-    pub fn from_heightfield(hf: &Heightfield) -> Self {
+    pub fn from_heightfield(hf: &Scan) -> Self {
         let (mut sum, mut n) = (0.0f64, 0usize);
         for &h in hf.z.iter().filter(|h| !h.is_nan()) {
             sum += h;

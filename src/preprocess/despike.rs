@@ -11,7 +11,7 @@
 
 use rayon::prelude::*;
 
-use crate::scan::Heightfield;
+use crate::scan::Scan;
 
 /// Departure from the neighbours' median, in units of their spread, beyond which a point is a spike.
 pub const SPIKE_THRESHOLD: f64 = 30.0;
@@ -86,7 +86,7 @@ fn departure(z: &[f64], nx: usize, ny: usize, i: usize, j: usize) -> Option<(f64
 }
 
 /// Mask the spikes of `hf` (module documentation). Returns the report; `Despike::None` does nothing.
-pub fn despike(hf: &mut Heightfield, how: Despike) -> Option<DespikeReport> {
+pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
     if how == Despike::None || hf.nx < 3 || hf.ny < 3 {
         return None;
     }

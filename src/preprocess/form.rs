@@ -10,7 +10,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::Heightfield;
+use crate::scan::Scan;
 
 /// Legendre polynomials P_0..P_3 at `u`.
 #[inline]
@@ -52,13 +52,13 @@ const MAX_TERMS: usize = 10;
 /// Three passes over the heights, each split over the rayon threads by blocks of [`ROWS_PER_TASK`]
 /// rows: the count and mean of the valid heights, the normal equations (fixed-size, upper triangle),
 /// and the residuals.
-pub fn remove_polynomial(hf: &Heightfield, order: usize) -> Result<Vec<f64>> {
+pub fn remove_polynomial(hf: &Scan, order: usize) -> Result<Vec<f64>> {
     polynomial_residual(hf, order, true)
 }
 
 /// [`remove_polynomial`]; `plane_path`: take [`plane_residual`] for the plane (off only to test it
 /// against the general term loop).
-fn polynomial_residual(hf: &Heightfield, order: usize, plane_path: bool) -> Result<Vec<f64>> {
+fn polynomial_residual(hf: &Scan, order: usize, plane_path: bool) -> Result<Vec<f64>> {
     if order > 3 {
         return Err(Error::invalid(format!("polynomial form order {order} is above 3")));
     }
@@ -160,7 +160,7 @@ fn polynomial_residual(hf: &Heightfield, order: usize, plane_path: bool) -> Resu
 ///
 /// Normal equations: a row `i` at `v_i` contributes `n, sum u, sum u^2, sum r, sum u r` over its valid
 /// points (`r = h - mean`), and the `v` entries are those times `v_i` or `v_i^2`.
-fn plane_residual(hf: &Heightfield, mean: f64) -> Result<Vec<f64>> {
+fn plane_residual(hf: &Scan, mean: f64) -> Result<Vec<f64>> {
     const L: usize = 4;
     let (nx, ny) = (hf.nx, hf.ny);
     let u: Vec<f64> = (0..nx).map(|j| scaled(j, nx)).collect();
@@ -226,7 +226,7 @@ fn plane_residual(hf: &Heightfield, mean: f64) -> Result<Vec<f64>> {
 }
 
 /// Residuals after removing the least-squares plane (order 1).
-pub fn remove_plane(hf: &Heightfield) -> Result<Vec<f64>> {
+pub fn remove_plane(hf: &Scan) -> Result<Vec<f64>> {
     remove_polynomial(hf, 1)
 }
 
@@ -248,7 +248,7 @@ pub struct CylinderFit {
 /// along the axis. The azimuth and a starting radius come from the Hessian of a quadratic fit (the
 /// axis is the direction of least curvature); `c0, g, tc, R` are then refined by damped Gauss-Newton
 /// on the vertical residuals.
-pub fn remove_cylinder(hf: &Heightfield) -> Result<CylinderFit> {
+pub fn remove_cylinder(hf: &Scan) -> Result<CylinderFit> {
     let pts: Vec<(f64, f64, f64)> = (0..hf.ny)
         .flat_map(|i| (0..hf.nx).map(move |j| (i, j)))
         .filter_map(|(i, j)| {
@@ -404,6 +404,7 @@ pub fn remove_cylinder(hf: &Heightfield) -> Result<CylinderFit> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scan::Heightfield;
 
     /// The plane path (`plane_residual`) gives the residuals of the general term loop to rounding: on a
     /// 76 mm stage height under a tilted plane and sub-micrometre roughness, with holes, on grids whose

@@ -17,6 +17,7 @@ pub mod filter;
 pub mod fitter;
 pub mod ndf_at;
 pub mod footprint;
+#[cfg(feature = "plot")]
 pub mod plot;
 pub mod report;
 /// The roughness matrix algebra now lives in [`crate::models::roughness`]; this path is kept for old callers.

@@ -1,9 +1,8 @@
-//! The heights of a [`super::Heightfield`]: an owned buffer, or a read-only view of a
-//! memory-mapped file whose bytes already are the heights (zero-copy read, issue 8).
+//! The heights of a [`super::Scan`]: an owned buffer, a read-only view of a memory-mapped file whose
+//! bytes already are the heights (zero-copy read), or the caller's borrowed slice.
 //!
-//! A 4096^2 float64 NPY is 128 MiB. Copying it costs a kernel zero-fill of the fresh buffer plus the copy
-//! itself, most of the read time measured before this type existed (perf: `clear_page_erms` 26% and the
-//! copy 10% of read + NDF). When the file stores native little-endian float64 in row-major order, in
+//! A 4096^2 float64 NPY is 128 MiB; copying it costs a kernel zero-fill of the fresh buffer plus the copy
+//! itself, most of the read time (figures in docs/PERFORMANCE.md). When the file stores native little-endian float64 in row-major order, in
 //! metres, 8-byte aligned and free of infinities, the heights are the mapped bytes: [`Heights`] derefs to
 //! them directly. The first mutable access (form removal, masking) copies them into an owned buffer, so
 //! every stage that edits heights works as before and the file is never written.
@@ -14,22 +13,24 @@
 use std::ops::{Deref, DerefMut};
 use std::sync::Arc;
 
-/// Row-major heights in metres (NaN = invalid): owned, or borrowed from a mapped file until first written.
+/// Row-major heights in metres (NaN = invalid): owned, borrowed from a mapped file, or borrowed from the
+/// caller's memory (`'a`, see [`super::Scan::from_view`]); borrowed heights are copied on first write.
 #[derive(Clone)]
-pub struct Heights(Repr);
+pub struct Heights<'a>(Repr<'a>);
 
 #[derive(Clone)]
-enum Repr {
+enum Repr<'a> {
     Owned(Vec<f64>),
     Mapped { map: Arc<memmap2::Mmap>, offset: usize, len: usize },
+    Borrowed(&'a [f64]),
 }
 
-impl Heights {
+impl<'a> Heights<'a> {
     /// A view of `len` float64 values at byte `offset` of `map`, when they can be read in place: the
     /// target is little-endian, the range lies inside the map, and its start is 8-byte aligned. The bytes
     /// are taken as native f64 as they are; the caller has checked the file stores `<f8` heights in
     /// metres with no infinities.
-    pub(crate) fn mapped(map: Arc<memmap2::Mmap>, offset: usize, len: usize) -> Option<Heights> {
+    pub(crate) fn mapped(map: Arc<memmap2::Mmap>, offset: usize, len: usize) -> Option<Heights<'static>> {
         let bytes = len.checked_mul(8)?;
         let end = offset.checked_add(bytes)?;
         let start = map.as_ptr() as usize + offset;
@@ -37,21 +38,44 @@ impl Heights {
             .then_some(Heights(Repr::Mapped { map, offset, len }))
     }
 
+    /// Heights borrowed from the caller, read in place until first written.
+    pub fn borrowed(z: &'a [f64]) -> Heights<'a> {
+        Heights(Repr::Borrowed(z))
+    }
+
     /// Whether the heights are still the mapped file's bytes (nothing has written them yet).
     pub fn is_mapped(&self) -> bool {
         matches!(self.0, Repr::Mapped { .. })
     }
 
-    /// The heights as an owned vector (a copy when mapped).
+    /// Whether the heights are still the caller's borrowed memory (nothing has written them yet).
+    pub fn is_borrowed(&self) -> bool {
+        matches!(self.0, Repr::Borrowed(_))
+    }
+
+    /// The heights as an owned vector (a copy when mapped or borrowed).
     pub fn into_vec(self) -> Vec<f64> {
         match self.0 {
             Repr::Owned(v) => v,
-            Repr::Mapped { .. } => self.to_vec(),
+            Repr::Mapped { .. } | Repr::Borrowed(_) => self.to_vec(),
+        }
+    }
+
+    /// The same heights with no borrow: borrowed heights are copied; owned and mapped ones are moved.
+    pub fn into_owned(self) -> Heights<'static> {
+        match self.0 {
+            Repr::Owned(v) => Heights(Repr::Owned(v)),
+            Repr::Mapped { map, offset, len } => Heights(Repr::Mapped { map, offset, len }),
+            Repr::Borrowed(z) => {
+                let mut v = with_capacity(z.len());
+                v.extend_from_slice(z);
+                Heights(Repr::Owned(v))
+            }
         }
     }
 }
 
-impl Deref for Heights {
+impl Deref for Heights<'_> {
     type Target = [f64];
     #[inline]
     fn deref(&self) -> &[f64] {
@@ -60,32 +84,33 @@ impl Deref for Heights {
             // SAFETY: `mapped` checked that [offset, offset + 8 len) lies inside the map and is 8-byte
             // aligned; every bit pattern is a valid f64; the map is read-only and lives as long as `self`.
             Repr::Mapped { map, offset, len } => unsafe { std::slice::from_raw_parts(map.as_ptr().add(*offset).cast::<f64>(), *len) },
+            Repr::Borrowed(z) => z,
         }
     }
 }
 
-impl DerefMut for Heights {
-    /// Copy-on-write: mapped heights are copied into an owned buffer (once) before they are written.
+impl DerefMut for Heights<'_> {
+    /// Copy-on-write: mapped or borrowed heights are copied into an owned buffer (once) before they are written.
     fn deref_mut(&mut self) -> &mut [f64] {
-        if let Repr::Mapped { .. } = self.0 {
+        if !matches!(self.0, Repr::Owned(_)) {
             let mut v = with_capacity(self.len());
             v.extend_from_slice(self);
             self.0 = Repr::Owned(v);
         }
         match &mut self.0 {
             Repr::Owned(v) => v,
-            Repr::Mapped { .. } => unreachable!("converted to owned just above"),
+            Repr::Mapped { .. } | Repr::Borrowed(_) => unreachable!("converted to owned just above"),
         }
     }
 }
 
-impl From<Vec<f64>> for Heights {
+impl From<Vec<f64>> for Heights<'_> {
     fn from(v: Vec<f64>) -> Self {
         Heights(Repr::Owned(v))
     }
 }
 
-impl<'a> IntoIterator for &'a Heights {
+impl<'a> IntoIterator for &'a Heights<'_> {
     type Item = &'a f64;
     type IntoIter = std::slice::Iter<'a, f64>;
     fn into_iter(self) -> Self::IntoIter {
@@ -93,22 +118,26 @@ impl<'a> IntoIterator for &'a Heights {
     }
 }
 
-impl Default for Heights {
+impl Default for Heights<'_> {
     fn default() -> Self {
         Heights(Repr::Owned(Vec::new()))
     }
 }
 
-impl PartialEq for Heights {
+impl PartialEq for Heights<'_> {
     /// Element-wise, as for `Vec<f64>` (so NaN heights compare unequal).
     fn eq(&self, other: &Self) -> bool {
         self[..] == other[..]
     }
 }
 
-impl std::fmt::Debug for Heights {
+impl std::fmt::Debug for Heights<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let kind = if self.is_mapped() { "mapped" } else { "owned" };
+        let kind = match self.0 {
+            Repr::Owned(_) => "owned",
+            Repr::Mapped { .. } => "mapped",
+            Repr::Borrowed(_) => "borrowed",
+        };
         write!(f, "Heights({kind}, {} values)", self.len())
     }
 }
@@ -119,8 +148,8 @@ impl std::fmt::Debug for Heights {
 // transparent huge pages when the kernel allows them on request (`enabled = madvise`).
 //
 // A fresh 128 MiB `Vec` is zeroed by the kernel one 4 KiB page at a time on first write (32768 page
-// faults for a 4096^2 float64 scan, ~75% of the read time measured before this module existed);
-// with `MADV_HUGEPAGE` the same buffer takes 64 faults of 2 MiB. This is what makes numpy's `np.load`
+// faults for a 4096^2 float64 scan, most of the read time; docs/PERFORMANCE.md); with `MADV_HUGEPAGE`
+// the same buffer takes 64 faults of 2 MiB. This is what makes numpy's `np.load`
 // fast on the same machine. The advice changes neither contents nor validity of the memory: where
 // huge pages are unavailable or disabled the kernel silently uses 4 KiB pages.
 

@@ -36,9 +36,11 @@ pub struct ScanMeta {
     pub despike: Option<crate::preprocess::DespikeReport>,
 }
 
-/// A regular grid of heights in metres with a validity mask (NaN = invalid).
+/// A regular grid of heights in metres with a validity mask (NaN = invalid): what every reader returns
+/// and every stage reads. The heights are owned, a view of a memory-mapped file, or borrowed from the
+/// caller for `'a` ([`Scan::from_view`]); the two borrowed kinds are copied on first write.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Heightfield {
+pub struct Scan<'a> {
     /// Number of columns (samples along x).
     pub nx: usize,
     /// Number of rows (samples along y).
@@ -53,10 +55,28 @@ pub struct Heightfield {
     pub y0: f64,
     /// Heights in metres, row-major: `z[i * nx + j]`; NaN marks an invalid point. Derefs to `[f64]`;
     /// may be a zero-copy view of the scan file until first written ([`Heights`]).
-    pub z: Heights,
+    pub z: Heights<'a>,
     /// File metadata.
     pub meta: ScanMeta,
 }
+
+/// The checks of [`Heightfield::new`] on a grid of `len` heights.
+fn check_grid(nx: usize, ny: usize, dx: f64, dy: f64, len: usize) -> Result<()> {
+    if nx == 0 || ny == 0 {
+        return Err(Error::invalid(format!("empty grid {nx} x {ny}")));
+    }
+    if nx.checked_mul(ny) != Some(len) {
+        return Err(Error::invalid(format!("{len} heights for a {nx} x {ny} grid")));
+    }
+    if !(dx.is_finite() && dx > 0.0 && dy.is_finite() && dy > 0.0) {
+        return Err(Error::invalid(format!("spacing must be finite and positive, got dx={dx}, dy={dy}")));
+    }
+    Ok(())
+}
+
+/// A scan that owns (or maps) its heights: what the readers return. The type's name before it gained a
+/// lifetime.
+pub type Heightfield = Scan<'static>;
 
 impl Heightfield {
     /// A heightfield from row-major heights, checking the shape and spacing.
@@ -82,8 +102,8 @@ impl Heightfield {
 
     /// [`Heightfield::new`] for readers whose heights are already finite or NaN (no infinities):
     /// skips the masking pass over the data, which matters for files of hundreds of megabytes.
-    pub(crate) fn new_finite_or_nan(nx: usize, ny: usize, dx: f64, dy: f64, z: impl Into<Heights>) -> Result<Self> {
-        let z: Heights = z.into();
+    pub(crate) fn new_finite_or_nan(nx: usize, ny: usize, dx: f64, dy: f64, z: impl Into<Heights<'static>>) -> Result<Self> {
+        let z: Heights<'static> = z.into();
         debug_assert!(z.iter().all(|h| !h.is_infinite()));
         let n = nx.checked_mul(ny).ok_or_else(|| Error::invalid("grid size overflows"))?;
         if nx == 0 || ny == 0 || z.len() != n {
@@ -94,7 +114,37 @@ impl Heightfield {
         }
         Ok(Heightfield { nx, ny, dx, dy, x0: 0.0, y0: 0.0, z, meta: ScanMeta::default() })
     }
+}
 
+impl<'a> Scan<'a> {
+    /// A scan over the caller's heights, rows along y (`h[[i, j]]` at `y = i dy`, `x = j dx`; NaN =
+    /// invalid), without a copy when the view is in standard (C, row-major) layout. Other layouts (a
+    /// transposed or strided view) are copied once, as is a view holding infinities (they are masked to
+    /// NaN like every reader's). Later stages that edit heights (form removal) copy them first; the
+    /// caller's array is never written.
+    pub fn from_view(h: ndarray::ArrayView2<'a, f64>, dx: f64, dy: f64) -> Result<Scan<'a>> {
+        let (ny, nx) = h.dim();
+        match h.to_slice() {
+            Some(z) if !z.iter().any(|v| v.is_infinite()) => {
+                check_grid(nx, ny, dx, dy, z.len())?;
+                Ok(Scan { nx, ny, dx, dy, x0: 0.0, y0: 0.0, z: Heights::borrowed(z), meta: ScanMeta::default() })
+            }
+            _ => Heightfield::new(nx, ny, dx, dy, h.iter().copied().collect()),
+        }
+    }
+
+    /// The heights as an `(ny, nx)` array view (rows along y), without a copy.
+    pub fn heights(&self) -> ndarray::ArrayView2<'_, f64> {
+        ndarray::ArrayView2::from_shape((self.ny, self.nx), &self.z[..]).expect("a scan holds nx * ny heights")
+    }
+
+    /// The same scan with no borrow (borrowed heights are copied; owned and mapped ones are moved).
+    pub fn into_owned(self) -> Scan<'static> {
+        Scan { nx: self.nx, ny: self.ny, dx: self.dx, dy: self.dy, x0: self.x0, y0: self.y0, z: self.z.into_owned(), meta: self.meta }
+    }
+}
+
+impl Scan<'_> {
     /// Height at row `i`, column `j` (NaN when invalid).
     #[inline]
     pub fn at(&self, i: usize, j: usize) -> f64 {
@@ -115,5 +165,49 @@ impl Heightfield {
     /// Number of valid points.
     pub fn valid_count(&self) -> usize {
         self.z.len() - self.invalid_count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A standard-layout view is borrowed in place (the scan's heights are the array's memory), reads
+    /// back the same values through `heights()`, and is copied only when written or made owned.
+    #[test]
+    fn views_are_borrowed_without_a_copy_and_copied_on_write() {
+        let a = ndarray::Array2::from_shape_fn((3, 4), |(i, j)| (10 * i + j) as f64 * 1e-9);
+        let mut s = Scan::from_view(a.view(), 1e-6, 2e-6).expect("valid");
+        assert!(s.z.is_borrowed());
+        assert_eq!(s.z.as_ptr(), a.as_ptr(), "no copy");
+        assert_eq!((s.nx, s.ny, s.dx, s.dy), (4, 3, 1e-6, 2e-6));
+        assert_eq!(s.at(2, 1), a[[2, 1]]);
+        assert_eq!(s.row(2), a.row(2).as_slice().expect("contiguous row"));
+        assert_eq!(s.heights(), a.view());
+        let owned = s.clone().into_owned();
+        assert!(!owned.z.is_borrowed() && owned.z.as_ptr() != a.as_ptr());
+        assert_eq!(owned.heights(), a.view());
+        s.z[0] = 5.0;
+        assert!(!s.z.is_borrowed());
+        assert_eq!(a[[0, 0]], 0.0, "the caller's array is never written");
+    }
+
+    /// A transposed view is not row-major: it is copied in its logical order (row `i` of the view is
+    /// row `i` of the scan); infinities are masked to NaN as every reader masks them; bad spacing and
+    /// empty grids are refused like [`Heightfield::new`] refuses them.
+    #[test]
+    fn other_layouts_are_copied_and_checked() {
+        let a = ndarray::Array2::from_shape_fn((3, 4), |(i, j)| (10 * i + j) as f64);
+        let t = a.t();
+        let s = Scan::from_view(t, 1.0, 1.0).expect("valid");
+        assert!(!s.z.is_borrowed());
+        assert_eq!((s.nx, s.ny), (3, 4));
+        assert_eq!(s.heights(), t);
+        let mut b = a.clone();
+        b[[1, 2]] = f64::INFINITY;
+        let s = Scan::from_view(b.view(), 1.0, 1.0).expect("valid");
+        assert!(s.at(1, 2).is_nan() && s.invalid_count() == 1 && b[[1, 2]].is_infinite());
+        assert!(Scan::from_view(a.view(), 0.0, 1.0).is_err());
+        assert!(Scan::from_view(ndarray::Array2::<f64>::zeros((0, 4)).view(), 1.0, 1.0).is_err());
     }
 }

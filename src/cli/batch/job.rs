@@ -4,14 +4,12 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use ndfit::batch::pipeline::{self, PipelineOptions};
+use ndfit::batch::pipeline;
 use ndfit::batch::{JobContext, JobFailure, JobOutput, ScanSpec};
+use ndfit::ModelChoice;
 use serde_json::Value;
 
-use ndfit::fit::{FitOptions, Objective, Solver};
-
-use crate::ndfit_cli::ndf::NdfArgs;
-use crate::ndfit_cli::scan_args::ScanArgs;
+use crate::ndfit_cli::fit_args::{parse_model, FitArgs};
 
 /// The run-level settings every scan's job shares (serializable: the child worker gets them too).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -37,42 +35,12 @@ impl JobConfig {
     }
 }
 
-/// The per-scan options: reading and preprocessing (`ScanArgs`), the NDF (`NdfArgs`) and the fit, with
-/// the flag names of `ndfit fit` / `ndfit ndf`.
+/// The per-scan options: exactly the flags of `ndfit fit` but the model and the outputs ([`FitArgs`]).
 #[derive(Debug, Parser)]
 #[command(no_binary_name = true, disable_help_flag = true, args_override_self = true)]
 pub struct PerScan {
     #[command(flatten)]
-    pub scan: ScanArgs,
-    #[command(flatten)]
-    pub ndf: NdfArgs,
-    /// Residuals: `poisson` or `logd` (data_formats/objective.md).
-    #[arg(long, default_value = "poisson")]
-    pub objective: String,
-    /// Local optimizer: `lm`, `nelder-mead` or `lbfgs`.
-    #[arg(long, default_value = "lm")]
-    pub solver: String,
-    /// Extra skew starts for the ellipsoid (0-4).
-    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
-    pub extra_starts: usize,
-}
-
-impl PerScan {
-    /// The pipeline options these flags ask for (`model` from the manifest or the run).
-    pub fn pipeline(&self, model: String) -> ndfit::Result<PipelineOptions> {
-        let bad = |flag: &str, e: ndfit::Error| ndfit::Error::invalid(format!("{flag}: {}", e.message()));
-        let ndf = self.ndf.options().map_err(|e| ndfit::Error::invalid(e.to_string()))?;
-        if self.extra_starts > 4 {
-            return Err(ndfit::Error::invalid(format!("--extra-starts {} must be between 0 and 4", self.extra_starts)));
-        }
-        let fit = FitOptions {
-            objective: self.objective.parse::<Objective>().map_err(|e| bad("--objective", e))?,
-            solver: self.solver.parse::<Solver>().map_err(|e| bad("--solver", e))?,
-            extra_starts: self.extra_starts,
-            ..FitOptions::default()
-        };
-        Ok(PipelineOptions { read: self.scan.read_options(), preprocess: self.scan.preprocess(), ndf, model, fit })
-    }
+    pub fit: FitArgs,
 }
 
 /// Parse the run's and the scan's options for `spec`.
@@ -86,7 +54,7 @@ pub fn parse_scan_options(cfg: &JobConfig, spec: &ScanSpec) -> Result<PerScan, J
         fail(text.lines().find(|l| !l.trim().is_empty()).unwrap_or("bad options").trim().trim_start_matches("error: "))
     })?;
     // Values that parse but are out of range fail here too, before anything runs.
-    per.pipeline(String::new()).map_err(|e| fail(e.message()))?;
+    per.fit.options(ModelChoice::Auto).map_err(|e| fail(e.message()))?;
     Ok(per)
 }
 
@@ -99,11 +67,16 @@ pub fn fit_scan(cfg: &JobConfig, spec: &ScanSpec, ctx: &JobContext<'_>) -> Resul
         std::process::abort();
     }
     let per = parse_scan_options(cfg, spec)?;
-    let path: PathBuf = per.scan.scan.clone();
-    let opts = per.pipeline(spec.model.clone().unwrap_or_else(|| cfg.model.clone())).map_err(|e| e.with_path(&path))?;
+    let path: PathBuf = per.fit.scan.scan.clone();
+    let model = parse_model(spec.model.as_deref().unwrap_or(&cfg.model)).map_err(|e| e.with_path(&path))?;
+    let opts = per.fit.options(model).map_err(|e| e.with_path(&path))?;
     let r = pipeline::fit_scan(&path, &opts, ctx.baseline)?;
     if cfg.write_ndf {
-        pipeline::write_ndf_csv(&ctx.extra_path("ndf", ".ndf.csv"), &r.ndf)?;
+        let csv = ctx.extra_path("ndf", ".ndf.csv");
+        if let Some(dir) = csv.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| ndfit::Error::io(e).with_path(dir))?;
+        }
+        ndfit::ndf::output::write_csv(&csv, &r.ndf).map_err(|e| e.with_path(&csv))?;
     }
     if cfg.plots {
         let model = ndfit::batch::model_of_fit(&r.output.fit).map_err(|e| e.with_path(&path))?;

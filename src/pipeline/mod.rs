@@ -1,0 +1,255 @@
+//! The one pipeline from a scan to a fit: read -> preprocess -> empirical NDF -> fit. Every command
+//! (`fit`, `ndf`, `demo`, `batch`), the benchmarks and the Python binding run it through [`Pipeline`]
+//! or, to time the stages apart, through the stage functions below, which [`Pipeline`] itself calls.
+//!
+//! ```text
+//!  path ──read_preprocessed──► Scan ──ndf──► EmpiricalNdf ──fit──► FitReport
+//!  Scan (in memory) ─preprocess─┘            (Options::ndf_options)   (Options::fit_options, ModelChoice)
+//! ```
+
+pub mod preset;
+
+use std::path::Path;
+use std::time::Instant;
+
+use crate::error::Result;
+use crate::fit::{FitOptions, FitReport, InputInfo};
+use crate::io::ReadOptions;
+use crate::models::ModelChoice;
+use crate::ndf::{EmpiricalNdf, NdfOptions};
+use crate::preprocess::Preprocess;
+use crate::scan::{Heightfield, Scan};
+pub use preset::Preset;
+
+/// Everything the pipeline needs besides the scan. `Default` is what `ndfit fit` does without flags:
+/// the mean plane removed, the automatic NDF grid, `auto` model choice, Poisson objective with LM.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Options {
+    /// How to read the file (spacing and height unit for formats without them, forced format).
+    pub read: ReadOptions,
+    /// Crop, subsampling and form removal before normals are taken.
+    pub preprocess: Preprocess,
+    /// A speed/accuracy preset: its stride multiplies `preprocess.subsample`, and it sets the NDF's
+    /// normals and bins (an explicit `ndf.cells_across` still wins), the tolerance and the starts.
+    pub preset: Option<Preset>,
+    /// How the empirical NDF is built.
+    pub ndf: NdfOptions,
+    /// One model, or `auto` (fit the nested models and choose by QBIC, [`crate::fit::fit_auto`]).
+    pub model: ModelChoice,
+    /// How to fit (objective, solver, tolerances, fitted region `max_theta`).
+    pub fit: FitOptions,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            read: ReadOptions::default(),
+            preprocess: Preprocess::default(),
+            preset: None,
+            ndf: NdfOptions::default(),
+            model: ModelChoice::Auto,
+            fit: FitOptions::default(),
+        }
+    }
+}
+
+impl Options {
+    /// The preprocessing with the preset's stride folded into the subsampling (a `subsample` of 0 stays
+    /// 0, for [`crate::preprocess::apply`] to refuse).
+    pub fn preprocess(&self) -> Preprocess {
+        let stride = self.preset.map_or(1, |p| p.stride());
+        Preprocess { subsample: self.preprocess.subsample.saturating_mul(stride), ..self.preprocess.clone() }
+    }
+
+    /// The NDF options for `scan` (preprocessed): [`Options::ndf`], or the preset's, whose capped grid
+    /// may need the scan's valid count; an explicit `cells_across` wins over the preset's.
+    pub fn ndf_options(&self, scan: &Scan) -> NdfOptions {
+        match self.preset {
+            None => self.ndf.clone(),
+            Some(p) => {
+                let po = p.ndf_options(if p.needs_sample_count() { scan.valid_count() as u64 } else { 0 });
+                NdfOptions { cells_across: self.ndf.cells_across.or(po.cells_across), ..po }
+            }
+        }
+    }
+
+    /// The fit options: [`Options::fit`] with the preset's tolerances and at least its extra starts.
+    pub fn fit_options(&self) -> FitOptions {
+        let mut f = self.fit;
+        if let Some(p) = self.preset {
+            let pf = p.fit_options();
+            f.tolerances = pf.tolerances;
+            f.extra_starts = f.extra_starts.max(pf.extra_starts);
+        }
+        f
+    }
+}
+
+/// What [`Pipeline::run`] produces: the empirical NDF and the fit report, whose `input` and timings the
+/// pipeline has filled in.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// The scan's empirical NDF.
+    pub ndf: EmpiricalNdf,
+    /// The fit (`ndfit.fit/1` when serialized).
+    pub fit: FitReport,
+}
+
+/// The pipeline with its options; see the [module documentation](self).
+#[derive(Debug, Clone, Default)]
+pub struct Pipeline {
+    options: Options,
+}
+
+impl Pipeline {
+    /// A pipeline that runs with `options`.
+    pub fn new(options: Options) -> Pipeline {
+        Pipeline { options }
+    }
+
+    /// The options it runs with.
+    pub fn options(&self) -> &Options {
+        &self.options
+    }
+
+    /// Read `path` (subsampling while reading where possible), preprocess, build the NDF and fit. Every
+    /// error names `path`.
+    pub fn run_path(&self, path: &Path) -> Result<Outcome> {
+        let t0 = Instant::now();
+        let scan = read_preprocessed(path, &self.options.read, &self.options.preprocess())?;
+        let ndf_opts = self.options.ndf_options(&scan);
+        let read_ms = ms(t0);
+        self.finish(scan, ndf_opts, path, read_ms)
+    }
+
+    /// [`Pipeline::run_path`] for a scan in memory (preprocessing included); `label` stands for the path
+    /// in the report's `input` and in error messages.
+    pub fn run(&self, scan: Scan<'_>, label: &str) -> Result<Outcome> {
+        let path = Path::new(label);
+        let t0 = Instant::now();
+        let scan = crate::preprocess::apply(scan, &self.options.preprocess()).map_err(|e| e.with_path(path))?;
+        let ndf_opts = self.options.ndf_options(&scan);
+        let read_ms = ms(t0);
+        self.finish(scan, ndf_opts, path, read_ms)
+    }
+
+    /// Read `path`, preprocess and build the NDF only (`ndfit ndf`); the scan is described by the
+    /// returned [`InputInfo`]. Errors name `path`.
+    pub fn ndf_path(&self, path: &Path) -> Result<(InputInfo, EmpiricalNdf)> {
+        let scan = read_preprocessed(path, &self.options.read, &self.options.preprocess())?;
+        let ndf = ndf(&scan, &self.options.ndf_options(&scan)).map_err(|e| e.with_path(path))?;
+        Ok((InputInfo::new(path, &scan), ndf))
+    }
+
+    /// Preprocess a scan in memory and build its NDF only.
+    pub fn ndf(&self, scan: Scan<'_>) -> Result<EmpiricalNdf> {
+        let scan = crate::preprocess::apply(scan, &self.options.preprocess())?;
+        ndf(&scan, &self.options.ndf_options(&scan))
+    }
+
+    fn finish(&self, scan: Scan<'_>, ndf_opts: NdfOptions, path: &Path, read_ms: f64) -> Result<Outcome> {
+        let t1 = Instant::now();
+        let ndf = ndf(&scan, &ndf_opts).map_err(|e| e.with_path(path))?;
+        let ndf_ms = ms(t1);
+        let mut report = fit(&ndf, self.options.model, &self.options.fit_options()).map_err(|e| e.with_path(path))?;
+        report.input = Some(InputInfo::new(path, &scan));
+        report.timings.read_ms = Some(read_ms);
+        report.timings.ndf_ms = Some(ndf_ms);
+        Ok(Outcome { ndf, fit: report })
+    }
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Read a scan file as stored: every format of [`crate::io`], detected from content then extension.
+/// Errors name `path`.
+pub fn read(path: &Path, opts: &ReadOptions) -> Result<Heightfield> {
+    crate::io::atomic::protect_input(path);
+    crate::io::read_scan(path, opts)
+}
+
+/// Stage 1: read `path` and preprocess it. Without a crop, a subsampling stride is applied while reading
+/// ([`crate::io::read_scan_subsampled`]: a large file reads only the kept points); the form is then
+/// removed from the kept points. Errors name `path`.
+pub fn read_preprocessed(path: &Path, opts: &ReadOptions, pre: &Preprocess) -> Result<Heightfield> {
+    crate::io::atomic::protect_input(path);
+    if pre.crop.is_none() && pre.subsample > 1 {
+        let hf = crate::io::read_scan_subsampled(path, opts, pre.subsample)?;
+        let rest = Preprocess { subsample: 1, ..pre.clone() };
+        return crate::preprocess::apply(hf, &rest).map_err(|e| e.with_path(path));
+    }
+    let hf = crate::io::read_scan(path, opts)?;
+    crate::preprocess::apply(hf, pre).map_err(|e| e.with_path(path))
+}
+
+/// Stage 2: the empirical NDF of a preprocessed scan ([`crate::ndf::empirical_ndf`]).
+pub fn ndf(scan: &Scan, opts: &NdfOptions) -> Result<EmpiricalNdf> {
+    crate::ndf::empirical_ndf(scan, opts)
+}
+
+/// Stage 3: fit one model or choose among them ([`crate::fit::fit_model`], [`crate::fit::fit_auto`]).
+pub fn fit(ndf: &EmpiricalNdf, model: ModelChoice, opts: &FitOptions) -> Result<FitReport> {
+    match model {
+        ModelChoice::Auto => crate::fit::fit_auto(ndf, opts),
+        ModelChoice::Model(id) => crate::fit::fit_model(ndf, id, opts),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::models::ModelId;
+    use crate::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
+
+    fn surface() -> Heightfield {
+        let p = EllipsoidParams { alpha_x: 0.3, alpha_y: 0.15, theta_z: 0.4, ..Default::default() };
+        ellipsoid_surface(&SynthSettings { nx: 192, ny: 192, ..Default::default() }, &p).expect("valid").0
+    }
+
+    /// The pipeline against the stages assembled by hand (plane removal, `empirical_ndf`, `fit_model`):
+    /// the same bins and the same parameters, bit for bit, from a scan in memory and from the same scan
+    /// written to a file; the report's `input` is filled in.
+    #[test]
+    fn pipeline_equals_the_stages_by_hand_in_memory_and_from_a_file() {
+        let hf = surface();
+        let opts = Options { model: ModelChoice::Model(ModelId::GgxAniso), ..Options::default() };
+        let by_hand = {
+            let pre = crate::preprocess::apply(hf.clone(), &Preprocess::default()).expect("plane");
+            let ndf = crate::ndf::empirical_ndf(&pre, &NdfOptions::default()).expect("ndf");
+            let fit = crate::fit::fit_model(&ndf, ModelId::GgxAniso, &FitOptions::default()).expect("fit");
+            (ndf, fit)
+        };
+        let heights = hf.heights().to_owned();
+        let mem = Pipeline::new(opts.clone()).run(Scan::from_view(heights.view(), hf.dx, hf.dy).expect("view"), "mem").expect("run");
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("s.x3p");
+        crate::io::write_x3p(&path, &hf).expect("write");
+        let file = Pipeline::new(opts).run_path(&path).expect("run_path");
+        for o in [&mem, &file] {
+            assert_eq!(o.ndf.bins, by_hand.0.bins);
+            assert_eq!(o.fit.params, by_hand.1.params);
+        }
+        let input = file.fit.input.as_ref().expect("input");
+        assert_eq!((input.nx, input.ny, input.path.as_str()), (192, 192, path.to_str().expect("utf-8")));
+        assert_eq!(mem.fit.input.as_ref().expect("input").path, "mem");
+        assert!(file.fit.timings.read_ms.is_some() && file.fit.timings.ndf_ms.is_some());
+    }
+
+    /// A preset: its stride subsamples (a quarter of the points along each axis for `fast`), its fit
+    /// options apply, and an explicit grid size wins over its binning.
+    #[test]
+    fn presets_set_stride_binning_and_tolerance() {
+        let o = Options { preset: Some(Preset::Fast), ndf: NdfOptions { cells_across: Some(31), ..NdfOptions::default() }, ..Options::default() };
+        assert_eq!(o.preprocess().subsample, preset::FAST_STRIDE);
+        assert_eq!(o.fit_options().tolerances, Preset::Fast.fit_options().tolerances);
+        let hf = surface();
+        assert_eq!(o.ndf_options(&hf).cells_across, Some(31));
+        let ndf = Pipeline::new(o).ndf(hf).expect("ndf");
+        assert_eq!(ndf.grid.n, 31);
+        assert_eq!(ndf.n_samples + ndf.n_skipped, 46 * 46, "central-difference stencils of the 48 x 48 subsample");
+        let none = Options::default();
+        assert_eq!((none.preprocess(), none.fit_options()), (Preprocess::default(), FitOptions::default()));
+    }
+}
