@@ -5,10 +5,7 @@
 
 use crate::ndf::{EmpiricalNdf, NdfBin};
 
-/// Largest share of all normals unresolved for which the cut applies. Beyond it the surface is rough at
-/// the sampling step itself (the Richardson estimate measures the surface, not a truncation error), the NDF
-/// is by definition that of the pixel footprint, and every bin is kept.
-pub const MAX_UNRESOLVED_SHARE: f64 = 0.25;
+pub use crate::ndf::resolution::MAX_UNRESOLVED_SHARE;
 
 /// What the tail cut left out of the region (the fit JSON's `quality.tail`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -49,12 +46,8 @@ pub fn usable(b: &NdfBin) -> bool {
 
 /// The cut over the usable bins of `ndf` with `m.z >= cos_max |m|` (`enabled` false: [`TailCut::none`]).
 pub fn tail_cut(ndf: &EmpiricalNdf, cos_max: f64, enabled: bool) -> TailCut {
-    if !enabled || ndf.unresolved.len() != ndf.bins.len() {
-        return TailCut::none();
-    }
-    let all: u64 = ndf.bins.iter().map(|b| b.count).sum();
-    let share = ndf.unresolved.iter().sum::<u64>() as f64 / all.max(1) as f64;
-    if !(share <= MAX_UNRESOLVED_SHARE) {
+    let Some(share) = ndf.unresolved_share.filter(|_| enabled) else { return TailCut::none() };
+    if !(share <= MAX_UNRESOLVED_SHARE) || ndf.unresolved.len() != ndf.bins.len() {
         return TailCut { rule: "none (rough at the sampling step)".into(), tolerance: ndf.resolution_tolerance, unresolved_fraction: share, ..TailCut::none() };
     }
     let (mut n, mut cut, mut k) = (0.0, 0.0, 0usize);

@@ -102,8 +102,11 @@ pub struct EmpiricalNdf {
     /// halves to estimate the overdispersion the data show ([`crate::fit::verdict`]).
     pub counts_odd: Vec<u64>,
     /// Per bin, how many of its normals the sampling does not resolve ([`resolution`]); empty when not
-    /// assessed (triangle normals, NDFs not counted from a scan).
+    /// assessed (triangle normals, NDFs not counted from a scan) or when over
+    /// [`resolution::MAX_UNRESOLVED_SHARE`] of all normals are unresolved.
     pub unresolved: Vec<u64>,
+    /// The share of all normals the sampling does not resolve, when assessed.
+    pub unresolved_share: Option<f64>,
     /// The relative slope error above which a normal counts in `unresolved`.
     pub resolution_tolerance: f64,
     /// Warnings for the user (one line each), e.g. a requested grid finer than the height lattice.
@@ -311,6 +314,7 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
         f32_storage: None,
         counts_odd,
         unresolved: Vec::new(),
+        unresolved_share: None,
         resolution_tolerance: resolution::RESOLUTION_TOLERANCE,
         warnings,
     })
@@ -359,6 +363,7 @@ impl EmpiricalNdf {
             f32_storage: None,
             counts_odd: Vec::new(),
             unresolved: Vec::new(),
+            unresolved_share: None,
             resolution_tolerance: resolution::RESOLUTION_TOLERANCE,
             warnings: Vec::new(),
         }
