@@ -51,6 +51,8 @@
 //!   without clap, indicatif or plotters.
 
 #![warn(missing_docs)]
+// `!(x > 0.0)` guards are deliberate throughout: unlike `x <= 0.0` they also catch NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 #[cfg(feature = "cli")]
 pub mod batch;

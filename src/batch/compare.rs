@@ -2,7 +2,7 @@
 //!
 //! The rule (documented in `data_formats/batch.md`): a scan **regresses** when its new fit describes
 //! its data worse than the baseline's fit did, beyond a tolerance. "Describes its data" is measured by
-//! `kl` ([`super::quality`]: the deviance per sample, the binned KL divergence of the model from the
+//! `kl` ([`super::quality()`]: the deviance per sample, the binned KL divergence of the model from the
 //! empirical NDF), and both fits are scored on the **same bins**: the baseline's model and parameters
 //! are re-evaluated against this run's empirical NDF of the scan. So the comparison is exact (no noise
 //! from different binnings), works across models (a `ggx` fit against an `ellipsoid` baseline), and does

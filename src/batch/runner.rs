@@ -250,7 +250,7 @@ pub fn run(
                         }
                     }
                 })
-                .map_err(|e| Error::io(e))
+                .map_err(Error::io)
                 .ok();
         }
     });

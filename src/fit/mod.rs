@@ -264,7 +264,7 @@ fn fit_ellipsoid(s: &Session, aniso: &Fitted, opts: &FitOptions) -> Result<Fitte
     fit_from(s, ModelId::Ellipsoid, &starts, opts)
 }
 
-/// Relative tolerance of the GTR2aniso pass that only starts the ellipsoid ([`aniso_start`]): measured
+/// Relative tolerance of the GTR2aniso pass that only starts the ellipsoid (`aniso_start`): measured
 /// on the 1024^2 bench scene, 1e-6 instead of 1e-10 cut the fit's residual bin evaluations by a fifth
 /// (103k -> 82k), and over the synthetic and real scans moved the ellipsoid's parameters by at most
 /// 2.7e-8 relative (the final fine pass runs at the full tolerance).

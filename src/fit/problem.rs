@@ -9,7 +9,7 @@
 //! pass and adds the gradients of `ln D`, which need no transcendental function.
 //!
 //! For large regions LM is handed `p + 1` compressed residuals with the same normal equations instead of
-//! one per bin ([`compress`]), so its pivoted QR no longer runs over every bin. Everything here is
+//! one per bin (`compress`), so its pivoted QR no longer runs over every bin. Everything here is
 //! serial and in a fixed order: results do not depend on the thread count of a batch.
 
 use std::cell::RefCell;
@@ -262,7 +262,7 @@ impl<'a> Problem<'a> {
         Problem { data, id, x: DVector::from_column_slice(x0), ws: RefCell::new(Workspace::default()), compressed }
     }
 
-    /// The same problem with compression ([`compress`]) forced on or off (tests and measurements).
+    /// The same problem with compression (`compress`) forced on or off (tests and measurements).
     pub fn with_compression(mut self, on: bool) -> Problem<'a> {
         self.compressed = on;
         self

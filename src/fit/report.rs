@@ -122,10 +122,10 @@ pub struct SolverInfo {
 /// Wall-clock times in milliseconds.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Timings {
-    /// Reading and preprocessing the scan (CLI only).
+    /// Reading and preprocessing the scan (filled in by `Pipeline`; absent when the stages are called apart).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub read_ms: Option<f64>,
-    /// Building the empirical NDF (CLI only).
+    /// Building the empirical NDF (filled in by `Pipeline`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ndf_ms: Option<f64>,
     /// The fit (all starts, covariance, for `auto` all candidate models).

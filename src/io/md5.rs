@@ -87,6 +87,8 @@ impl Md5 {
             *w = u32::from_le_bytes([block[i * 4], block[i * 4 + 1], block[i * 4 + 2], block[i * 4 + 3]]);
         }
         let [mut a, mut b, mut c, mut d] = self.state;
+        // The round index selects the function, the message word, the shift and the constant (RFC 1321).
+        #[allow(clippy::needless_range_loop)]
         for i in 0..64 {
             let (f, g) = match i / 16 {
                 0 => ((b & c) | (!b & d), i),

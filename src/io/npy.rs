@@ -128,7 +128,7 @@ fn value_of(b: &[u8], endian: char, kind: char, size: usize) -> f64 {
 }
 
 /// Every `stride`-th point along both axes of a C-ordered NPY file, decoded straight from its memory
-/// map (only the kept rows' pages are read), exactly as [`decode`] and then
+/// map (only the kept rows' pages are read), exactly as `decode` and then
 /// [`crate::preprocess::subsample`] would give them; `None` for Fortran order (read whole instead).
 pub fn read_npy_strided(map: &memmap2::Mmap, opts: &ReadOptions, stride: usize) -> Result<Option<Heightfield>> {
     let h = parse_header(map)?;

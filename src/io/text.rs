@@ -66,6 +66,8 @@ fn numeric_rows(text: &str, skip_first: bool) -> Result<Vec<(usize, Vec<f64>)>> 
 pub fn read_ascii_matrix(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
     let text = text_of(bytes)?;
     let first = text.lines().next().unwrap_or("").trim();
+    // Columns, rows and the optional spacing the header declares.
+    #[allow(clippy::type_complexity)]
     let mut header: Option<(usize, usize, Option<(f64, f64)>)> = None;
     if first.starts_with("AsciiMatrix") {
         let t: Vec<&str> = tokens(first).skip(1).collect();

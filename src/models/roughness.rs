@@ -368,6 +368,8 @@ mod tests {
             }
         }
         let (mut sw, mut s2) = (0.0, 0.0);
+        // `p` indexes the cell's grid position as well as `c`.
+        #[allow(clippy::needless_range_loop)]
         for p in 0..n * n {
             let r = approx(Vector2::new(at(p % n), at(p / n))) / c[p] - 1.0;
             sw += c[p];

@@ -7,7 +7,7 @@
 use crate::scan::Scan;
 
 /// Row access to a grid of stored heights, generic over the stored float type: the NDF pass runs over
-/// [`Heightfield`] (f64) and [`super::HeightsF32`] (f32 storage) with the same kernel. Every
+/// [`crate::Scan`] (f64) and [`super::HeightsF32`] (f32 storage) with the same kernel. Every
 /// height is widened to f64 before it is differenced.
 pub trait HeightRows: Sync {
     /// The stored float type.

@@ -49,7 +49,7 @@ const MAX_TERMS: usize = 10;
 /// The least-squares polynomial of total degree `order` (0..=3) fitted to the valid heights, evaluated
 /// on the whole grid (NaN where the input is NaN). Returns the residual heights.
 ///
-/// Three passes over the heights, each split over the rayon threads by blocks of [`ROWS_PER_TASK`]
+/// Three passes over the heights, each split over the rayon threads by blocks of `ROWS_PER_TASK`
 /// rows: the count and mean of the valid heights, the normal equations (fixed-size, upper triangle),
 /// and the residuals.
 pub fn remove_polynomial(hf: &Scan, order: usize) -> Result<Vec<f64>> {

@@ -63,6 +63,8 @@ pub fn write_plot(path: &Path, results: &[FootprintResult]) -> Result<()> {
             .collect();
         let untrusted = untrusted.as_slice();
         // Panel 1: alphas.
+        // Label, points, colour, dashed: one row per series, read as a table below.
+        #[allow(clippy::type_complexity)]
         let mut lines: Vec<(String, Vec<(f64, f64)>, RGBColor, bool)> = vec![
             ("alpha_x empirical".into(), series(results, id, false, param(0)), BLUE, false),
             ("alpha_x analytic".into(), series(results, id, true, param(0)), BLUE, true),

@@ -51,7 +51,7 @@ fn opts(out: &Path, jobs: usize) -> RunOptions {
 }
 
 fn run_dir(dir: &Path, o: &RunOptions, baseline: Option<&Baseline>, job: &batch::Job<'_>) -> RunOutcome {
-    let specs = discover::walk(dir, &[o.out_dir.clone()], &|_: &Path| false).unwrap();
+    let specs = discover::walk(dir, std::slice::from_ref(&o.out_dir), &|_: &Path| false).unwrap();
     let outcome = batch::run(&specs, baseline, job, o, &|_| {}).unwrap();
     let header = summary::Header {
         schema: summary::SCHEMA,

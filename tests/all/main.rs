@@ -6,6 +6,7 @@ mod batch;
 mod bench;
 mod cli;
 mod export;
+mod facade;
 mod fit;
 mod hostile;
 mod models;

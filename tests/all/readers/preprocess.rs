@@ -34,8 +34,8 @@ fn polynomial_forms_are_removed_exactly_and_holes_stay() {
     assert!(rms(&r3) < 1e-13, "order-3 residual {:e}", rms(&r3));
     let r2 = remove_polynomial(&hf, 2).expect("order 2");
     assert!(rms(&r2) > 1e-10, "order 2 cannot remove the cubic terms: {:e}", rms(&r2));
-    for k in 0..hf.z.len() {
-        assert_eq!(r3[k].is_nan(), holes.contains(&k), "point {k}");
+    for (k, r) in r3.iter().enumerate() {
+        assert_eq!(r.is_nan(), holes.contains(&k), "point {k}");
     }
     // A plane is removed by the default preprocessing, and nothing else changes.
     let plane = field(41, 23, dx, dy, &holes, |x, y| 0.0763 + 1e-3 * x - 2e-3 * y);

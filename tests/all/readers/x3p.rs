@@ -138,7 +138,7 @@ fn every_z_data_type_decodes_with_increment_and_offset() {
 #[test]
 fn valid_mask_and_nan_mark_invalid_points() {
     let (nx, ny) = (5, 2);
-    let data: Vec<u8> = (0..10).flat_map(|k| (k as i32).to_le_bytes()).collect();
+    let data: Vec<u8> = (0..10i32).flat_map(|k| k.to_le_bytes()).collect();
     // Bits, least significant first: points 1 and 8 invalid.
     let valid = [0b1111_1101u8, 0b0000_0010];
     let link = "<DataLink><PointDataLink>bindata/data.bin</PointDataLink><ValidPointsLink>bindata/valid.bin</ValidPointsLink></DataLink>";
