@@ -46,6 +46,7 @@ import numpy as np  # noqa: E402
 from ndfitpy import canonical, endtoend, fitjson, models, scanio  # noqa: E402
 from ndfitpy import objective as obj  # noqa: E402
 from ndfitpy.bins import read_ndf_csv  # noqa: E402
+from ndfitpy.tail import cut_unresolved as tail_cut  # noqa: E402
 from ndfitpy.fit import fit  # noqa: E402
 
 REPO = os.path.dirname(HERE)
@@ -64,6 +65,10 @@ SYNTH_CASES = [
      ["--form", "none"]),
     ("synth-gaussian", ["--surface", "gaussian", "--sigma-x", "0.15", "--sigma-y", "0.3", "--theta-z", "0.5"],
      ["--form", "none"]),
+]
+# Scans fitted with `ndfit fit --tail unresolved` against ndfitpy.tail's own cut of the CSV's bins.
+TAIL_CASES = [
+    ("synth-narrow-tail", ["--surface", "ellipsoid", "--alpha-x", "0.05", "--theta-x", "0.4"], ["--form", "none"]),
 ]
 
 
@@ -170,8 +175,9 @@ def diagnose(row: "Row") -> str:
             "data) or two minima of equal depth")
 
 
-def check_scan(ndfit: str, scan: str, name: str, model_list, work: str, ndf_args, timeout) -> List[Row]:
-    """All models on one scan; every failure becomes a row."""
+def check_scan(ndfit: str, scan: str, name: str, model_list, work: str, ndf_args, timeout, tail: bool = False) -> List[Row]:
+    """All models on one scan; every failure becomes a row. With ``tail``, ndfit fits with `--tail unresolved` and
+    ndfitpy fits the bins its own tail cut (ndfitpy.tail) keeps; both are then compared on those bins."""
     rows: List[Row] = []
     csv = os.path.join(work, f"{name}.ndf.csv")
     ok, t_ndf, msg = run([ndfit, "ndf", scan, "-o", csv, *ndf_args], timeout)
@@ -181,9 +187,15 @@ def check_scan(ndfit: str, scan: str, name: str, model_list, work: str, ndf_args
         bins = read_ndf_csv(csv)
     except ValueError as e:
         return [Row(scan=name, model=m, notes=[f"reading ndfit's NDF: {e}"]) for m in model_list]
+    fit_args = []
+    if tail:
+        bins, info = tail_cut(bins)
+        fit_args = ["--tail", "unresolved"]
+        if info.bins_excluded == 0:
+            return [Row(scan=name, model=m, notes=[f"the tail cut left nothing out ({info.rule}): the case tests nothing"]) for m in model_list]
     for m in model_list:
         out = os.path.join(work, f"{name}.{m}.rust.json")
-        ok, t_rust, msg = run([ndfit, "fit", scan, "--model", m, "-o", out, *ndf_args], timeout)
+        ok, t_rust, msg = run([ndfit, "fit", scan, "--model", m, "-o", out, *ndf_args, *fit_args], timeout)
         if not ok:
             rows.append(Row(scan=name, model=m, t_rust=t_rust, notes=[f"ndfit fit failed: {msg}"]))
             continue
@@ -295,6 +307,18 @@ def main(argv=None) -> int:
                     synth.append((path, name))
                 else:
                     rows += [Row(scan=name, model=m, notes=[f"ndfit synth failed: {msg}"]) for m in model_list]
+        tail_scans = []
+        if not args.no_synth and not args.no_csv:
+            for name, synth_args, case_ndf_args in TAIL_CASES:
+                if only and not any(s in name for s in only):
+                    continue
+                path = os.path.join(work, f"{name}.x3p")
+                size = str(args.size)
+                ok, _, msg = run([ndfit, "synth", path, *synth_args, "--nx", size, "--ny", size], args.timeout)
+                if ok:
+                    tail_scans.append((path, name, case_ndf_args))
+                else:
+                    rows += [Row(scan=name, model=m, notes=[f"ndfit synth failed: {msg}"]) for m in model_list]
         real = []
         if not args.no_real:
             if os.path.isdir(args.scans):
@@ -314,6 +338,9 @@ def main(argv=None) -> int:
             for path, name, case_ndf_args in scans:
                 print(f"-- {name}", file=sys.stderr, flush=True)
                 rows += check_scan(ndfit, path, name, model_list, work, case_ndf_args + ndf_args, args.timeout)
+            for path, name, case_ndf_args in tail_scans:
+                print(f"-- {name} (--tail unresolved)", file=sys.stderr, flush=True)
+                rows += check_scan(ndfit, path, name, model_list, work, case_ndf_args + ndf_args, args.timeout, tail=True)
         if not args.no_e2e:
             e2e_rows = run_e2e(ndfit, synth, real, work, args)
     finally:

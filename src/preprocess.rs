@@ -4,7 +4,10 @@
 //! else. Holes are never filled: invalid points stay NaN through every step, and the NDF code skips
 //! every stencil that touches one.
 
+pub mod despike;
 pub mod form;
+
+pub use despike::{Despike, DespikeReport};
 
 use crate::error::{Error, Result};
 use crate::scan::{Heightfield, Scan};
@@ -18,6 +21,8 @@ pub struct Preprocess {
     pub crop: Option<Crop>,
     /// Keep every `step`-th point along x and y (1 keeps all; applied after the crop).
     pub subsample: usize,
+    /// Spike removal after the form removal ([`despike`]).
+    pub despike: Despike,
 }
 
 /// A window of the grid in samples: columns `x..x+nx`, rows `y..y+ny`.
@@ -48,7 +53,7 @@ pub enum FormRemoval {
 
 impl Default for Preprocess {
     fn default() -> Self {
-        Preprocess { form: FormRemoval::Plane, crop: None, subsample: 1 }
+        Preprocess { form: FormRemoval::Plane, crop: None, subsample: 1, despike: Despike::Median }
     }
 }
 
@@ -66,12 +71,16 @@ pub fn apply<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Scan<'a>> {
         hf.meta.height_quantum = crate::ndf::quantum::height_quantum(&hf);
     }
     let z = match pre.form {
-        FormRemoval::None => return Ok(hf),
+        FormRemoval::None => {
+            hf.meta.despike = despike::despike(&mut hf, pre.despike);
+            return Ok(hf);
+        }
         FormRemoval::Plane => form::remove_polynomial(&hf, 1)?,
         FormRemoval::Polynomial(k) => form::remove_polynomial(&hf, k)?,
         FormRemoval::Cylinder => form::remove_cylinder(&hf)?.residual,
     };
     hf.z = z.into();
+    hf.meta.despike = despike::despike(&mut hf, pre.despike);
     Ok(hf)
 }
 

@@ -60,6 +60,19 @@ def _parse_float(text: str, path: str, line: int, col: str) -> float:
         raise ValueError(f"{path}: line {line}: column '{col}' is not a number: '{text}'") from None
 
 
+def _unresolved(values, count, path):
+    """The ``unresolved`` column as an array, or None when absent or not assessed (empty fields)."""
+    if not values:
+        return None
+    u = np.asarray(values, dtype=float)
+    if np.all(np.isnan(u)):
+        return None
+    bad = np.flatnonzero(~np.isfinite(u) | (u < 0) | (u > count) | (u != np.round(u)))
+    if bad.size:
+        raise ValueError(f"{path}: line {int(bad[0]) + 2}: unresolved must be an integer between 0 and count")
+    return u
+
+
 def read_ndf_csv(path: str) -> Bins:
     """Read an empirical NDF CSV; raise ValueError('<path>: <problem>') on anything malformed."""
     path = os.fspath(path)
@@ -82,6 +95,9 @@ def read_ndf_csv(path: str) -> Bins:
         want = list(REQUIRED + FIT_COLUMNS) + [c for c in ("solid_angle", "stderr") if c in header]
         idx = {c: header.index(c) for c in want}
         cols = {c: [] for c in want}
+        # Optional: the unresolved normals per bin (empty fields when ndfit did not assess them).
+        iu = header.index("unresolved") if "unresolved" in header else None
+        unresolved = []
         try:
             for lineno, row in enumerate(reader, start=2):
                 if not row or all(not x.strip() for x in row):
@@ -90,6 +106,9 @@ def read_ndf_csv(path: str) -> Bins:
                     raise ValueError(f"{path}: line {lineno}: {len(row)} fields, header has {len(header)}")
                 for c, i in idx.items():
                     cols[c].append(_parse_float(row[i].strip(), path, lineno, c))
+                if iu is not None:
+                    t = row[iu].strip()
+                    unresolved.append(_parse_float(t, path, lineno, "unresolved") if t else float("nan"))
         except (csv.Error, UnicodeDecodeError) as e:
             raise ValueError(f"{path}: not a CSV file: {e}") from None
     if not cols["mx"]:
@@ -132,7 +151,7 @@ def read_ndf_csv(path: str) -> Bins:
         d=arr["d"],
         solid_angle=arr.get("solid_angle"),
         path=path,
-        extra={"stderr": arr.get("stderr")},
+        extra={"stderr": arr.get("stderr"), "unresolved": _unresolved(unresolved, count, path)},
     )
 
 

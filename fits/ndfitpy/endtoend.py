@@ -136,7 +136,8 @@ def check_scan(ndfit: str, path: str, name: str, model_list, work: str, form: st
         hm = read_scan(path, dx=dx)
         slopes, bins_py = empirical_ndf(hm, form)
         ndf_json = os.path.join(work, f"{name}.e2e.ndf.json")
-        _run([ndfit, "ndf", path, "-o", ndf_json, "--form", form, *rust_args], timeout)
+        # The numpy pipeline has no spike removal: ndfit's (on by default) is turned off to compare the same points.
+        _run([ndfit, "ndf", path, "-o", ndf_json, "--form", form, "--despike", "none", *rust_args], timeout)
         with open(ndf_json, encoding="utf-8") as fh:
             doc = json.load(fh)
         cmp = compare_ndfs(slopes, doc)
@@ -150,7 +151,7 @@ def check_scan(ndfit: str, path: str, name: str, model_list, work: str, form: st
                      cells=cmp["cells"], errors=list(cmp["notes"]))
         try:
             out = os.path.join(work, f"{name}.{model}.e2e.rust.json")
-            _run([ndfit, "fit", path, "--model", model, "-o", out, "--form", form, *rust_args], timeout)
+            _run([ndfit, "fit", path, "--model", model, "-o", out, "--form", form, "--despike", "none", *rust_args], timeout)
             with open(out, encoding="utf-8") as fh:
                 rdoc = json.load(fh)
             py = fit(bins_py, model)

@@ -86,7 +86,7 @@ pub fn run(path: &Path, read_opts: &ReadOptions, knobs: &Knobs) -> Result<Outcom
     // The pipeline's own read stage, with the scan as stored (no form removal): a stride subsamples as it
     // reads (a large NPY file reads only the kept points); the time is the read's.
     let t = Instant::now();
-    let pre = Preprocess { form: FormRemoval::None, crop: None, subsample: knobs.stride.max(1) };
+    let pre = Preprocess { form: FormRemoval::None, crop: None, subsample: knobs.stride.max(1), despike: crate::preprocess::Despike::None };
     let hf = read_preprocessed(path, read_opts, &pre)?;
     times.read = ms(t);
     peaks.read = above(mem::peak_rss());

@@ -27,9 +27,16 @@ pub struct FitArgs {
     pub extra_starts: usize,
     /// Largest polar angle (degrees, 0-90] of the NDF bins the fit uses; the model is normalized over
     /// them (data_formats/objective.md). Lower it to the instrument's numerical aperture
-    /// (asin(NA)) when the scan cannot see steeper slopes.
-    #[arg(long, default_value_t = ndfit::fit::objective::DEFAULT_MAX_THETA_DEG, allow_hyphen_values = true)]
-    pub max_theta: f64,
+    /// (asin(NA)) when the scan cannot see steeper slopes. Default 70.
+    #[arg(long, allow_hyphen_values = true)]
+    pub max_theta: Option<f64>,
+    /// The objective's numerical aperture NA (0-1]: sets --max-theta to asin(NA); both given must agree.
+    #[arg(long, allow_hyphen_values = true)]
+    pub na: Option<f64>,
+    /// The tail: `all` (default) keeps every bin within --max-theta; `unresolved` leaves out the bins
+    /// where most normals are not resolved by the sampling (data_formats/objective.md).
+    #[arg(long, default_value = "all")]
+    pub tail: String,
     /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` = the defaults). Sets the
     /// subsampling stride (on top of --subsample; the kept points are all that is read, and the form is
     /// removed from them), the NDF's normals and bins (unless --ndf-cells), the tolerance and the starts.
@@ -47,12 +54,38 @@ impl FitArgs {
         if self.extra_starts > 4 {
             return Err(ndfit::Error::invalid(format!("--extra-starts {} must be between 0 and 4", self.extra_starts)));
         }
-        if !(self.max_theta > 0.0 && self.max_theta <= 90.0) {
-            return Err(ndfit::Error::invalid(format!("--max-theta {} must be in (0, 90] degrees", self.max_theta)));
-        }
+        let max_theta = max_theta_deg(self.max_theta, self.na)?;
+        let cut_unresolved = match self.tail.as_str() {
+            "unresolved" => true,
+            "all" => false,
+            other => return Err(ndfit::Error::invalid(format!("--tail {other:?}: use unresolved or all"))),
+        };
         let ndf = self.ndf.options().map_err(|e| ndfit::Error::invalid(e.to_string()))?;
-        let fit = FitOptions { objective, solver, extra_starts: self.extra_starts, max_theta: self.max_theta.to_radians(), ..FitOptions::default() };
+        let fit = FitOptions { objective, solver, extra_starts: self.extra_starts, max_theta: max_theta.to_radians(), cut_unresolved, ..FitOptions::default() };
         Ok(Options { read: self.scan.read_options(), preprocess: self.scan.preprocess(), preset: self.preset, ndf, model, fit })
+    }
+}
+
+/// The fit region's largest polar angle (degrees) from `--max-theta` and `--na` (`asin(NA)`); both
+/// given must agree to 1e-6 degrees.
+pub fn max_theta_deg(max_theta: Option<f64>, na: Option<f64>) -> ndfit::Result<f64> {
+    if let Some(t) = max_theta {
+        if !(t > 0.0 && t <= 90.0) {
+            return Err(ndfit::Error::invalid(format!("--max-theta {t} must be in (0, 90] degrees")));
+        }
+    }
+    let from_na = match na {
+        Some(a) if !(a > 0.0 && a <= 1.0) => return Err(ndfit::Error::invalid(format!("--na {a} must be in (0, 1]"))),
+        Some(a) => Some(a.asin().to_degrees()),
+        None => None,
+    };
+    match (max_theta, from_na) {
+        (Some(t), Some(n)) if (t - n).abs() > 1e-6 => Err(ndfit::Error::invalid(format!(
+            "--max-theta {t} and --na disagree: the aperture sets max_theta = asin(NA) = {n:.6} degrees"
+        ))),
+        (Some(t), _) => Ok(t),
+        (None, Some(n)) => Ok(n),
+        (None, None) => Ok(ndfit::fit::objective::DEFAULT_MAX_THETA_DEG),
     }
 }
 

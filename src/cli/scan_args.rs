@@ -33,6 +33,10 @@ pub struct ScanArgs {
     /// Keep every N-th point along x and y (after the crop; no averaging).
     #[arg(long, default_value_t = 1, allow_hyphen_values = true)]
     pub subsample: usize,
+    /// Spike removal after the form removal: `median` (default; isolated height outliers masked,
+    /// reported in the fit JSON's input.despike) or `none`.
+    #[arg(long, value_parser = parse_despike, default_value = "median")]
+    pub despike: ndfit::preprocess::Despike,
 }
 
 impl ScanArgs {
@@ -43,7 +47,7 @@ impl ScanArgs {
 
     /// The preprocessing these arguments ask for.
     pub fn preprocess(&self) -> Preprocess {
-        Preprocess { form: self.form.unwrap_or(FormRemoval::Plane), crop: self.crop, subsample: self.subsample }
+        Preprocess { form: self.form.unwrap_or(FormRemoval::Plane), crop: self.crop, subsample: self.subsample, despike: self.despike }
     }
 
     /// Record the scan as this process's input and refuse any of `outputs` that is a directory or the
@@ -76,6 +80,14 @@ fn parse_form(s: &str) -> Result<FormRemoval, String> {
         "poly3" => Ok(FormRemoval::Polynomial(3)),
         "cylinder" => Ok(FormRemoval::Cylinder),
         other => Err(format!("unknown form {other:?}: use none, plane, poly2, poly3 or cylinder")),
+    }
+}
+
+fn parse_despike(s: &str) -> Result<ndfit::preprocess::Despike, String> {
+    match s {
+        "median" => Ok(ndfit::preprocess::Despike::Median),
+        "none" => Ok(ndfit::preprocess::Despike::None),
+        other => Err(format!("unknown despike {other:?}: use median or none")),
     }
 }
 

@@ -28,6 +28,7 @@ pub mod report;
 pub mod solve;
 pub mod start;
 pub mod synthetic;
+pub mod tail;
 pub mod verdict;
 
 use std::collections::BTreeMap;
@@ -66,6 +67,9 @@ pub struct FitOptions {
     /// Largest polar angle (radians) of the bins the objective uses; the model is normalized over them
     /// (objective.md). Default [`objective::DEFAULT_MAX_THETA_DEG`].
     pub max_theta: f64,
+    /// Leave the bins where most normals are unresolved by the sampling out of the region ([`tail`],
+    /// objective.md). Default false: measured, it helps narrow and anisotropic caps but not skewed ones.
+    pub cut_unresolved: bool,
 }
 
 impl Default for FitOptions {
@@ -76,6 +80,7 @@ impl Default for FitOptions {
             tolerances: Tolerances::default(),
             extra_starts: 0,
             max_theta: objective::DEFAULT_MAX_THETA_DEG.to_radians(),
+            cut_unresolved: false,
         }
     }
 }
@@ -110,7 +115,7 @@ struct Session {
 
 impl Session {
     fn new(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<Session> {
-        let data = FitData::new(ndf, opts.objective, opts.max_theta)?;
+        let data = FitData::with_tail(ndf, opts.objective, opts.max_theta, opts.cut_unresolved)?;
         let summary = start::summarize(&data);
         let coarse = if data.bins.len() >= COARSE_PASS_MIN_BINS { data.coarsened(ndf, 50) } else { None };
         Ok(Session { data, coarse, summary })
@@ -433,6 +438,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
             n_samples: s.data.n,
             n_samples_total: s.data.n_total,
             max_theta_deg: s.data.max_theta.to_degrees(),
+            tail: Some(s.data.tail.clone()),
             delta_data,
             rank: cov.rank,
             condition: cov.condition.is_finite().then_some(cov.condition),

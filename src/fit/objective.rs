@@ -97,6 +97,8 @@ pub struct FitData {
     /// region of at least [`super::problem::COMPRESS_MIN_BINS`] fine bins and inherited by its merged
     /// bins ([`FitData::coarsened`]), so one fit's passes all solve the same way.
     pub lm_compressed: bool,
+    /// The tail bins left out of the region ([`super::tail`]; nothing cut for [`FitData::new`]).
+    pub tail: super::tail::TailCut,
 }
 
 impl FitData {
@@ -104,6 +106,12 @@ impl FitData {
     /// within `max_theta` (radians; `>= pi/2` keeps the hemisphere) of n. Fails on an NDF with no counts
     /// in that region.
     pub fn new(ndf: &EmpiricalNdf, objective: Objective, max_theta: f64) -> Result<FitData> {
+        FitData::with_tail(ndf, objective, max_theta, false)
+    }
+
+    /// [`FitData::new`] with, when `cut_unresolved`, the tail cut of [`super::tail`]: the bins where most
+    /// normals are unresolved by the sampling also leave the region.
+    pub fn with_tail(ndf: &EmpiricalNdf, objective: Objective, max_theta: f64, cut_unresolved: bool) -> Result<FitData> {
         if !(max_theta > 0.0) {
             return Err(Error::invalid(format!("max_theta must be positive, got {max_theta}")));
         }
@@ -118,8 +126,12 @@ impl FitData {
         // Past pi/2 there are no bins (the horizon bounds them): the hemisphere.
         let max_theta = max_theta.min(std::f64::consts::FRAC_PI_2);
         let cos_max = max_theta.cos();
-        let inside = |b: &&crate::ndf::NdfBin| b.m.z >= cos_max * b.m.norm();
-        let n: f64 = ndf.bins.iter().filter(usable).filter(inside).map(|b| b.count as f64).sum();
+        let tail = super::tail::tail_cut(ndf, cos_max, cut_unresolved);
+        let cut = tail.bins_excluded > 0;
+        let keep: Vec<bool> = (0..ndf.bins.len()).map(|k| !(cut && super::tail::is_unresolved(ndf, k))).collect();
+        let inside = |(k, b): &(usize, &crate::ndf::NdfBin)| keep[*k] && b.m.z >= cos_max * b.m.norm();
+        let usable = |(_, b): &(usize, &crate::ndf::NdfBin)| usable(b);
+        let n: f64 = ndf.bins.iter().enumerate().filter(usable).filter(inside).map(|(_, b)| b.count as f64).sum();
         if n <= 0.0 {
             return Err(Error::new(
                 ErrorKind::BadData,
@@ -129,9 +141,10 @@ impl FitData {
         let bins: Vec<Bin> = ndf
             .bins
             .iter()
+            .enumerate()
             .filter(usable)
             .filter(inside)
-            .map(|b| {
+            .map(|(_, b)| {
                 let c = b.count as f64;
                 Bin::new(b.m, c, b.proj_solid_angle, n)
             })
@@ -143,7 +156,7 @@ impl FitData {
             return Err(Error::new(ErrorKind::BadData, format!("no NDF bin qualifies for the {} objective", objective.as_str())));
         }
         let lm_compressed = bins.len() >= super::problem::COMPRESS_MIN_BINS;
-        Ok(FitData { bins, n, n_total, k_nonzero, n_residual_bins, max_theta, objective, lm_compressed })
+        Ok(FitData { bins, n, n_total, k_nonzero, n_residual_bins, max_theta, objective, lm_compressed, tail })
     }
 
     /// The same region on a grid twice as coarse: the fine bins of `ndf` in the region merged 2 x 2 by
@@ -158,9 +171,10 @@ impl FitData {
         let nc = n / 2 + 1;
         let mut acc: Vec<(f64, f64, Vector3<f64>)> = vec![(0.0, 0.0, Vector3::zeros()); nc * nc];
         let cos_max = self.max_theta.cos();
-        for (b, &cell) in ndf.bins.iter().zip(&ndf.bin_cells) {
+        let cut = self.tail.bins_excluded > 0;
+        for (k, (b, &cell)) in ndf.bins.iter().zip(&ndf.bin_cells).enumerate() {
             let ok = b.proj_solid_angle > 0.0 && b.proj_solid_angle.is_finite() && b.m.z > 0.0 && b.m.iter().all(|v| v.is_finite());
-            if !ok || b.m.z < cos_max * b.m.norm() {
+            if !ok || b.m.z < cos_max * b.m.norm() || (cut && super::tail::is_unresolved(ndf, k)) {
                 continue;
             }
             let (ix, iy) = (cell as usize % n, cell as usize / n);
@@ -189,6 +203,7 @@ impl FitData {
             max_theta: self.max_theta,
             objective: self.objective,
             lm_compressed: self.lm_compressed,
+            tail: self.tail.clone(),
         })
     }
 

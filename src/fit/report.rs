@@ -31,6 +31,9 @@ pub struct InputInfo {
     /// (`nx`, `ny`, `dx`, `dy` are then those of the kept points).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub file_grid: Option<[usize; 2]>,
+    /// What spike removal masked (preprocessing), when it ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub despike: Option<crate::preprocess::DespikeReport>,
 }
 
 impl InputInfo {
@@ -45,6 +48,7 @@ impl InputInfo {
             dy: hf.dy,
             invalid: hf.invalid_count(),
             file_grid: hf.meta.file_grid.filter(|g| *g != [hf.nx, hf.ny]),
+            despike: hf.meta.despike.clone(),
         }
     }
 }
@@ -70,6 +74,9 @@ pub struct Quality {
     pub n_samples_total: f64,
     /// Largest polar angle of the bins in the objective (degrees; objective.md).
     pub max_theta_deg: f64,
+    /// The bins the tail cut left out of the region (objective.md, "The tail the scan cannot resolve").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tail: Option<super::tail::TailCut>,
     /// `delta(D_fit; D_empirical)` over the bins (objective.md), counting noise included.
     pub delta_data: Option<f64>,
     /// Numerical rank of the Jacobian at the optimum (= parameter count when all are determined).

@@ -35,6 +35,7 @@ pub mod output;
 pub mod plot;
 pub mod precision;
 pub mod quantum;
+pub mod resolution;
 
 use nalgebra::Vector3;
 pub use frame::SlopeFrame;
@@ -100,6 +101,14 @@ pub struct EmpiricalNdf {
     /// ([`DISPERSION_BLOCKS`]); empty when the NDF was not counted from a scan. The fit compares the two
     /// halves to estimate the overdispersion the data show ([`crate::fit::verdict`]).
     pub counts_odd: Vec<u64>,
+    /// Per bin, how many of its normals the sampling does not resolve ([`resolution`]); empty when not
+    /// assessed (triangle normals, NDFs not counted from a scan) or when over
+    /// [`resolution::MAX_UNRESOLVED_SHARE`] of all normals are unresolved.
+    pub unresolved: Vec<u64>,
+    /// The share of all normals the sampling does not resolve, when assessed.
+    pub unresolved_share: Option<f64>,
+    /// The relative slope error above which a normal counts in `unresolved`.
+    pub resolution_tolerance: f64,
     /// Warnings for the user (one line each), e.g. a requested grid finer than the height lattice.
     pub warnings: Vec<String>,
 }
@@ -160,7 +169,9 @@ impl NdfOptions {
 /// Errors: [`ErrorKind::BadData`] when no stencil is valid (all points masked, or the grid is smaller
 /// than one stencil).
 pub fn empirical_ndf(hf: &Scan, opts: &NdfOptions) -> Result<EmpiricalNdf> {
-    ndf_of(hf, opts, || hf.invalid_count())
+    let mut ndf = ndf_of(hf, opts, || hf.invalid_count())?;
+    resolution::assess(hf, &mut ndf);
+    Ok(ndf)
 }
 
 /// [`empirical_ndf`] over f32 storage of the heights ([`HeightsF32`], mean removed in f64 first). The
@@ -170,6 +181,7 @@ pub fn empirical_ndf(hf: &Scan, opts: &NdfOptions) -> Result<EmpiricalNdf> {
 /// a slope error above [`precision::MAX_ROUNDING_FRACTION`] of the smallest robust slope scale (use f64).
 pub fn empirical_ndf_f32(h: &HeightsF32, opts: &NdfOptions) -> Result<EmpiricalNdf> {
     let mut ndf = ndf_of(h, opts, || h.invalid)?;
+    resolution::assess(h, &mut ndf);
     let bound = h.slope_rounding_bound(opts.scheme);
     let (a, b, c) = (ndf.frame.cov[0][0], ndf.frame.cov[0][1], ndf.frame.cov[1][1]);
     let lmin = (0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt()).max(0.0);
@@ -301,6 +313,9 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
         quantization,
         f32_storage: None,
         counts_odd,
+        unresolved: Vec::new(),
+        unresolved_share: None,
+        resolution_tolerance: resolution::RESOLUTION_TOLERANCE,
         warnings,
     })
 }
@@ -347,6 +362,9 @@ impl EmpiricalNdf {
             quantization: None,
             f32_storage: None,
             counts_odd: Vec::new(),
+            unresolved: Vec::new(),
+            unresolved_share: None,
+            resolution_tolerance: resolution::RESOLUTION_TOLERANCE,
             warnings: Vec::new(),
         }
     }

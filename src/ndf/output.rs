@@ -11,7 +11,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::io::{write_atomic, write_bytes_atomic};
 
 /// The CSV header (the contract's `mx,my,mz,d` first).
-pub const CSV_HEADER: &str = "mx,my,mz,d,stderr,count,solid_angle,proj_solid_angle,slope_x,slope_y";
+pub const CSV_HEADER: &str = "mx,my,mz,d,stderr,count,solid_angle,proj_solid_angle,slope_x,slope_y,unresolved";
 
 /// Write the NDF as CSV, one row per bin, empty bins included.
 pub fn write_csv(path: &Path, ndf: &EmpiricalNdf) -> Result<()> {
@@ -21,9 +21,11 @@ pub fn write_csv(path: &Path, ndf: &EmpiricalNdf) -> Result<()> {
 /// The CSV of [`write_csv`] into any writer (standard output).
 pub fn write_csv_to<W: std::io::Write + ?Sized>(w: &mut W, ndf: &EmpiricalNdf) -> Result<()> {
     writeln!(w, "{CSV_HEADER}")?;
-    for b in &ndf.bins {
+    for (k, b) in ndf.bins.iter().enumerate() {
         let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
-        writeln!(w, "{},{},{},{},{},{},{},{},{},{}", b.m.x, b.m.y, b.m.z, b.d, b.stderr, b.count, b.solid_angle, b.proj_solid_angle, sx, sy)?;
+        // Not assessed (triangle normals): an empty field.
+        let u = ndf.unresolved.get(k).map_or(String::new(), |u| u.to_string());
+        writeln!(w, "{},{},{},{},{},{},{},{},{},{},{u}", b.m.x, b.m.y, b.m.z, b.d, b.stderr, b.count, b.solid_angle, b.proj_solid_angle, sx, sy)?;
     }
     Ok(())
 }

@@ -31,6 +31,9 @@ pub struct ScanMeta {
     /// The grid as stored in the file (columns, rows), before any crop or subsampling.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub file_grid: Option<[usize; 2]>,
+    /// What spike removal masked ([`crate::preprocess::despike`]), when it ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub despike: Option<crate::preprocess::DespikeReport>,
 }
 
 /// A regular grid of heights in metres with a validity mask (NaN = invalid): what every reader returns

@@ -16,3 +16,4 @@ mod quantized;
 mod readers;
 mod scale;
 mod synth;
+mod tails;

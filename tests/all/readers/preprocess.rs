@@ -82,7 +82,7 @@ fn crop_and_subsample_keep_positions_and_holes() {
     let s = subsample(&hf, 3).expect("subsample");
     assert_eq!((s.nx, s.ny, s.dx, s.dy), (4, 3, 3e-6, 6e-6));
     assert_eq!(s.at(2, 3), hf.at(6, 9));
-    let all = apply(hf.clone(), &Preprocess { form: FormRemoval::None, crop: Some(Crop { x: 0, y: 0, nx: 10, ny: 8 }), subsample: 1 })
+    let all = apply(hf.clone(), &Preprocess { form: FormRemoval::None, crop: Some(Crop { x: 0, y: 0, nx: 10, ny: 8 }), subsample: 1, despike: ndfit::preprocess::Despike::None })
         .expect("identity");
     assert_eq!(all.z.iter().filter(|h| h.is_nan()).count(), 1);
 }

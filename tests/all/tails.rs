@@ -1,0 +1,172 @@
+//! The tail the scan cannot resolve, spikes and the instrument's aperture (data_formats/objective.md).
+//! Truths are the synthetic ellipsoid caps, whose NDF is exactly the ellipsoid NDF (Walter et al. eq. 1).
+
+use ndfit::fit::metric::delta_to_model;
+use ndfit::fit::{fit_model, FitOptions};
+use ndfit::models::{Model, ModelId};
+use ndfit::ndf::{empirical_ndf, NdfOptions};
+use ndfit::preprocess::despike::{despike, Despike};
+use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, gaussian_surface, GaussianParams, SynthSettings};
+use ndfit::Heightfield;
+
+fn cap(n: usize, p: [f64; 5]) -> (Heightfield, Model) {
+    let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+    let (hf, truth) = ellipsoid_surface(&SynthSettings { nx: n, ny: n, seed: 7, ..SynthSettings::default() }, &ep).expect("synth");
+    (hf, truth.to_model().expect("truth"))
+}
+
+fn fit(hf: &Heightfield, opts: &FitOptions) -> Model {
+    let ndf = empirical_ndf(hf, &NdfOptions::default()).expect("ndf");
+    fit_model(&ndf, ModelId::Ellipsoid, opts).expect("fit").to_model().expect("model")
+}
+
+/// Deterministic spike sites: 0.05% of the valid points (a multiplicative-congruential walk), alternating
+/// +-50 Sq (RMS height about the mean). Returns the sites.
+fn add_spikes(hf: &mut Heightfield) -> Vec<usize> {
+    let valid: Vec<usize> = (0..hf.z.len()).filter(|&k| hf.z[k].is_finite()).collect();
+    let mean = valid.iter().map(|&k| hf.z[k]).sum::<f64>() / valid.len() as f64;
+    let sq = (valid.iter().map(|&k| (hf.z[k] - mean).powi(2)).sum::<f64>() / valid.len() as f64).sqrt();
+    let count = (valid.len() as f64 * 5e-4).round() as usize;
+    let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
+    let mut sites = Vec::new();
+    while sites.len() < count {
+        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        let k = valid[(x >> 33) as usize % valid.len()];
+        if !sites.contains(&k) {
+            sites.push(k);
+        }
+    }
+    for (i, &k) in sites.iter().enumerate() {
+        hf.z[k] += if i % 2 == 0 { 50.0 * sq } else { -50.0 * sq };
+    }
+    sites
+}
+
+/// Clean synthetic scans (caps narrow, rough, anisotropic to 10:1, skewed to 0.4 rad; a Gaussian random
+/// surface) lose no point to the spike test.
+#[test]
+fn despike_masks_nothing_on_clean_synthetic_scans() {
+    for p in [[0.05, 0.05, 0.0, 0.0, 0.0], [1.2, 1.2, 0.0, 0.0, 0.0], [0.2, 0.02, 0.0, 0.4, 0.0], [0.5, 0.05, -0.4, 0.1, 1.0], [0.02, 0.02, 0.3, -0.3, 0.0]] {
+        let (mut hf, _) = cap(512, p);
+        let r = despike(&mut hf, Despike::Median).expect("report");
+        assert_eq!(r.masked, 0, "{p:?}: {r:?}");
+    }
+    let s = SynthSettings { nx: 256, ny: 256, seed: 11, ..SynthSettings::default() };
+    let (mut hf, _) = gaussian_surface(&s, &GaussianParams { sigma_x: 0.2, sigma_y: 0.2, ..GaussianParams::default() }).expect("synth");
+    let r = despike(&mut hf, Despike::Median).expect("report");
+    assert_eq!(r.masked, 0, "gaussian: {r:?}");
+}
+
+/// 0.05% spikes of +-50 Sq on a hard-end cap at 1024^2: the spike test masks exactly the spike sites
+/// (none else; sites next to an invalid point are not tested), and the fit of the
+/// despiked scan is within 0.5% (NDF error) of the clean scan's fit, while without despiking it is not.
+#[test]
+fn spikes_are_masked_and_the_fit_matches_the_clean_scan() {
+    let p = [0.1, 0.02, 0.2, 0.2, -0.7];
+    let (clean, _) = cap(1024, p);
+    let clean_fit = fit(&clean, &FitOptions::default());
+    let mut spiky = clean.clone();
+    let sites = add_spikes(&mut spiky);
+    let raw_fit = fit(&spiky, &FitOptions::default());
+    let r = despike(&mut spiky, Despike::Median).expect("report");
+    let masked: Vec<usize> = (0..spiky.z.len()).filter(|&k| spiky.z[k].is_nan() && clean.z[k].is_finite()).collect();
+    assert!(masked.iter().all(|k| sites.contains(k)), "a point that is not a spike was masked");
+    assert!(r.masked as f64 >= 0.95 * sites.len() as f64, "masked {} of {} spikes", r.masked, sites.len());
+    let d = delta_to_model(&fit(&spiky, &FitOptions::default()), &clean_fit).expect("delta");
+    let d_raw = delta_to_model(&raw_fit, &clean_fit).expect("delta");
+    eprintln!("spikes: {} sites, {} masked; NDF error against the clean fit {:.3}% despiked, {:.3}% not", sites.len(), r.masked, 100.0 * d, 100.0 * d_raw);
+    assert!(d < 5e-3, "{d}");
+    assert!(d_raw > d, "{d_raw} vs {d}");
+}
+
+/// An instrument of NA sin 45 deg: points steeper than 45 degrees are dropouts (invalid), and the fit over
+/// max_theta = 45 degrees is within 1% of the truth.
+#[test]
+fn na_cut_at_45_degrees_fits_within_one_percent() {
+    let p = [0.35, 0.05, 0.16, 0.0, 0.3];
+    let (mut hf, truth) = cap(1024, p);
+    let (nx, ny) = (hf.nx, hf.ny);
+    let z0 = hf.z.to_vec();
+    let mut dropped = 0;
+    for i in 1..ny - 1 {
+        for j in 1..nx - 1 {
+            let sx = (z0[i * nx + j + 1] - z0[i * nx + j - 1]) / (2.0 * hf.dx);
+            let sy = (z0[(i + 1) * nx + j] - z0[(i - 1) * nx + j]) / (2.0 * hf.dy);
+            if sx.hypot(sy) > 1.0 {
+                hf.z[i * nx + j] = f64::NAN;
+                dropped += 1;
+            }
+        }
+    }
+    let opts = FitOptions { max_theta: 45f64.to_radians(), ..FitOptions::default() };
+    let d45 = delta_to_model(&fit(&hf, &opts), &truth).expect("delta");
+    let d45t = delta_to_model(&fit(&hf, &FitOptions { cut_unresolved: true, ..opts }), &truth).expect("delta");
+    let d40 = delta_to_model(&fit(&hf, &FitOptions { max_theta: 40f64.to_radians(), ..opts }), &truth).expect("delta");
+    eprintln!("NA cut: {dropped} points steeper than 45 deg dropped; NDF error {:.3}% (max_theta 45), {:.3}% (45, tail cut), {:.3}% (40)", 100.0 * d45, 100.0 * d45t, 100.0 * d40);
+    assert!(dropped > 0);
+    assert!(d40 < 1e-2 && d45t < 1e-2, "{d40} {d45t}");
+}
+
+/// The unresolved-tail cut: on a narrow skewed cap at 1024^2 it leaves out the bins most of whose normals
+/// the Richardson estimate flags, removes none of them from the model's normalization inconsistently
+/// (every region bin is a resolved bin within max_theta), and brings the fit closer to the truth.
+#[test]
+fn unresolved_tail_cut_leaves_out_flagged_bins_and_helps_a_narrow_cap() {
+    let p = [0.05, 0.05, 0.4, 0.0, 0.0];
+    let (hf, truth) = cap(1024, p);
+    let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
+    assert_eq!(ndf.unresolved.len(), ndf.bins.len());
+    let cos_max = 70f64.to_radians().cos();
+    let data = ndfit::fit::FitData::with_tail(&ndf, ndfit::fit::Objective::Poisson, 70f64.to_radians(), true).expect("data");
+    let flagged: Vec<usize> = (0..ndf.bins.len()).filter(|&k| 2 * ndf.unresolved[k] > ndf.bins[k].count).collect();
+    let inside = |k: usize| ndf.bins[k].proj_solid_angle > 0.0 && ndf.bins[k].m.z >= cos_max;
+    let want = (0..ndf.bins.len()).filter(|&k| inside(k) && !flagged.contains(&k)).count();
+    assert_eq!(data.bins.len(), want);
+    let n_in: f64 = (0..ndf.bins.len()).filter(|&k| inside(k) && !flagged.contains(&k)).map(|k| ndf.bins[k].count as f64).sum();
+    assert_eq!(data.n, n_in);
+    assert_eq!(data.tail.bins_excluded, flagged.iter().filter(|&&k| inside(k)).count());
+    let off = delta_to_model(&fit(&hf, &FitOptions::default()), &truth).expect("delta");
+    let on = delta_to_model(&fit(&hf, &FitOptions { cut_unresolved: true, ..FitOptions::default() }), &truth).expect("delta");
+    eprintln!("tail cut: {:.2}% of the normals left out; NDF error {:.3}% -> {:.3}%", 100.0 * data.tail.excluded_fraction, 100.0 * off, 100.0 * on);
+    assert!(on < 0.5 * off, "{on} vs {off}");
+}
+
+/// The CLI: `--na` sets max_theta = asin(NA) (asin 0.5 = 30 degrees exactly); `--na` and `--max-theta` that
+/// disagree are refused in one line with no output written; `--despike none` leaves no report; `--tail`
+/// is reported in `quality.tail`.
+#[test]
+fn cli_na_despike_and_tail_options() {
+    use std::process::Command;
+    let dir = std::env::temp_dir().join(format!("ndfit-tails-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let scan = dir.join("cap.x3p");
+    let bin = crate::common::ndfit_bin();
+    let o = Command::new(&bin).arg("synth").arg(&scan).args(["--surface", "ellipsoid", "--nx", "128", "--ny", "128", "--dx", "1e-6", "--alpha-x", "0.3"]).output().expect("synth");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let fit = |args: &[&str], out: &std::path::Path| Command::new(&bin).arg("fit").arg(&scan).args(["--model", "ggx", "-q", "-o"]).arg(out).args(args).output().expect("fit");
+    let json = |p: &std::path::Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).expect("json")).expect("parse") };
+
+    let a = dir.join("a.json");
+    let o = fit(&["--na", "0.5", "--tail", "unresolved"], &a);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j = json(&a);
+    assert!((j["quality"]["max_theta_deg"].as_f64().expect("max_theta") - 30.0).abs() < 1e-9, "{}", j["quality"]["max_theta_deg"]);
+    assert_eq!(j["input"]["despike"]["masked"], 0);
+    assert_eq!(j["quality"]["tail"]["rule"], "unresolved");
+
+    let b = dir.join("b.json");
+    let o = fit(&["--na", "0.5", "--max-theta", "40"], &b);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("disagree") && err.trim().lines().count() == 1, "{err}");
+    assert!(!b.exists());
+
+    let c = dir.join("c.json");
+    let o = fit(&["--despike", "none"], &c);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j = json(&c);
+    assert!(j["input"].get("despike").is_none());
+    assert_eq!(j["quality"]["tail"]["rule"], "none");
+    let o = fit(&["--tail", "bogus"], &dir.join("d.json"));
+    assert!(!o.status.success());
+    let _ = std::fs::remove_dir_all(&dir);
+}
