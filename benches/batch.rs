@@ -60,7 +60,14 @@ fn throughput(c: &mut Criterion) {
         g.bench_function(format!("jobs_{jobs}"), |b| {
             b.iter(|| {
                 let out = tempfile::tempdir().expect("out dir");
-                let o = RunOptions { out_dir: out.path().to_path_buf(), jobs, resume: false, settings: String::new(), tolerances: Tolerances::default(), extras: Vec::new() };
+                let o = RunOptions {
+                    out_dir: out.path().to_path_buf(),
+                    jobs,
+                    resume: false,
+                    settings: String::new(),
+                    tolerances: Tolerances::default(),
+                    extras: Vec::new(),
+                };
                 let r = batch::run(&specs, None, &job, &o, &|_| {}).expect("batch run");
                 assert_eq!(r.counts().ok, n);
             })

@@ -23,7 +23,9 @@ fn bench(c: &mut Criterion) {
     g.bench_function("ndf1024_only", |b| b.iter(|| empirical_ndf(&hf, &NdfOptions::default()).expect("ndf")));
     for solver in [Solver::Lm, Solver::Lbfgs, Solver::NelderMead] {
         let opts = FitOptions { solver, ..FitOptions::default() };
-        g.bench_function(format!("ellipsoid_fit_{}", solver.as_str()), |b| b.iter(|| fit_model(&ndf, ModelId::Ellipsoid, &opts).expect("fit")));
+        g.bench_function(format!("ellipsoid_fit_{}", solver.as_str()), |b| {
+            b.iter(|| fit_model(&ndf, ModelId::Ellipsoid, &opts).expect("fit"))
+        });
     }
     g.bench_function("auto_fit_lm", |b| b.iter(|| fit_auto(&ndf, &FitOptions::default()).expect("fit")));
     g.finish();

@@ -12,9 +12,9 @@
 //! from `/proc/self/stat`, 10 ms ticks), and the wall time of the same runs with the load average.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use std::time::Instant;
 use ndfit::ndf::{empirical_ndf, empirical_ndf_f32, HeightsF32, NdfOptions, NormalScheme};
 use ndfit::synth::{ellipsoid_surface, gaussian_surface, EllipsoidParams, GaussianParams, SynthSettings};
+use std::time::Instant;
 
 fn ellipsoid(n: usize) -> ndfit::Heightfield {
     let s = SynthSettings { nx: n, ny: n, dx: 1e-6, dy: 1e-6, seed: 1, ..Default::default() };

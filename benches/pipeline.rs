@@ -28,7 +28,9 @@ fn pipeline_benches(c: &mut Criterion) {
         });
         if size == 1024 {
             g.throughput(Throughput::Elements(ndf.bins.len() as u64));
-            g.bench_function("fit_ellipsoid_1024", |b| b.iter(|| fit_model(&ndf, ModelId::Ellipsoid, &FitOptions::default()).expect("fit")));
+            g.bench_function("fit_ellipsoid_1024", |b| {
+                b.iter(|| fit_model(&ndf, ModelId::Ellipsoid, &FitOptions::default()).expect("fit"))
+            });
             let k = Knobs { size, ..Knobs::default() };
             g.throughput(Throughput::Elements((size * size) as u64));
             g.bench_function("scan_to_fit_1024", |b| b.iter(|| pipeline::run(&scene.path, &ro, &k).expect("pipeline")));

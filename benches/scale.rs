@@ -27,13 +27,9 @@ fn bench_scale(c: &mut Criterion) {
         })
     });
     let one = ScaleOptions { footprints: vec![8.0 * dx], models: vec![ModelId::Ellipsoid], ..Default::default() };
-    g.bench_function("scale_1_footprint_ellipsoid", |b| {
-        b.iter(|| analyze(&hf, &one, Some(&fitter as &dyn Fitter)).expect("scale"))
-    });
+    g.bench_function("scale_1_footprint_ellipsoid", |b| b.iter(|| analyze(&hf, &one, Some(&fitter as &dyn Fitter)).expect("scale")));
     let all = ScaleOptions { footprints: vec![2.0 * dx, 8.0 * dx, 32.0 * dx], ..Default::default() };
-    g.bench_function("scale_3_footprints_all_models", |b| {
-        b.iter(|| analyze(&hf, &all, Some(&fitter as &dyn Fitter)).expect("scale"))
-    });
+    g.bench_function("scale_3_footprints_all_models", |b| b.iter(|| analyze(&hf, &all, Some(&fitter as &dyn Fitter)).expect("scale")));
     g.finish();
 }
 

@@ -15,12 +15,16 @@ use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings}
 
 fn main() {
     let cases = [[0.3, 0.3, 0.0, 0.0, 0.0], [0.05, 0.05, 0.4, 0.0, 0.0], [0.35, 0.05, 0.16, 0.0, 0.3], [0.5, 0.05, -0.4, 0.1, 1.0]];
-    let sizes: Vec<usize> = std::env::var("SIZES").ok().map(|s| s.split(',').map(|t| t.parse().expect("size")).collect()).unwrap_or(vec![128, 256, 512, 1024, 2048]);
+    let sizes: Vec<usize> = std::env::var("SIZES")
+        .ok()
+        .map(|s| s.split(',').map(|t| t.parse().expect("size")).collect())
+        .unwrap_or(vec![128, 256, 512, 1024, 2048]);
     println!("| truth (ax, ay, tx, ty, tz) | grid | across | central | central, --tail unresolved (cut) | triangles |");
     println!("| --- | --- | --- | --- | --- | --- |");
     for p in cases {
         for &n in &sizes {
-            let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+            let ep =
+                EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
             let (hf, truth) = ellipsoid_surface(&SynthSettings { nx: n, ny: n, seed: 7, ..SynthSettings::default() }, &ep).expect("synth");
             let truth = truth.to_model().expect("truth");
             let row = (0..n).filter(|&j| hf.z[(n / 2) * n + j].is_finite()).count();
@@ -34,7 +38,14 @@ fn main() {
             let (c, _) = err(NormalScheme::Central, false);
             let (ct, f) = err(NormalScheme::Central, true);
             let (t, _) = err(NormalScheme::Triangles, false);
-            println!("| {p:?} | {n}^2 | {} | {:.3}% | {:.3}% ({:.1}%) | {:.3}% |", row.min(col), 100.0 * c, 100.0 * ct, 100.0 * f, 100.0 * t);
+            println!(
+                "| {p:?} | {n}^2 | {} | {:.3}% | {:.3}% ({:.1}%) | {:.3}% |",
+                row.min(col),
+                100.0 * c,
+                100.0 * ct,
+                100.0 * f,
+                100.0 * t
+            );
         }
     }
 }

@@ -32,11 +32,22 @@ fn main() {
     }
     exact.n_samples = exact.bins.iter().map(|b| b.count).sum();
     let rep = fit_model(&exact, ModelId::Ellipsoid, &FitOptions::default()).expect("fit");
-    eprintln!("bins {} exact-count fit {:?} delta {:.2e}", ndf.bins.len(), rep.param_vec(), delta_to_truth(&rep.to_model().unwrap(), &truth));
-    let mid: f64 = ndf.bins.iter().enumerate().map(|(k, b)| {
-        let ex = ndf.bin_integral(k, ndfit::ndf::QuadOrder::Fine(4), |m| truth.d(m)).unwrap();
-        ex * (truth.d(b.m) * b.proj_solid_angle / ex - 1.0).powi(2)
-    }).sum::<f64>().sqrt();
+    eprintln!(
+        "bins {} exact-count fit {:?} delta {:.2e}",
+        ndf.bins.len(),
+        rep.param_vec(),
+        delta_to_truth(&rep.to_model().unwrap(), &truth)
+    );
+    let mid: f64 = ndf
+        .bins
+        .iter()
+        .enumerate()
+        .map(|(k, b)| {
+            let ex = ndf.bin_integral(k, ndfit::ndf::QuadOrder::Fine(4), |m| truth.d(m)).unwrap();
+            ex * (truth.d(b.m) * b.proj_solid_angle / ex - 1.0).powi(2)
+        })
+        .sum::<f64>()
+        .sqrt();
     let est = ndfit::fit::metric::delta(|m| ndf.d_at(*m), |m| truth.d(*m), ndf.bins.iter().map(|b| (b.m, b.proj_solid_angle)));
     eprintln!("midpoint rms rel err {mid:.2e}; delta(D_emp; D_true) on bins {est:?}");
 }

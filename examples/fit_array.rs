@@ -27,7 +27,13 @@ fn main() -> ndfit::Result<()> {
     let outcome = Pipeline::new(options).run(scan, "array")?;
     let p = &outcome.fit.params;
     println!("{:>8} {:>9} {:>9}", "param", "truth", "fit");
-    for (name, t) in [("alpha_x", truth.alpha_x), ("alpha_y", truth.alpha_y), ("theta_x", truth.theta_x), ("theta_y", truth.theta_y), ("theta_z", truth.theta_z)] {
+    for (name, t) in [
+        ("alpha_x", truth.alpha_x),
+        ("alpha_y", truth.alpha_y),
+        ("theta_x", truth.theta_x),
+        ("theta_y", truth.theta_y),
+        ("theta_z", truth.theta_z),
+    ] {
         println!("{name:>8} {t:9.4} {:9.4}", p[name]);
     }
     // theta_z: the alpha_x axis lies along (cos theta_z, -sin theta_z) in the scan frame (azimuth -theta_z).

@@ -36,7 +36,8 @@ fn main() {
     println!("| truth (ax, ay, tx, ty, tz), {n}^2 | default | --tail unresolved | spikes, despiked (not) vs clean fit | NA 45: max_theta 45 + tail cut / 40 |");
     println!("| --- | --- | --- | --- | --- |");
     for p in cases {
-        let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+        let ep =
+            EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
         let (hf, truth) = ellipsoid_surface(&SynthSettings { nx: n, ny: n, seed: 7, ..SynthSettings::default() }, &ep).expect("synth");
         let truth = truth.to_model().expect("truth");
         let d = |m: &Result<Model, String>, r: &Result<Model, String>| match (m, r) {

@@ -30,9 +30,13 @@ fn main() {
         [0.1, 0.05, 0.55, -0.55, 0.3],
         [0.9, 0.5, 0.0, 0.0, 0.2],
     ];
-    let thetas: Vec<f64> = std::env::var("NDFIT_THETAS").ok().map(|s| s.split(',').map(|t| t.parse().expect("theta")).collect()).unwrap_or(vec![60.0, 70.0, 75.0, 80.0, 85.0, 90.0]);
+    let thetas: Vec<f64> = std::env::var("NDFIT_THETAS")
+        .ok()
+        .map(|s| s.split(',').map(|t| t.parse().expect("theta")).collect())
+        .unwrap_or(vec![60.0, 70.0, 75.0, 80.0, 85.0, 90.0]);
     for p in cases {
-        let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+        let ep =
+            EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
         let (hf, truth) = ellipsoid_surface(&settings(1024, 7), &ep).expect("synth");
         let truth = truth.to_model().expect("truth model");
         // NDFIT_BALANCED=1: the binning `ndfit fit` uses by default (Preset::Balanced).

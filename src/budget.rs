@@ -36,7 +36,11 @@ pub fn max_memory() -> u64 {
 pub fn default_budget() -> u64 {
     let mut least = u64::MAX;
     if let Ok(text) = std::fs::read_to_string("/proc/meminfo") {
-        if let Some(kb) = text.lines().find_map(|l| l.strip_prefix("MemAvailable:")).and_then(|r| r.trim().trim_end_matches("kB").trim().parse::<u64>().ok()) {
+        if let Some(kb) = text
+            .lines()
+            .find_map(|l| l.strip_prefix("MemAvailable:"))
+            .and_then(|r| r.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+        {
             least = least.min(kb.saturating_mul(1024));
         }
     }
@@ -77,7 +81,11 @@ pub fn human(bytes: u64) -> String {
         v /= 1024.0;
         u += 1;
     }
-    if u == 0 { format!("{bytes} B") } else { format!("{v:.1} {}", UNITS[u]) }
+    if u == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{v:.1} {}", UNITS[u])
+    }
 }
 
 /// Refuse a plan to hold `bytes` for `what` beyond the budget.
@@ -115,7 +123,10 @@ pub fn check_points(nx: usize, ny: usize, what: &str) -> Result<()> {
 pub fn try_vec<T>(n: usize, what: &str) -> Result<Vec<T>> {
     let mut v = Vec::new();
     v.try_reserve_exact(n).map_err(|_| {
-        Error::new(ErrorKind::TooLarge, format!("{what}: cannot allocate {}", human((n as u64).saturating_mul(std::mem::size_of::<T>() as u64))))
+        Error::new(
+            ErrorKind::TooLarge,
+            format!("{what}: cannot allocate {}", human((n as u64).saturating_mul(std::mem::size_of::<T>() as u64))),
+        )
     })?;
     Ok(v)
 }

@@ -86,15 +86,10 @@ pub fn apply<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Scan<'a>> {
 
 /// The window `c` of `hf` (origin moved so every kept point keeps its position).
 pub fn crop(hf: &Scan, c: Crop) -> Result<Heightfield> {
-    let fits = c.nx > 0
-        && c.ny > 0
-        && c.x.checked_add(c.nx).is_some_and(|e| e <= hf.nx)
-        && c.y.checked_add(c.ny).is_some_and(|e| e <= hf.ny);
+    let fits =
+        c.nx > 0 && c.ny > 0 && c.x.checked_add(c.nx).is_some_and(|e| e <= hf.nx) && c.y.checked_add(c.ny).is_some_and(|e| e <= hf.ny);
     if !fits {
-        return Err(Error::invalid(format!(
-            "crop {}x{}+{}+{} does not fit in the {} x {} grid",
-            c.nx, c.ny, c.x, c.y, hf.nx, hf.ny
-        )));
+        return Err(Error::invalid(format!("crop {}x{}+{}+{} does not fit in the {} x {} grid", c.nx, c.ny, c.x, c.y, hf.nx, hf.ny)));
     }
     let mut z = Vec::with_capacity(c.nx * c.ny);
     for i in c.y..c.y + c.ny {

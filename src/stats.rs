@@ -6,8 +6,8 @@
 //!   eq. 61-62), so no invalid point is ever filled in. Called `Sdq_central` in the peer readings.
 
 use crate::error::Result;
-use crate::scan::Heightfield;
 use crate::preprocess::form::remove_plane;
+use crate::scan::Heightfield;
 
 /// Statistics reported by `ndfit info`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

@@ -89,9 +89,7 @@ impl BaselineEntry {
 
 /// Numbers of a JSON object by key (non-numbers skipped).
 fn numbers(v: Option<&Value>) -> BTreeMap<String, f64> {
-    v.and_then(Value::as_object)
-        .map(|o| o.iter().filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x))).collect())
-        .unwrap_or_default()
+    v.and_then(Value::as_object).map(|o| o.iter().filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x))).collect()).unwrap_or_default()
 }
 
 /// The standard errors a fit JSON reports, by parameter name: `std_errors` of `ndfit.fit/1` (an object

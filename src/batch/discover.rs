@@ -7,8 +7,7 @@ use crate::error::{Error, Result};
 
 /// Extensions of the instrument and plain formats ndfit reads that are unambiguous scan files. Files
 /// with other extensions are included only when their content is recognised (see [`walk`]).
-pub const SCAN_EXTENSIONS: &[&str] =
-    &["x3p", "plu", "apx", "sur", "opd", "al3d", "tmd", "gsf", "npy", "exr", "asc", "xyz", "dat"];
+pub const SCAN_EXTENSIONS: &[&str] = &["x3p", "plu", "apx", "sur", "opd", "al3d", "tmd", "gsf", "npy", "exr", "asc", "xyz", "dat"];
 
 /// Whether `path` looks like a scan: a known scan extension, or content that `detect` recognises.
 /// A file with a scan extension is kept even when its content is unreadable, so that a corrupt scan

@@ -30,11 +30,9 @@ pub fn read_manifest(path: &Path) -> Result<Vec<ScanSpec>> {
         .flexible(false)
         .from_path(path)
         .map_err(|e| csv_err(e).with_path(path))?;
-    let header: Vec<String> =
-        rdr.headers().map_err(|e| csv_err(e).with_path(path))?.iter().map(|h| h.to_string()).collect();
+    let header: Vec<String> = rdr.headers().map_err(|e| csv_err(e).with_path(path))?.iter().map(|h| h.to_string()).collect();
     let col = |name: &str| header.iter().position(|h| h == name);
-    let path_col =
-        col("path").ok_or_else(|| Error::corrupt("manifest has no 'path' column").with_path(path))?;
+    let path_col = col("path").ok_or_else(|| Error::corrupt("manifest has no 'path' column").with_path(path))?;
     let (id_col, model_col, opt_col) = (col("id"), col("model"), col("options"));
     let option_cols: Vec<(usize, String)> = header
         .iter()

@@ -28,7 +28,8 @@ pub struct PipelineResult {
 /// bins). Every error names `path`.
 pub fn fit_scan(path: &Path, opts: &Options, baseline: Option<&BaselineEntry>) -> Result<PipelineResult> {
     let Outcome { ndf, fit } = Pipeline::new(opts.clone()).run_path(path)?;
-    let fit = serde_json::to_value(&fit).map_err(|e| Error::new(ErrorKind::Numerical, format!("fit result is not JSON: {e}")).with_path(path))?;
+    let fit =
+        serde_json::to_value(&fit).map_err(|e| Error::new(ErrorKind::Numerical, format!("fit result is not JSON: {e}")).with_path(path))?;
     let output = score(fit, &ndf, baseline).map_err(|e| e.with_path(path))?;
     Ok(PipelineResult { output, ndf })
 }
@@ -40,7 +41,6 @@ pub fn score(fit: Value, ndf: &EmpiricalNdf, baseline: Option<&BaselineEntry>) -
     let max_theta = super::quality::max_theta_of_fit(&fit);
     let q = quality(ndf, &fitted, max_theta)?;
     // A baseline model this version cannot evaluate falls back to its stored quality (basis "stored").
-    let same_bins =
-        baseline.and_then(|b| b.fit_json()).and_then(|f| model_of_fit(&f).ok()).and_then(|m| quality(ndf, &m, max_theta).ok());
+    let same_bins = baseline.and_then(|b| b.fit_json()).and_then(|f| model_of_fit(&f).ok()).and_then(|m| quality(ndf, &m, max_theta).ok());
     Ok(JobOutput { fit, quality: Some(q), baseline_on_same_bins: same_bins })
 }

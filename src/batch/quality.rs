@@ -39,8 +39,7 @@ pub struct Quality {
 pub fn quality(ndf: &EmpiricalNdf, model: &dyn Ndf, max_theta: f64) -> Result<Quality> {
     let cos_max = max_theta.min(std::f64::consts::FRAC_PI_2).cos();
     // Bins without projected area carry no data and no model mass (objective.md).
-    let region: Vec<&crate::ndf::NdfBin> =
-        ndf.bins.iter().filter(|b| b.proj_solid_angle > 0.0 && b.m.z >= cos_max * b.m.norm()).collect();
+    let region: Vec<&crate::ndf::NdfBin> = ndf.bins.iter().filter(|b| b.proj_solid_angle > 0.0 && b.m.z >= cos_max * b.m.norm()).collect();
     let n: u64 = region.iter().map(|b| b.count).sum();
     if n == 0 {
         return Err(Error::new(crate::ErrorKind::BadData, "the empirical NDF holds no samples in the fit region"));
@@ -49,7 +48,11 @@ pub fn quality(ndf: &EmpiricalNdf, model: &dyn Ndf, max_theta: f64) -> Result<Qu
     // A model that is NaN or negative somewhere is as wrong as a zero there.
     let dm = |m| {
         let d = model.d(m);
-        if d.is_finite() && d > 0.0 { d } else { 0.0 }
+        if d.is_finite() && d > 0.0 {
+            d
+        } else {
+            0.0
+        }
     };
     let s_norm: f64 = region.iter().map(|b| dm(b.m) * b.proj_solid_angle).sum();
     let (mut dev, mut n_bins) = (0.0f64, 0usize);

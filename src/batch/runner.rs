@@ -302,10 +302,7 @@ fn resume_key(spec: &ScanSpec, base: Option<&super::compare::BaselineEntry>, opt
     ResumeKey {
         job: format!("{:016x}", fnv1a64(text.as_bytes())),
         size: meta.as_ref().map(|m| m.len()),
-        mtime_ns: meta
-            .and_then(|m| m.modified().ok())
-            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-            .map(|d| d.as_nanos()),
+        mtime_ns: meta.and_then(|m| m.modified().ok()).and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map(|d| d.as_nanos()),
     }
 }
 
@@ -441,8 +438,7 @@ pub fn brief_of(mut entry: Entry, reused: bool) -> Brief {
             v
         })
     };
-    let termination = find(&["solver.termination", "termination"])
-        .map(|v| v.as_str().map(str::to_string).unwrap_or_else(|| v.to_string()));
+    let termination = find(&["solver.termination", "termination"]).map(|v| v.as_str().map(str::to_string).unwrap_or_else(|| v.to_string()));
     let evaluations = find(&["solver.evaluations", "evaluations"]).and_then(Value::as_u64);
     let reduced_chi2 = find(&["quality.reduced_chi2", "reduced_chi2"]).and_then(Value::as_f64);
     let fit_verdict = find(&["quality.verdict"]).and_then(Value::as_str).map(str::to_string);
@@ -483,12 +479,8 @@ pub struct OutDirLock {
 pub fn lock_out_dir(dir: &Path) -> Result<OutDirLock> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(e).with_path(dir))?;
     let path = dir.join(LOCK_FILE);
-    let file = std::fs::OpenOptions::new()
-        .create(true)
-        .truncate(false)
-        .write(true)
-        .open(&path)
-        .map_err(|e| Error::io(e).with_path(&path))?;
+    let file =
+        std::fs::OpenOptions::new().create(true).truncate(false).write(true).open(&path).map_err(|e| Error::io(e).with_path(&path))?;
     #[cfg(target_os = "linux")]
     {
         use std::os::fd::AsRawFd;

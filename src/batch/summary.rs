@@ -56,8 +56,8 @@ pub fn write_summary_json(out_dir: &Path, header: &Header, outcome: &RunOutcome)
             let rec = out_dir.join(super::runner::RECORDS_DIR).join(key_to_rel(&b.entry.path));
             let mut rec = rec.into_os_string();
             rec.push(".json");
-            let mut entry = read_record(Path::new(&rec))
-                .ok_or_else(|| Error::corrupt("per-scan record vanished or is unreadable").with_path(&rec))?;
+            let mut entry =
+                read_record(Path::new(&rec)).ok_or_else(|| Error::corrupt("per-scan record vanished or is unreadable").with_path(&rec))?;
             entry.resume = None;
             let sep = if i == 0 { "\n    " } else { ",\n    " };
             write!(w, "{sep}{}", json(&entry)?).map_err(Error::io)?;
@@ -84,8 +84,23 @@ pub fn write_summary_csv(out_dir: &Path, outcome: &RunOutcome) -> Result<()> {
         head.extend(PARAMS.iter().map(|p| format!("stderr_{p}")));
         head.extend(
             [
-                "kl", "deviance", "ndf_delta", "n_samples", "n_bins", "reduced_chi2", "fit_verdict", "termination", "evaluations", "time_s",
-                "verdict", "baseline_model", "kl_baseline", "delta_kl", "params_changed", "error_kind", "error",
+                "kl",
+                "deviance",
+                "ndf_delta",
+                "n_samples",
+                "n_bins",
+                "reduced_chi2",
+                "fit_verdict",
+                "termination",
+                "evaluations",
+                "time_s",
+                "verdict",
+                "baseline_model",
+                "kl_baseline",
+                "delta_kl",
+                "params_changed",
+                "error_kind",
+                "error",
             ]
             .map(String::from),
         );

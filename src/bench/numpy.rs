@@ -6,8 +6,8 @@ use std::process::Command;
 
 use super::accuracy::RefNodes;
 use super::knobs::Knobs;
-use super::presets::Preset;
 use super::pipeline::{self, Outcome, StageTimes};
+use super::presets::Preset;
 use super::scene::{Scene, DX};
 use super::sweep::median_times;
 use crate::error::{Error, ErrorKind, Result};
@@ -121,8 +121,7 @@ pub fn run_numpy(python: &Path, script: &Path, npy: &Path, fit: bool, bins: usiz
         let last = err.lines().last().unwrap_or("no message");
         return Err(Error::new(ErrorKind::Io, format!("{} failed ({}): {last}", script.display(), out.status)));
     }
-    serde_json::from_slice(&out.stdout)
-        .map_err(|e| Error::new(ErrorKind::BadData, format!("{}: unreadable output: {e}", script.display())))
+    serde_json::from_slice(&out.stdout).map_err(|e| Error::new(ErrorKind::BadData, format!("{}: unreadable output: {e}", script.display())))
 }
 
 /// Compare on `scene`: task `ndf` times read + NDF with the NDF defaults (what `ndfit ndf` writes),

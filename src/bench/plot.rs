@@ -47,7 +47,8 @@ pub fn plot_pareto(path: &Path, rows: &[Row], front: &[usize], title: &str) -> R
             .map_err(perr)?
             .label("sweep point")
             .legend(|(x, y)| Circle::new((x, y), 4, RGBColor(120, 120, 120).filled()));
-        let fr: Vec<(f64, f64)> = front.iter().filter_map(|&i| rows.get(i)).filter_map(|r| r.fit_delta.map(|d| (r.t_total_ms, d))).collect();
+        let fr: Vec<(f64, f64)> =
+            front.iter().filter_map(|&i| rows.get(i)).filter_map(|r| r.fit_delta.map(|d| (r.t_total_ms, d))).collect();
         c.draw_series(LineSeries::new(fr.iter().copied(), RED.stroke_width(2)))
             .map_err(perr)?
             .label("Pareto front")

@@ -1,8 +1,8 @@
 //! The benchmark knobs of each preset ([`Preset`] itself belongs to the pipeline).
 
 use super::knobs::{Binning, Knobs};
-pub use crate::pipeline::preset::{Preset, PresetKnobs, FAST_STRIDE};
 use crate::fit::Solver;
+pub use crate::pipeline::preset::{Preset, PresetKnobs, FAST_STRIDE};
 
 impl Preset {
     /// The full benchmark knobs of this preset for a scan of `size` points per side.

@@ -67,7 +67,8 @@ fn machine(s: &Value) -> String {
         m["profile"].as_str().unwrap_or("?"),
         m["ndfit"].as_str().unwrap_or("?")
     );
-    let la = |k: &str| m[k].as_array().map(|a| a.iter().map(|v| format!("{:.2}", v.as_f64().unwrap_or(f64::NAN))).collect::<Vec<_>>().join(" "));
+    let la =
+        |k: &str| m[k].as_array().map(|a| a.iter().map(|v| format!("{:.2}", v.as_f64().unwrap_or(f64::NAN))).collect::<Vec<_>>().join(" "));
     if let (Some(a), Some(b)) = (la("loadavg_start"), la("loadavg_end")) {
         let _ = writeln!(o, "- Load average (1, 5, 15 min) at the start of the run: {a}; at the end: {b}.");
     }

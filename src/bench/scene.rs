@@ -5,8 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::scan::Heightfield;
 use crate::models::Model;
+use crate::scan::Heightfield;
 use crate::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
 
 /// Grid spacing of every synthetic scan (m). The ellipsoid is sized to the grid, so the NDF does not

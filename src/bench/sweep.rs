@@ -248,7 +248,15 @@ pub fn run_child_point(p: &ChildPoint) -> Result<Row> {
     measure(&p.group, &p.knobs, &scene, &nodes, p.repeats)
 }
 
-fn measure_isolated(iso: &Isolation, group: &str, k: &Knobs, scene: &Scene, nodes: &RefNodes, frame: &crate::ndf::SlopeFrame, repeats: usize) -> Result<Row> {
+fn measure_isolated(
+    iso: &Isolation,
+    group: &str,
+    k: &Knobs,
+    scene: &Scene,
+    nodes: &RefNodes,
+    frame: &crate::ndf::SlopeFrame,
+    repeats: usize,
+) -> Result<Row> {
     match iso {
         Isolation::InProcess => measure(group, k, scene, nodes, repeats),
         Isolation::Child(exe) => {

@@ -284,7 +284,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 }
 
 /// `--update-doc`: copy the run's files beside `doc` and regenerate its tables.
-fn update_doc(doc: &std::path::Path, rows: &[Row], summary: &serde_json::Value, csv: &std::path::Path, png: &std::path::Path, json: &std::path::Path) -> anyhow::Result<()> {
+fn update_doc(
+    doc: &std::path::Path,
+    rows: &[Row],
+    summary: &serde_json::Value,
+    csv: &std::path::Path,
+    png: &std::path::Path,
+    json: &std::path::Path,
+) -> anyhow::Result<()> {
     let dir = doc.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
     for (from, name) in [(csv, "bench.csv"), (png, "pareto.png"), (json, "bench_summary.json")] {
         let to = dir.join(name);
@@ -305,7 +312,11 @@ fn update_doc(doc: &std::path::Path, rows: &[Row], summary: &serde_json::Value, 
 fn replot(csv_in: &std::path::Path, out: &std::path::Path, doc: Option<&std::path::Path>) -> anyhow::Result<ExitCode> {
     let mut rd = csv::Reader::from_path(csv_in).with_context(|| format!("{}: cannot open", csv_in.display()))?;
     let rows: Vec<Row> = rd.deserialize().collect::<Result<_, _>>().with_context(|| format!("{}: not a bench.csv", csv_in.display()))?;
-    let knob_size = rows.iter().find(|r| r.group == "preset_balanced").map(|r| r.size).with_context(|| format!("{}: no preset_balanced row", csv_in.display()))?;
+    let knob_size = rows
+        .iter()
+        .find(|r| r.group == "preset_balanced")
+        .map(|r| r.size)
+        .with_context(|| format!("{}: no preset_balanced row", csv_in.display()))?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the output folder", out.display()))?;
     let knob_rows: Vec<Row> = rows.iter().filter(|r| r.size == knob_size && !r.model.is_empty()).cloned().collect();
     let front = pareto_front(&knob_rows, |r| r.t_total_ms, |r| r.fit_delta);

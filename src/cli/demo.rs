@@ -33,19 +33,15 @@ pub struct Args {
 }
 
 /// The built-in surface: a skewed, anisotropic ellipsoid like a brushed and slightly tilted metal.
-const TRUTH: EllipsoidParams =
-    EllipsoidParams { alpha_x: 0.30, alpha_y: 0.12, theta_x: 0.15, theta_y: -0.10, theta_z: 0.50, fill: 0.96 };
+const TRUTH: EllipsoidParams = EllipsoidParams { alpha_x: 0.30, alpha_y: 0.12, theta_x: 0.15, theta_y: -0.10, theta_z: 0.50, fill: 0.96 };
 
 /// Run `ndfit demo`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let settings = SynthSettings { nx: args.size, ny: args.size, ..SynthSettings::default() };
     let t0 = Instant::now();
     let (hf, _truth) = ellipsoid_surface(&settings, &TRUTH)?;
-    let truth = Model::from_params(
-        ModelId::Ellipsoid,
-        &[TRUTH.alpha_x, TRUTH.alpha_y, TRUTH.theta_x, TRUTH.theta_y, TRUTH.theta_z],
-    )?
-    .canonical();
+    let truth =
+        Model::from_params(ModelId::Ellipsoid, &[TRUTH.alpha_x, TRUTH.alpha_y, TRUTH.theta_x, TRUTH.theta_y, TRUTH.theta_z])?.canonical();
     let t1 = Instant::now();
     // The synthetic surface has no form to remove.
     let preprocess = Preprocess { form: FormRemoval::None, ..Preprocess::default() };

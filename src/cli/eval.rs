@@ -21,8 +21,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let path = args.fit.display().to_string();
     let text = std::fs::read_to_string(&args.fit).with_context(|| format!("{path}: cannot read"))?;
-    let json: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| anyhow!("{path}: not valid JSON ({e})"))?;
+    let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| anyhow!("{path}: not valid JSON ({e})"))?;
     let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: {}", e.message()))?;
 
     let mut input = String::new();

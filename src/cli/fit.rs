@@ -60,7 +60,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 
 /// One line on a fit: the model, its main parameters and the verdict.
 pub fn summary_line(report: &ndfit::fit::FitReport) -> String {
-    let params: Vec<String> = report.model.param_names().iter().map(|n| format!("{n}={:.4}", report.params.get(*n).copied().unwrap_or(f64::NAN))).collect();
+    let params: Vec<String> =
+        report.model.param_names().iter().map(|n| format!("{n}={:.4}", report.params.get(*n).copied().unwrap_or(f64::NAN))).collect();
     let q = &report.quality;
     let chi = q.reduced_chi2.map_or(String::new(), |c| format!(", deviance/dof {c:.3}"));
     let disp = q.dispersion.map_or(String::new(), |d| format!(" (data's own dispersion {d:.3})"));

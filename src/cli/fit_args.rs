@@ -61,7 +61,14 @@ impl FitArgs {
             other => return Err(ndfit::Error::invalid(format!("--tail {other:?}: use unresolved or all"))),
         };
         let ndf = self.ndf.options().map_err(|e| ndfit::Error::invalid(e.to_string()))?;
-        let fit = FitOptions { objective, solver, extra_starts: self.extra_starts, max_theta: max_theta.to_radians(), cut_unresolved, ..FitOptions::default() };
+        let fit = FitOptions {
+            objective,
+            solver,
+            extra_starts: self.extra_starts,
+            max_theta: max_theta.to_radians(),
+            cut_unresolved,
+            ..FitOptions::default()
+        };
         Ok(Options { read: self.scan.read_options(), preprocess: self.scan.preprocess(), preset: self.preset, ndf, model, fit })
     }
 }

@@ -23,8 +23,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     // Sq and Sdq are taken after the requested form removal (the plane by default).
     let pre = args.scan.preprocess();
     let pre_form = pre.form;
-    let shaped = ndfit::preprocess::apply(raw.clone(), &ndfit::preprocess::Preprocess { form: ndfit::preprocess::FormRemoval::None, ..pre.clone() })
-        .map_err(|e| e.with_path(&args.scan.scan))?;
+    let shaped =
+        ndfit::preprocess::apply(raw.clone(), &ndfit::preprocess::Preprocess { form: ndfit::preprocess::FormRemoval::None, ..pre.clone() })
+            .map_err(|e| e.with_path(&args.scan.scan))?;
     // Sq removes the least-squares plane itself; other forms are removed first.
     let leveled = match pre_form {
         ndfit::preprocess::FormRemoval::Plane | ndfit::preprocess::FormRemoval::None => shaped.clone(),
@@ -93,5 +94,9 @@ fn sig(v: f64) -> String {
     let s = format!("{v:.5e}");
     let (mant, exp) = s.split_once('e').unwrap_or((&s, "0"));
     let mant = if mant.contains('.') { mant.trim_end_matches('0').trim_end_matches('.') } else { mant };
-    if exp == "0" { mant.to_string() } else { format!("{mant}e{exp}") }
+    if exp == "0" {
+        mant.to_string()
+    } else {
+        format!("{mant}e{exp}")
+    }
 }

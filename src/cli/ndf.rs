@@ -32,10 +32,18 @@ impl NdfArgs {
     pub fn options(&self) -> anyhow::Result<NdfOptions> {
         let scheme: NormalScheme = self.normals.parse()?;
         if let Some(c) = self.ndf_cells {
-            anyhow::ensure!((3..=ndfit::ndf::grid::MAX_CELLS_ACROSS).contains(&c), "--ndf-cells {c} must be between 3 and {}", ndfit::ndf::grid::MAX_CELLS_ACROSS);
+            anyhow::ensure!(
+                (3..=ndfit::ndf::grid::MAX_CELLS_ACROSS).contains(&c),
+                "--ndf-cells {c} must be between 3 and {}",
+                ndfit::ndf::grid::MAX_CELLS_ACROSS
+            );
             anyhow::ensure!(c % 2 == 1, "--ndf-cells {c} must be odd (the grid has a centre cell): use {} or {}", c - 1, c + 1);
         }
-        anyhow::ensure!(self.target_count.is_finite() && self.target_count >= 1.0, "--target-count {} must be at least 1", self.target_count);
+        anyhow::ensure!(
+            self.target_count.is_finite() && self.target_count >= 1.0,
+            "--target-count {} must be at least 1",
+            self.target_count
+        );
         Ok(NdfOptions { scheme, cells_across: self.ndf_cells, target_count: self.target_count, frame: None })
     }
 }
@@ -89,9 +97,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let ext = out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
         anyhow::ensure!(matches!(ext.as_deref(), Some("csv" | "json")), "{}: output must end in .csv or .json", out.display());
     }
-    let pngs: Vec<PathBuf> = args.png.iter().flat_map(|p| ["map", "slices"].map(|s| PathBuf::from(format!("{}.{s}.png", p.display())))).collect();
+    let pngs: Vec<PathBuf> =
+        args.png.iter().flat_map(|p| ["map", "slices"].map(|s| PathBuf::from(format!("{}.{s}.png", p.display())))).collect();
     args.scan.check_outputs(args.output.as_deref().into_iter().chain(args.exr.as_deref()).chain(pngs.iter().map(|p| p.as_path())))?;
-    let pipeline = Pipeline::new(Options { read: args.scan.read_options(), preprocess: args.scan.preprocess(), ndf: opts, ..Options::default() });
+    let pipeline =
+        Pipeline::new(Options { read: args.scan.read_options(), preprocess: args.scan.preprocess(), ndf: opts, ..Options::default() });
     let (input, ndf) = pipeline.ndf_path(&args.scan.scan)?;
     for w in &ndf.warnings {
         eprintln!("ndfit: {}: warning: {w}", args.scan.scan.display());

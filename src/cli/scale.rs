@@ -88,7 +88,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     footprints.dedup();
 
     let hf = args.scan.load()?;
-    let opts = ScaleOptions { footprints, models, samples_per_point: args.samples_per_point, bins: args.bins, seed: args.seed, blur: args.blur };
+    let opts =
+        ScaleOptions { footprints, models, samples_per_point: args.samples_per_point, bins: args.bins, seed: args.seed, blur: args.blur };
     let fitter = ndfit::scale::default_fitter();
     let results = analyze(&hf, &opts, Some(&fitter as &dyn Fitter)).map_err(|e| anyhow!("{path}: {e}"))?;
     // The recommendation covers the scene's footprints, or every footprint given when there is no scene.

@@ -75,7 +75,11 @@ pub struct Args {
 }
 
 fn parse_plane(s: &str) -> anyhow::Result<PlaneFacet> {
-    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|_| anyhow::anyhow!("--plane {s:?} is not SX,SY[,WEIGHT]"))?;
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| anyhow::anyhow!("--plane {s:?} is not SX,SY[,WEIGHT]"))?;
     match v.as_slice() {
         [sx, sy] => Ok(PlaneFacet { slope: [*sx, *sy], weight: 1.0 }),
         [sx, sy, w] => Ok(PlaneFacet { slope: [*sx, *sy], weight: *w }),
@@ -85,18 +89,43 @@ fn parse_plane(s: &str) -> anyhow::Result<PlaneFacet> {
 
 /// Run `ndfit synth`.
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
-    let s = SynthSettings { nx: a.nx, ny: a.ny, dx: a.dx, dy: a.dy.unwrap_or(a.dx), seed: a.seed, noise: a.noise, holes: a.holes, offset: a.offset };
+    let s = SynthSettings {
+        nx: a.nx,
+        ny: a.ny,
+        dx: a.dx,
+        dy: a.dy.unwrap_or(a.dx),
+        seed: a.seed,
+        noise: a.noise,
+        holes: a.holes,
+        offset: a.offset,
+    };
     let (hf, mut truth) = match a.surface.as_str() {
         "ellipsoid" => {
-            let p = EllipsoidParams { alpha_x: a.alpha_x, alpha_y: a.alpha_y.unwrap_or(a.alpha_x), theta_x: a.theta_x, theta_y: a.theta_y, theta_z: a.theta_z, fill: a.fill };
+            let p = EllipsoidParams {
+                alpha_x: a.alpha_x,
+                alpha_y: a.alpha_y.unwrap_or(a.alpha_x),
+                theta_x: a.theta_x,
+                theta_y: a.theta_y,
+                theta_z: a.theta_z,
+                fill: a.fill,
+            };
             ellipsoid_surface(&s, &p)?
         }
         "gaussian" => {
-            let p = GaussianParams { sigma_x: a.sigma_x, sigma_y: a.sigma_y.unwrap_or(a.sigma_x), theta_z: a.theta_z, corr_length: a.corr_length.unwrap_or(8.0 * a.dx) };
+            let p = GaussianParams {
+                sigma_x: a.sigma_x,
+                sigma_y: a.sigma_y.unwrap_or(a.sigma_x),
+                theta_z: a.theta_z,
+                corr_length: a.corr_length.unwrap_or(8.0 * a.dx),
+            };
             gaussian_surface(&s, &p)?
         }
         "planes" => {
-            let facets = if a.plane.is_empty() { vec![PlaneFacet { slope: [0.1, 0.0], weight: 1.0 }] } else { a.plane.iter().map(|p| parse_plane(p)).collect::<anyhow::Result<Vec<_>>>()? };
+            let facets = if a.plane.is_empty() {
+                vec![PlaneFacet { slope: [0.1, 0.0], weight: 1.0 }]
+            } else {
+                a.plane.iter().map(|p| parse_plane(p)).collect::<anyhow::Result<Vec<_>>>()?
+            };
             tilted_planes(&s, &facets)?
         }
         other => anyhow::bail!("unknown --surface {other:?} (expected ellipsoid, gaussian or planes)"),

@@ -85,10 +85,8 @@ impl MixtureExport {
         );
         m.insert("bsdfs".into(), json!([self.core.to_json(), self.tail.to_json()]));
         m.insert("tangent_angle".into(), Value::from(self.core.lobe.tangent_angle));
-        let notes: Vec<String> = [("core", &self.core), ("tail", &self.tail)]
-            .iter()
-            .filter_map(|(n, e)| e.note.as_ref().map(|t| format!("{n}: {t}")))
-            .collect();
+        let notes: Vec<String> =
+            [("core", &self.core), ("tail", &self.tail)].iter().filter_map(|(n, e)| e.note.as_ref().map(|t| format!("{n}: {t}"))).collect();
         if !notes.is_empty() {
             m.insert("note".into(), Value::from(notes.join("; ")));
         }

@@ -30,8 +30,8 @@
 use nalgebra::Vector3;
 use serde_json::{json, Map, Value};
 
-use crate::fit::metric::RefNodes;
 use crate::error::{Error, Result};
+use crate::fit::metric::RefNodes;
 use crate::models::{LobeAxes, Model, ModelId, Ndf};
 use crate::ndf::SlopeFrame;
 
@@ -242,7 +242,9 @@ pub fn export(model: &Model, target: Target, max_theta_deg: f64) -> Result<Expor
     }
     // Not representable: why, then the nearest representable lobe, fitted.
     let why = match (&model, exact) {
-        (Model::Ellipsoid(_), None) => "the ellipsoid's skew (theta_x, theta_y) has no counterpart in an axis-aligned renderer lobe".to_string(),
+        (Model::Ellipsoid(_), None) => {
+            "the ellipsoid's skew (theta_x, theta_y) has no counterpart in an axis-aligned renderer lobe".to_string()
+        }
         (_, Some(l)) if l.distribution == Distribution::Beckmann => format!("{} has no Beckmann lobe", target.as_str()),
         (_, Some(l)) if l.alpha_u > BLENDER_MAX_ALPHA => format!("Blender saturates alphas at 1, the fit has alpha_x = {:.4}", l.alpha_u),
         (_, Some(l)) => format!("Blender's anisotropy is at most 10:1, the fit has {:.2}:1", l.alpha_u / l.alpha_v),
@@ -260,7 +262,8 @@ pub fn export(model: &Model, target: Target, max_theta_deg: f64) -> Result<Expor
     let beckmann_ref = matches!(model, Model::Beckmann(_) | Model::BeckmannAniso(_)) && lobe.distribution == Distribution::Ggx;
     let delta = crate::fit::metric::delta(|m| approx.d(*m), |m| model.d(*m), region.nodes.iter().copied())
         .filter(|d| d.is_finite() && !beckmann_ref);
-    let delta_reverse = crate::fit::metric::delta(|m| model.d(*m), |m| approx.d(*m), region.nodes.iter().copied()).filter(|d| d.is_finite());
+    let delta_reverse =
+        crate::fit::metric::delta(|m| model.d(*m), |m| approx.d(*m), region.nodes.iter().copied()).filter(|d| d.is_finite());
     let to = approx.id().as_str().to_string();
     let fmt = |d: Option<f64>| d.map_or("unbounded (a GGX tail over a Beckmann one)".to_string(), |d| format!("{:.2}%", 100.0 * d));
     let note = format!(
@@ -324,7 +327,13 @@ impl RegionNodes {
 
 /// The renderer lobe of `distribution` maximizing `sum_k w_k ln(D(m_k) / S)`, `w_k = D_ref(m_k) W_k`,
 /// `S = sum_k D(m_k) W_k` (module doc), with Blender's limits when `blender`.
-fn fit_lobe(reference: &Model, region: &RegionNodes, distribution: Distribution, blender: bool, start: Option<RendererLobe>) -> Result<RendererLobe> {
+fn fit_lobe(
+    reference: &Model,
+    region: &RegionNodes,
+    distribution: Distribution,
+    blender: bool,
+    start: Option<RendererLobe>,
+) -> Result<RendererLobe> {
     use argmin::core::{CostFunction, Executor};
     use argmin::solver::neldermead::NelderMead;
 
@@ -378,9 +387,9 @@ fn fit_lobe(reference: &Model, region: &RegionNodes, distribution: Distribution,
         let solver = NelderMead::new(simplex).with_sd_tolerance(1e-12).map_err(|e| Error::invalid(format!("approximation fit: {e}")))?;
         let cost = Cost { nodes: &region.nodes, w: &w, wsum, distribution, blender };
         let res = Executor::new(cost, solver)
-        .configure(|s| s.max_iters(2000))
-        .run()
-        .map_err(|e| Error::invalid(format!("approximation fit: {e}")))?;
+            .configure(|s| s.max_iters(2000))
+            .run()
+            .map_err(|e| Error::invalid(format!("approximation fit: {e}")))?;
         if let Some(p) = res.state.best_param {
             best = p;
         }

@@ -2,7 +2,7 @@
 //! extend, and the ladder step of `--model auto` (one lobe or two), derived in
 //! `data_formats/objective.md` ("Mixtures and the ladder").
 
-use super::{fit_chain, fit_from, public, Fitted, FitOptions, Session};
+use super::{fit_chain, fit_from, public, FitOptions, Fitted, Session};
 use crate::error::Result;
 use crate::models::ModelId;
 
@@ -80,7 +80,13 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
     };
     let mut warnings = fit.as_ref().map(|g| g.warnings.clone()).unwrap_or_default();
     warnings.push(format!("{id}: {why}; reported as the {} lobe twice (the data show no second lobe it can fit)", parent.id));
-    let local = super::solve::Local { x: x.clone(), f, termination: format!("{id}: the one-lobe {} fit as two equal lobes", parent.id), converged: true, evaluations: 0 };
+    let local = super::solve::Local {
+        x: x.clone(),
+        f,
+        termination: format!("{id}: the one-lobe {} fit as two equal lobes", parent.id),
+        converged: true,
+        evaluations: 0,
+    };
     let (evaluations, start_objectives, best_start) = match &fit {
         Ok(g) => (g.evaluations, g.start_objectives.clone(), g.best_start),
         Err(_) => (0, Vec::new(), 0),

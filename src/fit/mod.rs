@@ -172,7 +172,9 @@ fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) ->
         Some(p) => p,
         None => {
             let (i, l, objs) = best_of_starts(&s.data, id, starts, opts, &mut evaluations)?;
-            let l = l.ok_or_else(|| Error::new(ErrorKind::Numerical, format!("no usable {id} fit: the objective was not finite from any start")))?;
+            let l = l.ok_or_else(|| {
+                Error::new(ErrorKind::Numerical, format!("no usable {id} fit: the objective was not finite from any start"))
+            })?;
             (i, l, objs)
         }
     };
@@ -194,7 +196,8 @@ fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) ->
         None
     } else {
         solve::minimize(&s.data, id, &xc, opts.solver, opts.tolerances).ok().and_then(|pl| {
-            let x2 = Model::from_params(id, &params::to_public(id, &pl.x)).ok().map(|m| params::to_internal(id, &m.canonical().params()))?;
+            let x2 =
+                Model::from_params(id, &params::to_public(id, &pl.x)).ok().map(|m| params::to_internal(id, &m.canonical().params()))?;
             let f2 = problem::residuals_into(&s.data, id, &x2, &mut r);
             (f2.is_finite() && f2 <= local.f + 1e-8 * local.f.abs().max(1.0)).then_some((x2, f2))
         })
@@ -380,7 +383,8 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     for (a, u) in unident.iter().enumerate() {
         let name = id.param_names()[a];
         if cov0.undetermined[a] && !fit.delta {
-            warnings.push(format!("{id}: {name} is not determined by the data (a null direction of the Jacobian; its standard error is null)"));
+            warnings
+                .push(format!("{id}: {name} is not determined by the data (a null direction of the Jacobian; its standard error is null)"));
         } else if *u {
             warnings.push(format!(
                 "{id}: {name} is not identified: its standard error {:.3} rad exceeds 1/6 (the anisotropy that locates the axes is below 3 standard errors: a nearly isotropic lobe); reported as null",
@@ -415,7 +419,8 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     let mut warnings: Vec<String> = ndf.warnings.iter().cloned().chain(warnings).collect();
     let new: Vec<String> = reasons.iter().filter(|r| !warnings.contains(r)).map(|r| format!("{verdict}: {r}")).collect();
     warnings.extend(new);
-    let matrix_a = model.matrix_a().map(|a| [[a[(0, 0)], a[(0, 1)], a[(0, 2)]], [a[(1, 0)], a[(1, 1)], a[(1, 2)]], [a[(2, 0)], a[(2, 1)], a[(2, 2)]]]);
+    let matrix_a =
+        model.matrix_a().map(|a| [[a[(0, 0)], a[(0, 1)], a[(0, 2)]], [a[(1, 0)], a[(1, 1)], a[(1, 2)]], [a[(2, 0)], a[(2, 1)], a[(2, 2)]]]);
     Ok(FitReport {
         schema: report::SCHEMA.to_string(),
         model: id,

@@ -183,11 +183,7 @@ impl FitData {
             a.1 += b.proj_solid_angle;
             a.2 += b.proj_solid_angle * b.m.normalize();
         }
-        let bins: Vec<Bin> = acc
-            .into_iter()
-            .filter(|a| a.1 > 0.0)
-            .map(|(c, w, m)| Bin::new(m, c, w, self.n))
-            .collect();
+        let bins: Vec<Bin> = acc.into_iter().filter(|a| a.1 > 0.0).map(|(c, w, m)| Bin::new(m, c, w, self.n)).collect();
         if bins.len() < min_bins {
             return None;
         }

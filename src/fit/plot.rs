@@ -72,7 +72,8 @@ fn plot_fit_to(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> R
     }
     let dmax = data.iter().chain(&fit).flatten().cloned().fold(0.0f64, f64::max);
     let (lo, hi) = if dmax > 0.0 { (dmax.log10() - 4.0, dmax.log10()) } else { (-1.0, 0.0) };
-    let d_colour = |d: f64| if d > 0.0 { ViridisRGB::get_color(((d.log10() - lo) / (hi - lo)).clamp(0.0, 1.0)) } else { RGBColor(200, 200, 200) };
+    let d_colour =
+        |d: f64| if d > 0.0 { ViridisRGB::get_color(((d.log10() - lo) / (hi - lo)).clamp(0.0, 1.0)) } else { RGBColor(200, 200, 200) };
     let resid: Vec<Option<RGBColor>> = data
         .iter()
         .zip(&fit)
@@ -169,7 +170,9 @@ fn plot_fit_to(path: &Path, ndf: &EmpiricalNdf, model: &Model, title: &str) -> R
                 .label_style((crate::plot::FONT, 13))
                 .draw()
                 .map_err(perr)?;
-            chart.draw_series(pts_d.iter().filter(|p| p.1 >= ymin).map(|p| Circle::new(*p, 3, RGBColor(90, 90, 90).filled()))).map_err(perr)?;
+            chart
+                .draw_series(pts_d.iter().filter(|p| p.1 >= ymin).map(|p| Circle::new(*p, 3, RGBColor(90, 90, 90).filled())))
+                .map_err(perr)?;
             chart
                 .draw_series(LineSeries::new(pts_f.iter().cloned().filter(|p| p.1 >= ymin), RGBColor(210, 30, 30).stroke_width(2)))
                 .map_err(perr)?;

@@ -4,8 +4,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::scan::Scan;
 use crate::models::ModelId;
+use crate::scan::Scan;
 
 /// The schema id of a fit result.
 pub const SCHEMA: &str = "ndfit.fit/1";

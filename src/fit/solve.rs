@@ -93,12 +93,8 @@ pub fn minimize(data: &FitData, id: ModelId, x0: &[f64], solver: Solver, tol: To
 
 fn lm(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Result<Local> {
     let problem = Problem::new(data, id, x0);
-    let (problem, report) = LevenbergMarquardt::new()
-        .with_ftol(tol.rel)
-        .with_xtol(tol.rel)
-        .with_gtol(0.0)
-        .with_patience(tol.max_iter)
-        .minimize(problem);
+    let (problem, report) =
+        LevenbergMarquardt::new().with_ftol(tol.rel).with_xtol(tol.rel).with_gtol(0.0).with_patience(tol.max_iter).minimize(problem);
     let x = problem.x.as_slice().to_vec();
     // Usually the last residual pass (LM ends on an accepted step), else evaluated.
     let f = problem.objective();
@@ -247,10 +243,8 @@ fn lbfgs(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Result<Loc
             // The gradient criterion is off: the cost criterion above is the relative one.
             .with_tolerance_grad(0.0)
             .map_err(arg_err)?;
-        let res = Executor::new(cost, solver)
-            .configure(|s| s.param(x.to_vec()).max_iters(5 * tol.max_iter as u64))
-            .run()
-            .map_err(arg_err)?;
+        let res =
+            Executor::new(cost, solver).configure(|s| s.param(x.to_vec()).max_iters(5 * tol.max_iter as u64)).run().map_err(arg_err)?;
         finish(data, id, &res.state, evals.get())
     })
 }

@@ -91,10 +91,8 @@ pub fn expected(model: &Model, grid: &Grid, n_samples: f64) -> (Vec<NdfBin>, Vec
             let (x0, y0) = (-std::f64::consts::SQRT_2 + j as f64 * h, -std::f64::consts::SQRT_2 + i as f64 * h);
             // Cells that cross the rim of the disk get a finer rule (16x16 sub-cells, each with the 4x4
             // Gauss-Legendre rule), so their partial area is integrated to well below the counting noise.
-            let corners_in = [(0.0, 0.0), (h, 0.0), (0.0, h), (h, h)]
-                .iter()
-                .filter(|(a, b)| (x0 + a).powi(2) + (y0 + b).powi(2) < 2.0)
-                .count();
+            let corners_in =
+                [(0.0, 0.0), (h, 0.0), (0.0, h), (h, h)].iter().filter(|(a, b)| (x0 + a).powi(2) + (y0 + b).powi(2) < 2.0).count();
             let sub = match corners_in {
                 0 if (x0 + 0.5 * h).hypot(y0 + 0.5 * h) > std::f64::consts::SQRT_2 + h => continue,
                 4 => 1,

@@ -48,7 +48,12 @@ pub fn usable(b: &NdfBin) -> bool {
 pub fn tail_cut(ndf: &EmpiricalNdf, cos_max: f64, enabled: bool) -> TailCut {
     let Some(share) = ndf.unresolved_share.filter(|_| enabled) else { return TailCut::none() };
     if !(share <= MAX_UNRESOLVED_SHARE) || ndf.unresolved.len() != ndf.bins.len() {
-        return TailCut { rule: "none (rough at the sampling step)".into(), tolerance: ndf.resolution_tolerance, unresolved_fraction: share, ..TailCut::none() };
+        return TailCut {
+            rule: "none (rough at the sampling step)".into(),
+            tolerance: ndf.resolution_tolerance,
+            unresolved_fraction: share,
+            ..TailCut::none()
+        };
     }
     let (mut n, mut cut, mut k) = (0.0, 0.0, 0usize);
     for (i, b) in ndf.bins.iter().enumerate() {

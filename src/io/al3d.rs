@@ -10,8 +10,8 @@
 use std::collections::BTreeMap;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, checked_size, field_text, Cursor};
+use crate::scan::{Heightfield, ScanMeta};
 
 /// The AL3D signature.
 pub const AL3D_MAGIC: &[u8] = b"AliconaImaging\x00\r\n";

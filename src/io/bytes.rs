@@ -123,9 +123,7 @@ fn truncated(what: &str, pos: usize, n: usize, len: usize) -> Error {
 
 /// `a * b * c` as a byte count, failing on overflow (header sizes are never trusted).
 pub fn checked_size(dims: &[usize], what: &str) -> Result<usize> {
-    dims.iter()
-        .try_fold(1usize, |acc, &d| acc.checked_mul(d))
-        .ok_or_else(|| Error::corrupt(format!("{what}: size {dims:?} overflows")))
+    dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d)).ok_or_else(|| Error::corrupt(format!("{what}: size {dims:?} overflows")))
 }
 
 /// Check that a grid of `nx * ny` samples of `bytes_per` bytes fits in `available` bytes, returning

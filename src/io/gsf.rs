@@ -6,9 +6,9 @@
 //! 4, then `XRes * YRes` little-endian float32, x fastest. NaN points are invalid.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::check_grid;
 use crate::io::units::metres_per;
+use crate::scan::{Heightfield, ScanMeta};
 
 /// The GSF signature line.
 pub const GSF_MAGIC: &[u8] = b"Gwyddion Simple Field 1.0\n";
@@ -20,11 +20,7 @@ pub fn read_gsf(bytes: &[u8]) -> Result<Heightfield> {
     if !bytes.starts_with(GSF_MAGIC) {
         return Err(Error::corrupt("not a GSF file (bad magic)"));
     }
-    let nul = bytes
-        .iter()
-        .take(MAX_HEADER)
-        .position(|&b| b == 0)
-        .ok_or_else(|| Error::corrupt("GSF header has no NUL terminator"))?;
+    let nul = bytes.iter().take(MAX_HEADER).position(|&b| b == 0).ok_or_else(|| Error::corrupt("GSF header has no NUL terminator"))?;
     let data_start = (nul / 4 + 1) * 4;
     if data_start > bytes.len() || bytes[nul..data_start].iter().any(|&b| b != 0) {
         return Err(Error::corrupt("GSF header padding is not NUL bytes up to a multiple of 4"));
@@ -58,10 +54,8 @@ pub fn read_gsf(bytes: &[u8]) -> Result<Heightfield> {
     let fz = metres_per(&z_unit).map_err(|e| Error::new(ErrorKind::Unsupported, format!("GSF ZUnits: {}", e.message())))?;
     let xr = real("XReal", 1.0)?;
     let yr = real("YReal", 1.0)?;
-    let z: Vec<f64> = bytes[data_start..data_start + n * 4]
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64 * fz)
-        .collect();
+    let z: Vec<f64> =
+        bytes[data_start..data_start + n * 4].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64 * fz).collect();
     let mut hf = Heightfield::new(nx, ny, xr / nx as f64 * fxy, yr / ny as f64 * fxy, z)
         .map_err(|e| Error::corrupt(format!("GSF: {}", e.message())))?;
     hf.x0 = real("XOffset", 0.0)? * fxy;

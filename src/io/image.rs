@@ -8,9 +8,9 @@
 //! what the compressed bytes can hold before any pixel is decoded.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::raw_opts::{spacing, z_scale};
 use crate::io::ReadOptions;
+use crate::scan::{Heightfield, ScanMeta};
 
 /// No lossless codec here expands more than deflate's 1032:1; more pixels than that is a lie.
 const MAX_RATIO: u64 = 1032;

@@ -12,8 +12,8 @@
 //! Values at or above 2147483640 are invalid.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, field_text, Cursor};
+use crate::scan::{Heightfield, ScanMeta};
 
 /// Phase values at or above this are "no data".
 const INVALID_PHASE: i32 = 2_147_483_640;
@@ -89,7 +89,11 @@ pub fn read_metropro(bytes: &[u8]) -> Result<Heightfield> {
         .chunks_exact(4)
         .map(|b| {
             let v = i32::from_be_bytes([b[0], b[1], b[2], b[3]]);
-            if v >= INVALID_PHASE { f64::NAN } else { v as f64 * k }
+            if v >= INVALID_PHASE {
+                f64::NAN
+            } else {
+                v as f64 * k
+            }
         })
         .collect();
     let mut hf = Heightfield::new(cn_w, cn_h, lateral, lateral, z)?;

@@ -82,8 +82,7 @@ pub enum Format {
 
 impl Format {
     /// Every format, in detection order.
-    pub const ALL: &'static [Format] =
-        &[
+    pub const ALL: &'static [Format] = &[
         Format::X3p,
         Format::Sur,
         Format::MetroPro,
@@ -154,9 +153,7 @@ impl Format {
         match self {
             Format::X3p => head.starts_with(b"PK\x03\x04"),
             Format::Sur => head.starts_with(b"DIGITAL SURF") || head.starts_with(b"DSCOMPRESSED"),
-            Format::MetroPro => {
-                head.len() >= 4 && head[..3] == [0x88, 0x1B, 0x03] && (0x6F..=0x71).contains(&head[3])
-            }
+            Format::MetroPro => head.len() >= 4 && head[..3] == [0x88, 0x1B, 0x03] && (0x6F..=0x71).contains(&head[3]),
             Format::Al3d => head.starts_with(al3d::AL3D_MAGIC),
             Format::Tmd => head.starts_with(tmd::TMD_MAGIC),
             // Two bytes, then the directory entry named "Directory".
@@ -241,10 +238,7 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
     }
     let format = match &opts.format {
         Some(id) => Format::from_id(id).ok_or_else(|| {
-            Error::invalid(format!(
-                "unknown format {id:?}; known: {}",
-                Format::ALL.iter().map(|f| f.id()).collect::<Vec<_>>().join(", ")
-            ))
+            Error::invalid(format!("unknown format {id:?}; known: {}", Format::ALL.iter().map(|f| f.id()).collect::<Vec<_>>().join(", ")))
         })?,
         None => detect(path, &bytes[..bytes.len().min(512)]).ok_or_else(|| {
             Error::new(ErrorKind::UnknownFormat, "unknown scan format (neither its content nor its extension is recognised)")
@@ -264,7 +258,11 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
                 _ => read_bytes(format, bytes, opts)?,
             };
             whole.meta.file_grid = Some([whole.nx, whole.ny]);
-            if stride > 1 { crate::preprocess::subsample(&whole, stride)? } else { whole }
+            if stride > 1 {
+                crate::preprocess::subsample(&whole, stride)?
+            } else {
+                whole
+            }
         }
     };
     // The strided NPY path knows the file's grid from its header; the rest set it above.

@@ -10,12 +10,12 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::heights::Heights;
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, Cursor};
-use crate::scan::heights;
 use crate::io::raw_opts::{spacing, z_scale};
 use crate::io::ReadOptions;
+use crate::scan::heights;
+use crate::scan::heights::Heights;
+use crate::scan::{Heightfield, ScanMeta};
 
 /// The NPY signature.
 pub const NPY_MAGIC: &[u8] = b"\x93NUMPY";
@@ -148,7 +148,11 @@ pub fn read_npy_strided(map: &memmap2::Mmap, opts: &ReadOptions, stride: usize) 
         let row = &raw[r * stride * nx * size..][..nx * size];
         for (j, o) in out.iter_mut().enumerate() {
             let b = &row[j * stride * size..][..size];
-            *o = if f8 { fin(f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * zs) } else { fin(value_of(b, h.endian, h.kind, size) * zs) };
+            *o = if f8 {
+                fin(f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * zs)
+            } else {
+                fin(value_of(b, h.endian, h.kind, size) * zs)
+            };
         }
     });
     let hf = Heightfield::new_finite_or_nan(sx, sy, dx * stride as f64, dy * stride as f64, z)?;
@@ -188,8 +192,7 @@ fn parse_descr(d: &str) -> Result<(char, char, usize)> {
     let mut ch = d.chars();
     let (e, k) = (ch.next().unwrap_or('?'), ch.next().unwrap_or('?'));
     let size: usize = ch.as_str().parse().unwrap_or(0);
-    let ok = matches!(e, '<' | '>' | '|' | '=')
-        && matches!((k, size), ('f', 4) | ('f', 8) | ('i', 1 | 2 | 4 | 8) | ('u', 1 | 2 | 4 | 8));
+    let ok = matches!(e, '<' | '>' | '|' | '=') && matches!((k, size), ('f', 4) | ('f', 8) | ('i', 1 | 2 | 4 | 8) | ('u', 1 | 2 | 4 | 8));
     if !ok {
         return Err(Error::new(ErrorKind::Unsupported, format!("NPY dtype {d:?} (float and integer arrays are read)")));
     }

@@ -11,8 +11,8 @@
 //! (Wyko writes 1.7e38), and 32767 for 16-bit data.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, field_text, Cursor};
+use crate::scan::{Heightfield, ScanMeta};
 
 const ENTRY: usize = 24;
 /// |value| at or above this marks a bad pixel in float data (Wyko writes 1.7e38).
@@ -68,9 +68,7 @@ pub fn read_opd(bytes: &[u8]) -> Result<Heightfield> {
             "Mult" => mult = bc.u16_le("Mult")? as f64,
             "Aspect" if *btype == 7 => aspect = bc.f32_le("Aspect")? as f64,
             "Pixel_size" if *btype == 7 => pixel = Some(bc.f32_le("Pixel_size")? as f64),
-            "Date" | "Time" | "MachineID" | "SerialNum" | "ObjectiveLabel" | "Title" | "Note" | "MeasMode"
-                if *btype == 5 =>
-            {
+            "Date" | "Time" | "MachineID" | "SerialNum" | "ObjectiveLabel" | "Title" | "Note" | "MeasMode" if *btype == 5 => {
                 let t = field_text(body);
                 if !t.is_empty() {
                     meta.instrument.insert(name.to_lowercase(), t);
@@ -96,11 +94,19 @@ pub fn read_opd(bytes: &[u8]) -> Result<Heightfield> {
         match el {
             4 => {
                 let v = f32::from_le_bytes(data[4 * k..4 * k + 4].try_into().expect("4 bytes"));
-                if !v.is_finite() || v.abs() >= BAD_FLOAT { f64::NAN } else { v as f64 * scale }
+                if !v.is_finite() || v.abs() >= BAD_FLOAT {
+                    f64::NAN
+                } else {
+                    v as f64 * scale
+                }
             }
             2 => {
                 let v = i16::from_le_bytes([data[2 * k], data[2 * k + 1]]);
-                if v == BAD_I16 { f64::NAN } else { v as f64 * scale }
+                if v == BAD_I16 {
+                    f64::NAN
+                } else {
+                    v as f64 * scale
+                }
             }
             _ => data[k] as i8 as f64 * scale,
         }

@@ -9,8 +9,8 @@
 //! Invalid points hold 1000001. Only topography measurements (type 3) are read; layer 0 is taken.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, field_text, Cursor};
+use crate::scan::{Heightfield, ScanMeta};
 
 /// The marker Sensofar writes for a point that was not measured.
 pub const PLU_INVALID: f32 = 1_000_001.0;
@@ -44,10 +44,7 @@ pub fn read_plu(bytes: &[u8]) -> Result<Heightfield> {
     let _factor = c.u32_le("factor")?;
     debug_assert_eq!(c.pos(), 500);
     if mtype != 3 {
-        return Err(Error::new(
-            ErrorKind::Unsupported,
-            format!("PLU measurement type {mtype} is not a topography (type 3)"),
-        ));
+        return Err(Error::new(ErrorKind::Unsupported, format!("PLU measurement type {mtype} is not a topography (type 3)")));
     }
     if layers == 0 {
         return Err(Error::corrupt("PLU header says the file holds no layer"));
@@ -56,16 +53,18 @@ pub fn read_plu(bytes: &[u8]) -> Result<Heightfield> {
     let nx = c.u32_le("layer columns")? as usize;
     let n = check_grid(nx, ny, 4, c.remaining(), "PLU layer 0")?;
     if (nx, ny) != (cal_cols as usize, cal_rows as usize) {
-        return Err(Error::corrupt(format!(
-            "PLU layer is {nx} x {ny} but the calibration block says {cal_cols} x {cal_rows}"
-        )));
+        return Err(Error::corrupt(format!("PLU layer is {nx} x {ny} but the calibration block says {cal_cols} x {cal_rows}")));
     }
     let raw = c.take(n * 4, "PLU heights")?;
     let z: Vec<f64> = raw
         .chunks_exact(4)
         .map(|b| {
             let v = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-            if v == PLU_INVALID { f64::NAN } else { v as f64 * 1e-6 }
+            if v == PLU_INVALID {
+                f64::NAN
+            } else {
+                v as f64 * 1e-6
+            }
         })
         .collect();
     if !(um_x.is_finite() && um_x > 0.0 && um_y.is_finite() && um_y > 0.0) {

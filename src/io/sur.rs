@@ -15,9 +15,9 @@
 use std::io::Read;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, checked_size, Cursor};
 use crate::io::units::{latin1, metres_per};
+use crate::scan::{Heightfield, ScanMeta};
 
 /// Deflate/zlib cannot expand more than about 1032:1; a stream claiming more is lying.
 const MAX_ZLIB_RATIO: usize = 1032;
@@ -102,8 +102,7 @@ pub fn read_sur(bytes: &[u8]) -> Result<Heightfield> {
     };
     let dx = sx as f64 * fx;
     let dy = sy as f64 * fy;
-    let mut hf = Heightfield::new(nx, ny, dx, dy, z)
-        .map_err(|e| Error::corrupt(format!("SUR: {}", e.message())))?;
+    let mut hf = Heightfield::new(nx, ny, dx, dy, z).map_err(|e| Error::corrupt(format!("SUR: {}", e.message())))?;
     hf.x0 = x_off as f64 * fx;
     hf.y0 = y_off as f64 * fy;
     let mut meta = ScanMeta { format: "sur".into(), ..Default::default() };

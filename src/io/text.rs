@@ -9,9 +9,9 @@
 //! Row 0 is the first row in the file (y grows down the file).
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::raw_opts::{spacing, z_scale};
 use crate::io::ReadOptions;
+use crate::scan::{Heightfield, ScanMeta};
 
 /// Largest text file parsed (bounds memory: tokens are held as f64).
 const MAX_TEXT: usize = 1 << 31;
@@ -30,9 +30,7 @@ fn strip_comment(line: &str) -> &str {
 fn number(t: &str, line: usize) -> Result<f64> {
     match t {
         "nan" | "NaN" | "NAN" | "-nan" | "-NaN" | "NA" | "***" => Ok(f64::NAN),
-        _ => t
-            .parse::<f64>()
-            .map_err(|_| Error::corrupt(format!("line {line}: {t:?} is not a number"))),
+        _ => t.parse::<f64>().map_err(|_| Error::corrupt(format!("line {line}: {t:?} is not a number"))),
     }
 }
 
@@ -127,7 +125,11 @@ pub fn read_csv(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
     let names: Vec<String> = tokens(first).map(|t| t.trim_matches('"').to_ascii_lowercase()).collect();
     let is_header = !names.is_empty() && names.iter().any(|n| n.parse::<f64>().is_err() && !n.contains("nan"));
     if is_header {
-        let col = |n: &str| names.iter().position(|c| c == n || c.starts_with(&format!("{n} ")) || c.starts_with(&format!("{n}(")) || c.starts_with(&format!("{n}[")));
+        let col = |n: &str| {
+            names.iter().position(|c| {
+                c == n || c.starts_with(&format!("{n} ")) || c.starts_with(&format!("{n}(")) || c.starts_with(&format!("{n}["))
+            })
+        };
         if let (Some(x), Some(y), Some(z)) = (col("x"), col("y"), col("z")) {
             let rows = numeric_rows(text, true)?;
             let pts = rows
@@ -191,9 +193,10 @@ pub fn grid_from_points(pts: &[(f64, f64, f64)], opts: &ReadOptions, what: &str)
     let nx = pts.iter().map(|p| idx(p.0, x0, sx)).fold(0.0f64, f64::max) as usize + 1;
     let ny = pts.iter().map(|p| idx(p.1, y0, sy)).fold(0.0f64, f64::max) as usize + 1;
     // A grid much larger than the point count is not a grid sampled by these points.
-    let cells = nx.checked_mul(ny).filter(|&c| c <= pts.len().saturating_mul(4).max(16)).ok_or_else(|| {
-        Error::corrupt(format!("{what}: {} points do not sample a regular grid ({nx} x {ny} nodes)", pts.len()))
-    })?;
+    let cells = nx
+        .checked_mul(ny)
+        .filter(|&c| c <= pts.len().saturating_mul(4).max(16))
+        .ok_or_else(|| Error::corrupt(format!("{what}: {} points do not sample a regular grid ({nx} x {ny} nodes)", pts.len())))?;
     let mut z = vec![f64::NAN; cells];
     let mut seen = vec![false; cells];
     for p in pts {

@@ -7,8 +7,8 @@
 //! the 18.96 mm field of the shared scan). Spacing = length / count. NaN points are invalid.
 
 use crate::error::{Error, Result};
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::{check_grid, Cursor};
+use crate::scan::{Heightfield, ScanMeta};
 
 /// The TMD signature.
 pub const TMD_MAGIC: &[u8] = b"Binary TrueMap Data File v2.0";
@@ -23,11 +23,7 @@ pub fn read_tmd(bytes: &[u8]) -> Result<Heightfield> {
         return Err(Error::corrupt("not a TMD file (bad magic)"));
     }
     let rest = &bytes[32..];
-    let end = rest
-        .iter()
-        .take(MAX_COMMENT)
-        .position(|&b| b == 0)
-        .ok_or_else(|| Error::corrupt("TMD comment is not NUL-terminated"))?;
+    let end = rest.iter().take(MAX_COMMENT).position(|&b| b == 0).ok_or_else(|| Error::corrupt("TMD comment is not NUL-terminated"))?;
     let comment = String::from_utf8_lossy(&rest[..end]).trim().to_string();
     c.skip(end + 1, "TMD comment")?;
     let nx = c.u32_le("TMD columns")? as usize;
@@ -41,8 +37,7 @@ pub fn read_tmd(bytes: &[u8]) -> Result<Heightfield> {
         return Err(Error::corrupt(format!("TMD field size {lx} x {ly} mm is not positive")));
     }
     let raw = c.take(n * 4, "TMD heights")?;
-    let z: Vec<f64> =
-        raw.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64 * 1e-3).collect();
+    let z: Vec<f64> = raw.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64 * 1e-3).collect();
     let mut hf = Heightfield::new(nx, ny, lx / nx as f64 * 1e-3, ly / ny as f64 * 1e-3, z)?;
     hf.x0 = ox * 1e-3;
     hf.y0 = oy * 1e-3;

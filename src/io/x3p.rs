@@ -21,10 +21,10 @@
 use std::io::Read;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::scan::{Heightfield, ScanMeta};
 use crate::io::bytes::checked_size;
-use crate::scan::heights;
 use crate::io::xml::{self, Element};
+use crate::scan::heights;
+use crate::scan::{Heightfield, ScanMeta};
 
 /// Largest `main.xml` read (an inline `DataList` of a big scan can be large; this bounds memory).
 const MAX_MAIN_XML: u64 = 1 << 30;
@@ -81,8 +81,8 @@ impl ZType {
 
 /// Read an X3P file held in memory.
 pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
-    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes))
-        .map_err(|e| Error::corrupt(format!("not a readable X3P zip container ({e})")))?;
+    let mut zip =
+        zip::ZipArchive::new(std::io::Cursor::new(bytes)).map_err(|e| Error::corrupt(format!("not a readable X3P zip container ({e})")))?;
 
     let (main_name, prefix) = find_main_xml(&mut zip)?;
     let main_text = read_entry_text(&mut zip, &main_name)?;
@@ -116,9 +116,7 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
     let (dx, x0) = lateral_axis(axes, "CX", &main_name)?;
     let (dy, y0) = lateral_axis(axes, "CY", &main_name)?;
     let cz = axes.child("CZ").ok_or_else(|| Error::corrupt(format!("{main_name}: no CZ axis")))?;
-    let ztype = ZType::parse(
-        cz.text_at(&["DataType"]).ok_or_else(|| Error::corrupt(format!("{main_name}: CZ has no DataType")))?,
-    )?;
+    let ztype = ZType::parse(cz.text_at(&["DataType"]).ok_or_else(|| Error::corrupt(format!("{main_name}: CZ has no DataType")))?)?;
     let z_inc = opt_number(cz, "Increment", &main_name)?.unwrap_or(1.0);
     let z_off = opt_number(cz, "Offset", &main_name)?.unwrap_or(0.0);
     if z_inc == 0.0 {
@@ -168,14 +166,12 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
 
     let mut z: Vec<f64>;
     if let Some(link) = r3.child("DataLink") {
-        let data_name = link
-            .text_at(&["PointDataLink"])
-            .ok_or_else(|| Error::corrupt(format!("{main_name}: DataLink has no PointDataLink")))?;
+        let data_name =
+            link.text_at(&["PointDataLink"]).ok_or_else(|| Error::corrupt(format!("{main_name}: DataLink has no PointDataLink")))?;
         let data_path = format!("{prefix}{data_name}");
         let (raw, crc) = read_entry_exact(&mut zip, bytes, &data_path, n, ztype.size(), nx, ny)?;
         check_md5(link, "MD5ChecksumPointData", &data_path, &raw)?;
-        z = decode(&raw, ztype, z_inc, z_off, crc)
-            .map_err(|e| Error::corrupt(format!("{data_path}: {}", e.message())))?;
+        z = decode(&raw, ztype, z_inc, z_off, crc).map_err(|e| Error::corrupt(format!("{data_path}: {}", e.message())))?;
         if let Some(valid_name) = link.text_at(&["ValidPointsLink"]) {
             let vpath = format!("{prefix}{valid_name}");
             let vbytes = n.div_ceil(8);
@@ -192,13 +188,13 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
         return Err(Error::corrupt(format!("{main_name}: Record3 has neither DataLink nor DataList")));
     }
 
-    if let Some(mask) = zip.file_names().filter_map(|r| r.ok()).find(|f| {
-        f.starts_with(&prefix) && !f.starts_with("__MACOSX/") && f.to_ascii_lowercase().ends_with("mask.png")
-    }) {
-        meta.instrument.insert(
-            "x3p.mask".into(),
-            format!("{mask} present: an annotation layer (x3ptools), not a validity mask; not applied"),
-        );
+    if let Some(mask) = zip
+        .file_names()
+        .filter_map(|r| r.ok())
+        .find(|f| f.starts_with(&prefix) && !f.starts_with("__MACOSX/") && f.to_ascii_lowercase().ends_with("mask.png"))
+    {
+        meta.instrument
+            .insert("x3p.mask".into(), format!("{mask} present: an annotation layer (x3ptools), not a validity mask; not applied"));
     }
 
     // `decode` and the DataList parser already turned infinities into NaN.
@@ -266,9 +262,7 @@ fn find_main_xml<R: std::io::Read + std::io::Seek>(zip: &mut zip::ZipArchive<R>)
     }
     let cands: Vec<&String> = names
         .iter()
-        .filter(|n| {
-            !n.starts_with("__MACOSX/") && (n.ends_with("/main.xml")) && !n.rsplit('/').next().unwrap_or("").starts_with("._")
-        })
+        .filter(|n| !n.starts_with("__MACOSX/") && (n.ends_with("/main.xml")) && !n.rsplit('/').next().unwrap_or("").starts_with("._"))
         .collect();
     match cands.as_slice() {
         [] => Err(Error::corrupt("zip holds no main.xml: not an X3P file")),
@@ -292,10 +286,7 @@ fn read_entry_text<R: std::io::Read + std::io::Seek>(zip: &mut zip::ZipArchive<R
     let declared = entry.size();
     crate::budget::check_bytes(declared.saturating_mul(2), &format!("{name} ({declared} bytes of XML)"))?;
     let mut buf = Vec::new();
-    entry
-        .take(limit + 1)
-        .read_to_end(&mut buf)
-        .map_err(|e| Error::corrupt(format!("cannot read {name} from the zip ({e})")))?;
+    entry.take(limit + 1).read_to_end(&mut buf).map_err(|e| Error::corrupt(format!("cannot read {name} from the zip ({e})")))?;
     if buf.len() as u64 > limit {
         return Err(Error::new(ErrorKind::TooLarge, format!("{name} is larger than {limit} bytes (it declares {declared})")));
     }
@@ -315,22 +306,19 @@ fn read_entry_exact<'a, R: std::io::Read + std::io::Seek>(
     ny: usize,
 ) -> Result<(std::borrow::Cow<'a, [u8]>, Option<u32>)> {
     let need = checked_size(&[n, size], "X3P point data")?;
-    let mut entry = zip
-        .by_name(name)
-        .map_err(|e| Error::corrupt(format!("main.xml links {name}, which the zip does not hold ({e})")))?;
+    let mut entry = zip.by_name(name).map_err(|e| Error::corrupt(format!("main.xml links {name}, which the zip does not hold ({e})")))?;
     let declared = entry.size();
     if declared != need as u64 {
-        return Err(Error::corrupt(format!(
-            "{name} holds {declared} bytes but main.xml's {nx} x {ny} points of {size} bytes need {need}"
-        )));
+        return Err(Error::corrupt(format!("{name} holds {declared} bytes but main.xml's {nx} x {ny} points of {size} bytes need {need}")));
     }
     match entry.compression() {
         zip::CompressionMethod::Stored => {
             let start = entry.data_start().ok_or_else(|| Error::corrupt(format!("{name}: no data offset")))?;
             let start = usize::try_from(start).map_err(|_| Error::corrupt(format!("{name}: data offset too large")))?;
-            let slice = start.checked_add(need).and_then(|end| file.get(start..end)).ok_or_else(|| {
-                Error::corrupt(format!("{name}: truncated, {need} bytes of point data are not all in the file"))
-            })?;
+            let slice = start
+                .checked_add(need)
+                .and_then(|end| file.get(start..end))
+                .ok_or_else(|| Error::corrupt(format!("{name}: truncated, {need} bytes of point data are not all in the file")))?;
             Ok((std::borrow::Cow::Borrowed(slice), Some(entry.crc32())))
         }
         _ => {
@@ -361,7 +349,11 @@ pub fn decode(raw: &[u8], t: ZType, inc: f64, off: f64, crc: Option<u32>) -> Res
     let identity = inc == 1.0 && off == 0.0;
     let finish = |v: f64| {
         let v = if identity { v } else { off + inc * v };
-        if v.is_finite() { v } else { f64::NAN }
+        if v.is_finite() {
+            v
+        } else {
+            f64::NAN
+        }
     };
     let size = t.size();
     let mut out = heights::with_capacity(raw.len() / size);
@@ -407,11 +399,8 @@ fn parse_data_list(list: &Element, n: usize, t: ZType, inc: f64, off: f64, main:
                 return Ok(f64::NAN); // an empty Datum is a missing point
             }
             // A SUR DataList Datum holds only z; with absolute x/y it would hold "x;y;z".
-            let v: f64 = d
-                .text
-                .trim()
-                .parse()
-                .map_err(|_| Error::corrupt(format!("{main}: DataList point {k} is not a number: {:?}", d.text)))?;
+            let v: f64 =
+                d.text.trim().parse().map_err(|_| Error::corrupt(format!("{main}: DataList point {k} is not a number: {:?}", d.text)))?;
             let v = match t {
                 ZType::F => v as f32 as f64,
                 _ => v,
@@ -433,8 +422,7 @@ fn lateral_axis(axes: &Element, name: &str, main: &str) -> Result<(f64, f64)> {
             ))
         }
     }
-    let inc = opt_number(ax, "Increment", main)?
-        .ok_or_else(|| Error::corrupt(format!("{main}: {name} has no Increment")))?;
+    let inc = opt_number(ax, "Increment", main)?.ok_or_else(|| Error::corrupt(format!("{main}: {name} has no Increment")))?;
     if !(inc.is_finite() && inc > 0.0) {
         return Err(Error::corrupt(format!("{main}: {name} Increment {inc} is not a positive length")));
     }
@@ -446,9 +434,7 @@ fn opt_number(e: &Element, child: &str, main: &str) -> Result<Option<f64>> {
     match e.text_at(&[child]) {
         None => Ok(None),
         Some(t) => {
-            let v: f64 = t
-                .parse()
-                .map_err(|_| Error::corrupt(format!("{main}: {}/{child} is not a number: {t:?}", e.name)))?;
+            let v: f64 = t.parse().map_err(|_| Error::corrupt(format!("{main}: {}/{child} is not a number: {t:?}", e.name)))?;
             if !v.is_finite() {
                 return Err(Error::corrupt(format!("{main}: {}/{child} is not finite", e.name)));
             }
@@ -465,4 +451,3 @@ fn size_field(md: &Element, name: &str, main: &str) -> Result<usize> {
     }
     Ok(v)
 }
-

@@ -8,9 +8,9 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::scan::Heightfield;
 use crate::io::md5::md5_hex;
 use crate::io::xml::escape;
+use crate::scan::Heightfield;
 
 /// Write `hf` as an X3P file at `path` (atomically: a failed write leaves no file behind).
 pub fn write_x3p(path: &Path, hf: &Heightfield) -> Result<()> {
@@ -20,9 +20,11 @@ pub fn write_x3p(path: &Path, hf: &Heightfield) -> Result<()> {
 
 /// The bytes of an X3P file holding `hf`.
 pub fn x3p_bytes(hf: &Heightfield) -> Result<Vec<u8>> {
-    let n = hf.nx.checked_mul(hf.ny).filter(|&n| n == hf.z.len()).ok_or_else(|| {
-        Error::invalid(format!("heightfield has {} heights for a {} x {} grid", hf.z.len(), hf.nx, hf.ny))
-    })?;
+    let n = hf
+        .nx
+        .checked_mul(hf.ny)
+        .filter(|&n| n == hf.z.len())
+        .ok_or_else(|| Error::invalid(format!("heightfield has {} heights for a {} x {} grid", hf.z.len(), hf.nx, hf.ny)))?;
     let mut data = Vec::with_capacity(n * 8);
     for h in &hf.z {
         data.extend_from_slice(&h.to_le_bytes());
@@ -35,11 +37,8 @@ pub fn x3p_bytes(hf: &Heightfield) -> Result<Vec<u8>> {
     {
         let mut zw = zip::ZipWriter::new(&mut out);
         let large = data.len() as u64 >= u32::MAX as u64;
-        let deflated = zip::write::SimpleFileOptions::default()
-            .compression_method(zip::CompressionMethod::Deflated)
-            .large_file(false);
-        let stored =
-            zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored).large_file(large);
+        let deflated = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated).large_file(false);
+        let stored = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored).large_file(large);
         let zerr = |e: zip::result::ZipError| Error::invalid(format!("cannot build the X3P zip ({e})"));
         zw.start_file("main.xml", deflated).map_err(zerr)?;
         zw.write_all(main.as_bytes())?;

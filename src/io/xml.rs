@@ -65,9 +65,7 @@ pub fn parse(text: &str) -> Result<Element> {
         )
     };
     loop {
-        let ev = reader
-            .read_event()
-            .map_err(|e| Error::corrupt(format!("XML error at byte {}: {e}", reader.buffer_position())))?;
+        let ev = reader.read_event().map_err(|e| Error::corrupt(format!("XML error at byte {}: {e}", reader.buffer_position())))?;
         match ev {
             Event::Start(s) => {
                 count += 1;

@@ -122,30 +122,29 @@ fn label(v: [Vector3<f64>; 3], s: Vector3<f64>) -> Result<[f64; 5]> {
     let z = Vector3::z();
 
     // Pick r3 and the two remaining (axis, singular value) pairs.
-    let (r3, s3, rest): (Vector3<f64>, f64, Option<[AxisSv; 2]>) =
-        if ties(s[0], s[1]) && ties(s[1], s[2]) {
-            (z, s[0], None) // a sphere: every labeling is equivalent
-        } else {
-            // A tied pair (i, j) and the odd one k, if any.
-            let pair = [(0, 1, 2), (1, 2, 0), (0, 2, 1)].into_iter().find(|&(i, j, _)| ties(s[i], s[j]));
-            match pair {
-                Some((i, j, k)) => {
-                    let p = v[i] * v[i].z + v[j] * v[j].z; // projection of n onto the tied plane
-                    if p.norm_squared() >= v[k].z * v[k].z {
-                        let r3 = p.normalize();
-                        let w = v[k].cross(&r3); // in the tied plane, orthogonal to r3
-                        (r3, s[i], Some([(w, s[i]), (v[k], s[k])]))
-                    } else {
-                        (v[k], s[k], Some([(v[i], s[i]), (v[j], s[j])]))
-                    }
-                }
-                None => {
-                    let k = (0..3).max_by(|&p, &q| v[p].z.abs().total_cmp(&v[q].z.abs())).unwrap_or(2);
-                    let others: Vec<usize> = (0..3).filter(|&i| i != k).collect();
-                    (v[k], s[k], Some([(v[others[0]], s[others[0]]), (v[others[1]], s[others[1]])]))
+    let (r3, s3, rest): (Vector3<f64>, f64, Option<[AxisSv; 2]>) = if ties(s[0], s[1]) && ties(s[1], s[2]) {
+        (z, s[0], None) // a sphere: every labeling is equivalent
+    } else {
+        // A tied pair (i, j) and the odd one k, if any.
+        let pair = [(0, 1, 2), (1, 2, 0), (0, 2, 1)].into_iter().find(|&(i, j, _)| ties(s[i], s[j]));
+        match pair {
+            Some((i, j, k)) => {
+                let p = v[i] * v[i].z + v[j] * v[j].z; // projection of n onto the tied plane
+                if p.norm_squared() >= v[k].z * v[k].z {
+                    let r3 = p.normalize();
+                    let w = v[k].cross(&r3); // in the tied plane, orthogonal to r3
+                    (r3, s[i], Some([(w, s[i]), (v[k], s[k])]))
+                } else {
+                    (v[k], s[k], Some([(v[i], s[i]), (v[j], s[j])]))
                 }
             }
-        };
+            None => {
+                let k = (0..3).max_by(|&p, &q| v[p].z.abs().total_cmp(&v[q].z.abs())).unwrap_or(2);
+                let others: Vec<usize> = (0..3).filter(|&i| i != k).collect();
+                (v[k], s[k], Some([(v[others[0]], s[others[0]]), (v[others[1]], s[others[1]])]))
+            }
+        }
+    };
     let r3 = if r3.z < 0.0 { -r3 } else { r3 };
     let Some(rest) = rest else {
         return Ok([1.0, 1.0, 0.0, 0.0, 0.0]);

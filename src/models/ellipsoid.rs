@@ -220,7 +220,13 @@ impl Ellipsoid {
         }
         let r = self.visible_ratio(psi);
         // G1(psi) / r = min(1, r) / r = min(1/r, 1); r = 0 on the horizon has the limit 1, r NaN only for u = 0.
-        let f = if r.is_nan() { 0.0 } else if r > 1.0 { 1.0 / r } else { 1.0 };
+        let f = if r.is_nan() {
+            0.0
+        } else if r > 1.0 {
+            1.0 / r
+        } else {
+            1.0
+        };
         // F is a reflectance: a caller's rounding outside [0, 1] must not lift the weight past 1 (eq. 52).
         self.g1(omega, m) * fresnel.clamp(0.0, 1.0) * f
     }

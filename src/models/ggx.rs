@@ -34,8 +34,7 @@ impl Ggx {
 
     /// The same distribution as an [`Ellipsoid`] (Walter et al. sec. 4.2: `R = Rz(theta_z)`).
     pub fn to_ellipsoid(&self) -> Ellipsoid {
-        Ellipsoid::from_params(self.alpha_x, self.alpha_y, 0.0, 0.0, self.theta_z)
-            .expect("alphas and theta_z were checked on construction")
+        Ellipsoid::from_params(self.alpha_x, self.alpha_y, 0.0, 0.0, self.theta_z).expect("alphas and theta_z were checked on construction")
     }
 
     /// The same distribution with Tokuyoshi's 2x2 roughness matrix (Tokuyoshi eq. 17-18).

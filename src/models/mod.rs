@@ -94,8 +94,7 @@ pub enum ModelId {
 
 impl ModelId {
     /// Every single-lobe model id, simplest first.
-    pub const ALL: [ModelId; 5] =
-        [ModelId::Ggx, ModelId::Beckmann, ModelId::GgxAniso, ModelId::BeckmannAniso, ModelId::Ellipsoid];
+    pub const ALL: [ModelId; 5] = [ModelId::Ggx, ModelId::Beckmann, ModelId::GgxAniso, ModelId::BeckmannAniso, ModelId::Ellipsoid];
 
     /// The two-lobe mixtures ([`mixture`]), simplest first.
     pub const MIXTURES: [ModelId; 3] = [ModelId::Ggx2, ModelId::Beckmann2, ModelId::EllipsoidGgx];
@@ -181,13 +180,11 @@ impl std::str::FromStr for ModelChoice {
 impl std::str::FromStr for ModelId {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
-        ModelId::ALL
-            .into_iter()
-            .chain(ModelId::MIXTURES)
-            .find(|id| id.as_str() == s)
-            .ok_or_else(|| {
-                Error::invalid(format!("unknown model '{s}' (expected ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid, ggx2, beckmann2 or ellipsoid+ggx)"))
-            })
+        ModelId::ALL.into_iter().chain(ModelId::MIXTURES).find(|id| id.as_str() == s).ok_or_else(|| {
+            Error::invalid(format!(
+                "unknown model '{s}' (expected ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid, ggx2, beckmann2 or ellipsoid+ggx)"
+            ))
+        })
     }
 }
 

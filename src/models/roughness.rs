@@ -71,9 +71,7 @@ pub fn ellipsoid_params_from_ata(ata: &Matrix3<f64>) -> Result<[f64; 5]> {
         return Err(Error::new(ErrorKind::Numerical, "A^T A is not finite"));
     }
     let sym = 0.5 * (ata + ata.transpose());
-    let l = sym
-        .cholesky()
-        .ok_or_else(|| Error::new(ErrorKind::Numerical, "A^T A is not positive definite"))?;
+    let l = sym.cholesky().ok_or_else(|| Error::new(ErrorKind::Numerical, "A^T A is not positive definite"))?;
     canonical::decompose(&l.l().transpose())
 }
 
@@ -81,9 +79,7 @@ pub fn ellipsoid_params_from_ata(ata: &Matrix3<f64>) -> Result<[f64; 5]> {
 /// (Tokuyoshi sec. 2); GGX and the ellipsoid use the matrix of eq. 17 / S4.
 pub fn slope_form(model: &Model) -> Result<SlopeForm> {
     match model {
-        Model::Ggx(g) | Model::GgxAniso(g) => {
-            Ok(SlopeForm { a2: aniso_matrix(g.alpha_x, g.alpha_y, g.theta_z), mu: Vector2::zeros() })
-        }
+        Model::Ggx(g) | Model::GgxAniso(g) => Ok(SlopeForm { a2: aniso_matrix(g.alpha_x, g.alpha_y, g.theta_z), mu: Vector2::zeros() }),
         Model::Beckmann(b) | Model::BeckmannAniso(b) => {
             Ok(SlopeForm { a2: aniso_matrix(b.alpha_x, b.alpha_y, b.theta_z), mu: Vector2::zeros() })
         }
@@ -355,10 +351,12 @@ mod tests {
     fn conv_delta(base: impl Fn(Vector2<f64>) -> f64, approx: impl Fn(Vector2<f64>) -> f64, sigma2: f64, w: f64, n: usize) -> f64 {
         let h = 2.0 * w / n as f64;
         let at = |i: usize| -w + (i as f64 + 0.5) * h;
-        let g: Vec<f64> = (0..2 * n).map(|k| {
-            let t = (k as f64 - n as f64) * h;
-            (-0.5 * t * t / sigma2).exp() / (2.0 * std::f64::consts::PI * sigma2).sqrt() * h
-        }).collect();
+        let g: Vec<f64> = (0..2 * n)
+            .map(|k| {
+                let t = (k as f64 - n as f64) * h;
+                (-0.5 * t * t / sigma2).exp() / (2.0 * std::f64::consts::PI * sigma2).sqrt() * h
+            })
+            .collect();
         let f: Vec<f64> = (0..n * n).map(|p| base(Vector2::new(at(p % n), at(p / n)))).collect();
         let mut t = vec![0.0; n * n];
         for i in 0..n {

@@ -24,10 +24,7 @@ impl Model {
                 .find(|o| o.contains_key("model") && (o.contains_key("params") || o.contains_key("matrix_a")))
                 .ok_or_else(|| Error::invalid("no 'model' key in the JSON object"))?
         };
-        let id_str = obj
-            .get("model")
-            .and_then(Value::as_str)
-            .ok_or_else(|| Error::invalid("'model' must be a string (a model id)"))?;
+        let id_str = obj.get("model").and_then(Value::as_str).ok_or_else(|| Error::invalid("'model' must be a string (a model id)"))?;
         let id: ModelId = id_str.parse()?;
         match obj.get("params") {
             Some(p) => {
@@ -74,9 +71,7 @@ fn read_params(id: ModelId, p: &Value) -> Result<Vec<f64>> {
                 number(v, &format!("params.{n}"))
             })
             .collect(),
-        Value::Array(a) if a.len() == names.len() => {
-            a.iter().zip(names).map(|(v, n)| number(v, &format!("params.{n}"))).collect()
-        }
+        Value::Array(a) if a.len() == names.len() => a.iter().zip(names).map(|(v, n)| number(v, &format!("params.{n}"))).collect(),
         _ => Err(Error::invalid(format!(
             "model {id}: 'params' must be an object with {} (or an array of {} numbers)",
             names.join(", "),

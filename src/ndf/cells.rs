@@ -230,7 +230,13 @@ fn tensor_sums_k<const K: usize>(frame: &SlopeFrame, x0: f64, x1: f64, y0: f64, 
 
 /// Bins from per-cell counts: every cell that meets the disk or holds a count, with its exact `W`, solid
 /// angle and W-weighted centroid. Shared with `scale`, which bins sampled slopes on the same grid.
-pub(crate) fn build_bins(frame: &SlopeFrame, grid: &BinGrid, counts: &[u64], n: u64, lattice: Option<&quantum::SlopeLattice>) -> (Vec<NdfBin>, Vec<u32>) {
+pub(crate) fn build_bins(
+    frame: &SlopeFrame,
+    grid: &BinGrid,
+    counts: &[u64],
+    n: u64,
+    lattice: Option<&quantum::SlopeLattice>,
+) -> (Vec<NdfBin>, Vec<u32>) {
     let nf = n as f64;
     let cells: Vec<usize> = (0..grid.cells()).filter(|&c| grid.meets_disk(c) || counts[c] > 0).collect();
     let rim = frame.rim_shape();
@@ -245,17 +251,12 @@ pub(crate) fn build_bins(frame: &SlopeFrame, grid: &BinGrid, counts: &[u64], n: 
             let count = counts[c];
             // Guard: W = 0 only for a rim sliver of zero projected solid angle, or a lattice cell that
             // holds no node; D there is 0, not 0/0.
-            let (d, stderr) = if w > 0.0 {
-                (count as f64 / (nf * w), (count.max(1) as f64).sqrt() / (nf * w))
-            } else {
-                (0.0, 0.0)
-            };
+            let (d, stderr) = if w > 0.0 { (count as f64 / (nf * w), (count.max(1) as f64).sqrt() / (nf * w)) } else { (0.0, 0.0) };
             NdfBin { m: frame.normal_at(centroid), d, stderr, count, solid_angle: o, proj_solid_angle: w }
         })
         .collect();
     (bins, cells.into_iter().map(|c| c as u32).collect())
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -283,7 +284,12 @@ mod tests {
                     w += cw;
                     o += co;
                 }
-                eprintln!("frame {:?} n {n}: W - pi = {:.2e}, omega - 2pi = {:.2e}", f.cov, w - std::f64::consts::PI, o - 2.0 * std::f64::consts::PI);
+                eprintln!(
+                    "frame {:?} n {n}: W - pi = {:.2e}, omega - 2pi = {:.2e}",
+                    f.cov,
+                    w - std::f64::consts::PI,
+                    o - 2.0 * std::f64::consts::PI
+                );
                 // Measured: <= 1e-10 for ordinary frames, 6e-7 at the anisotropy cap with a tilted centre.
                 assert!((w - std::f64::consts::PI).abs() < 2e-6, "W {w}");
                 assert!((o - 2.0 * std::f64::consts::PI).abs() < 2e-6, "omega {o}");
@@ -483,5 +489,4 @@ mod tests {
         }
         assert!(failures.is_empty(), "rim-cell error grew: {failures:?}");
     }
-
 }

@@ -62,20 +62,10 @@ impl SlopeFrame {
         let l2 = if l2.is_finite() { l2.max(floor).max(l1 / (MAX_ANISOTROPY * MAX_ANISOTROPY)) } else { l1 };
         let (r1, r2) = (l1.sqrt(), l2.sqrt());
         // M = V diag(d1, d2) V^T with V = [[cs, -sn], [sn, cs]].
-        let sym = |d1: f64, d2: f64| {
-            [
-                [cs * cs * d1 + sn * sn * d2, cs * sn * (d1 - d2)],
-                [cs * sn * (d1 - d2), sn * sn * d1 + cs * cs * d2],
-            ]
-        };
+        let sym =
+            |d1: f64, d2: f64| [[cs * cs * d1 + sn * sn * d2, cs * sn * (d1 - d2)], [cs * sn * (d1 - d2), sn * sn * d1 + cs * cs * d2]];
         let center = if center[0].is_finite() && center[1].is_finite() { center } else { [0.0, 0.0] };
-        SlopeFrame {
-            center,
-            cov: sym(l1, l2),
-            whiten: sym(1.0 / r1, 1.0 / r2),
-            unwhiten: sym(r1, r2),
-            det_unwhiten: r1 * r2,
-        }
+        SlopeFrame { center, cov: sym(l1, l2), whiten: sym(1.0 / r1, 1.0 / r2), unwhiten: sym(r1, r2), det_unwhiten: r1 * r2 }
     }
 
     /// The robust frame of a sample of slopes (any order; the slice is reordered). An empty sample gives
@@ -100,7 +90,11 @@ impl SlopeFrame {
             col.extend(samples.iter().map(|s| (s[0] - cx) / sx - (s[1] - cy) / sy));
             let sm = median_and_scale(&mut col).1;
             let den = sp * sp + sm * sm;
-            if den > 0.0 { ((sp * sp - sm * sm) / den).clamp(-1.0, 1.0) } else { 0.0 }
+            if den > 0.0 {
+                ((sp * sp - sm * sm) / den).clamp(-1.0, 1.0)
+            } else {
+                0.0
+            }
         } else {
             0.0
         };
@@ -169,7 +163,11 @@ impl SlopeFrame {
         let ms = Self::stretched_at(p);
         let v = self.scan_vector(ms);
         let q = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-        if q > 0.0 { self.det_unwhiten * ms[2] / (q * q) } else { 0.0 }
+        if q > 0.0 {
+            self.det_unwhiten * ms[2] / (q * q)
+        } else {
+            0.0
+        }
     }
 
     /// Density of solid angle with respect to `d^2 p`: `dw/d^2p = det(U) / (m'_z^2 + |c m'_z + U m'_xy|^2)^(3/2)`
@@ -178,7 +176,11 @@ impl SlopeFrame {
     pub fn solid_density(&self, p: [f64; 2]) -> f64 {
         let v = self.scan_vector(Self::stretched_at(p));
         let q = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-        if q > 0.0 { self.det_unwhiten / (q * q.sqrt()) } else { 0.0 }
+        if q > 0.0 {
+            self.det_unwhiten / (q * q.sqrt())
+        } else {
+            0.0
+        }
     }
 
     /// Both densities at once, `(dW/d^2p, dw/d^2p)` ([`SlopeFrame::proj_density`],
@@ -189,7 +191,11 @@ impl SlopeFrame {
         let v = self.scan_vector(ms);
         let q = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
         // Guard: q = 0 cannot happen for |m'| = 1 but rounding at the rim; the densities vanish there.
-        if q > 0.0 { (self.det_unwhiten * ms[2] / (q * q), self.det_unwhiten / (q * q.sqrt())) } else { (0.0, 0.0) }
+        if q > 0.0 {
+            (self.det_unwhiten * ms[2] / (q * q), self.det_unwhiten / (q * q.sqrt()))
+        } else {
+            (0.0, 0.0)
+        }
     }
 
     /// [`SlopeFrame::densities`] without a branch (the guard is a select), so that loops over nodes
@@ -248,11 +254,19 @@ fn rim_direction(w: [f64; 2]) -> [f64; 2] {
         (w[0] / big, w[1] / big)
     };
     let r = (x * x + y * y).sqrt();
-    if r > 0.0 { [LAMBERT_RADIUS * x / r, LAMBERT_RADIUS * y / r] } else { [0.0, 0.0] }
+    if r > 0.0 {
+        [LAMBERT_RADIUS * x / r, LAMBERT_RADIUS * y / r]
+    } else {
+        [0.0, 0.0]
+    }
 }
 
 fn inf_unit(v: f64) -> f64 {
-    if v.is_infinite() { v.signum() } else { 0.0 }
+    if v.is_infinite() {
+        v.signum()
+    } else {
+        0.0
+    }
 }
 
 /// Median and Gaussian-consistent IQR scale of `v` (reordered in place). Empty input gives `(0, 0)`.

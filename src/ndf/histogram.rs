@@ -35,7 +35,17 @@ const MAX_LANED_CELLS: usize = 1 << 16;
 impl Acc {
     fn new(cells: usize) -> Self {
         let shift = if cells <= MAX_LANED_CELLS { 2 } else { 0 };
-        Acc { counts: vec![0; cells], odd: vec![0; cells], odd_pending: false, lanes: vec![0; cells << shift], shift, pending: 0, n: 0, m1: [0.0; 2], m2: [0.0; 3] }
+        Acc {
+            counts: vec![0; cells],
+            odd: vec![0; cells],
+            odd_pending: false,
+            lanes: vec![0; cells << shift],
+            shift,
+            pending: 0,
+            n: 0,
+            m1: [0.0; 2],
+            m2: [0.0; 3],
+        }
     }
 
     /// Add the interleaved counters into `counts` and clear them.
@@ -200,7 +210,13 @@ fn dispersion_block(i: usize, rows: usize) -> usize {
 }
 
 /// The parallel pass: rows split into a few contiguous chunks per thread, one histogram per chunk.
-pub(super) fn histogram<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame, grid: &BinGrid, rows: std::ops::Range<usize>) -> Acc {
+pub(super) fn histogram<H: HeightRows>(
+    hf: &H,
+    scheme: NormalScheme,
+    frame: &SlopeFrame,
+    grid: &BinGrid,
+    rows: std::ops::Range<usize>,
+) -> Acc {
     let cells = grid.cells();
     let chunks = (rayon::current_num_threads() * 2).max(1);
     let len = rows.len().div_ceil(chunks).max(1);
@@ -271,7 +287,11 @@ mod tests {
         let z: Vec<f64> = (0..nx * 5)
             .map(|k| {
                 let (i, j) = ((k / nx) as f64, (k % nx) as f64);
-                if k % 7 == 0 { 1e180 * j } else { 1e-7 * (j * j * 0.3 + i * j * 0.1) }
+                if k % 7 == 0 {
+                    1e180 * j
+                } else {
+                    1e-7 * (j * j * 0.3 + i * j * 0.1)
+                }
             })
             .collect();
         let hf = Heightfield::new(nx, 5, 1e-6, 1e-6, z).expect("shape");

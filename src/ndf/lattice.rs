@@ -38,7 +38,13 @@ type Sums = [f64; 4];
 ///
 /// `cells` are the grid cells of the bins and `ints[k] = (W, Omega, centroid)` their Lambert integrals,
 /// replaced in place. Returns how many cells were replaced.
-pub(crate) fn respect_lattice(frame: &SlopeFrame, grid: &BinGrid, lat: &SlopeLattice, cells: &[usize], ints: &mut [(f64, f64, [f64; 2])]) -> usize {
+pub(crate) fn respect_lattice(
+    frame: &SlopeFrame,
+    grid: &BinGrid,
+    lat: &SlopeLattice,
+    cells: &[usize],
+    ints: &mut [(f64, f64, [f64; 2])],
+) -> usize {
     let cell_area = lat.step[0] * lat.step[1];
     if !(cell_area > 0.0 && cell_area.is_finite()) {
         return 0;
@@ -63,7 +69,16 @@ pub(crate) fn respect_lattice(frame: &SlopeFrame, grid: &BinGrid, lat: &SlopeLat
         picked.push(k);
         // The cell's extent in slope space, from its corners and edge midpoints (padded below: the
         // edges are curved in slope space).
-        for (px, py) in [(x0, y0), (x1, y0), (x0, y1), (x1, y1), (0.5 * (x0 + x1), y0), (0.5 * (x0 + x1), y1), (x0, 0.5 * (y0 + y1)), (x1, 0.5 * (y0 + y1))] {
+        for (px, py) in [
+            (x0, y0),
+            (x1, y0),
+            (x0, y1),
+            (x1, y1),
+            (0.5 * (x0 + x1), y0),
+            (0.5 * (x0 + x1), y1),
+            (x0, 0.5 * (y0 + y1)),
+            (x1, 0.5 * (y0 + y1)),
+        ] {
             let m = frame.normal_at([px, py]);
             let s = SlopeFrame::slope_of(m);
             for a in 0..2 {

@@ -37,9 +37,9 @@ pub mod precision;
 pub mod quantum;
 pub mod resolution;
 
-use nalgebra::Vector3;
 pub use frame::SlopeFrame;
 pub use grid::{BinGrid, QuadOrder, RimShape};
+use nalgebra::Vector3;
 pub use normals::{HeightRows, NormalScheme};
 pub use precision::{F32Storage, HeightsF32, Precision};
 pub use quantum::{HeightQuantum, SlopeLattice};
@@ -197,7 +197,8 @@ pub fn empirical_ndf_f32(h: &HeightsF32, opts: &NdfOptions) -> Result<EmpiricalN
             ),
         ));
     }
-    ndf.f32_storage = Some(F32Storage { offset: h.offset, max_deviation: h.max_deviation, slope_rounding_bound: bound, fraction_of_slope_scale: frac });
+    ndf.f32_storage =
+        Some(F32Storage { offset: h.offset, max_deviation: h.max_deviation, slope_rounding_bound: bound, fraction_of_slope_scale: frac });
     Ok(ndf)
 }
 
@@ -216,7 +217,10 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
     let stencils = rows.len() as u64 * scheme.per_row(hf) as u64;
     let no_valid = || {
         let (nx, ny) = (hf.nx(), hf.ny());
-        Error::new(ErrorKind::BadData, format!("no valid normal stencil in the {nx} x {ny} grid ({} of {} points invalid)", invalid(), nx * ny))
+        Error::new(
+            ErrorKind::BadData,
+            format!("no valid normal stencil in the {nx} x {ny} grid ({} of {} points invalid)", invalid(), nx * ny),
+        )
     };
     if stencils == 0 {
         return Err(Error::new(ErrorKind::BadData, format!("grid {} x {} is too small for {} normals", hf.nx(), hf.ny(), scheme.as_str())));
@@ -416,7 +420,14 @@ mod tests {
     #[test]
     fn frame_subsample_costs_little() {
         let s = crate::synth::SynthSettings { nx: 1024, ny: 1024, dx: 1e-6, dy: 1e-6, seed: 1, ..Default::default() };
-        let p = crate::synth::EllipsoidParams { alpha_x: 0.35, alpha_y: 0.18, theta_x: 0.15, theta_y: -0.1, theta_z: 0.6, ..Default::default() };
+        let p = crate::synth::EllipsoidParams {
+            alpha_x: 0.35,
+            alpha_y: 0.18,
+            theta_x: 0.15,
+            theta_y: -0.1,
+            theta_z: 0.6,
+            ..Default::default()
+        };
         let (hf, _) = crate::synth::ellipsoid_surface(&s, &p).expect("valid");
         let mut all = subsample(&hf, NormalScheme::Central, usize::MAX).0;
         let full = SlopeFrame::robust(&mut all);
@@ -432,5 +443,4 @@ mod tests {
             assert!(ex < bound && ey < bound && dc < bound, "{ex} {ey} {dc} vs {bound}");
         }
     }
-
 }

@@ -25,7 +25,11 @@ pub fn write_csv_to<W: std::io::Write + ?Sized>(w: &mut W, ndf: &EmpiricalNdf) -
         let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
         // Not assessed (triangle normals): an empty field.
         let u = ndf.unresolved.get(k).map_or(String::new(), |u| u.to_string());
-        writeln!(w, "{},{},{},{},{},{},{},{},{},{},{u}", b.m.x, b.m.y, b.m.z, b.d, b.stderr, b.count, b.solid_angle, b.proj_solid_angle, sx, sy)?;
+        writeln!(
+            w,
+            "{},{},{},{},{},{},{},{},{},{},{u}",
+            b.m.x, b.m.y, b.m.z, b.d, b.stderr, b.count, b.solid_angle, b.proj_solid_angle, sx, sy
+        )?;
     }
     Ok(())
 }
@@ -91,7 +95,12 @@ pub fn write_exr(path: &Path, ndf: &EmpiricalNdf, res: usize) -> Result<()> {
     }
     let data: Vec<f32> = raster(ndf, res, [0.0, 0.0], 1.0).into_iter().map(|v| v as f32).collect();
     let channel = AnyChannel::new("D", FlatSamples::F32(data));
-    let layer = Layer::new((res, res), LayerAttributes::named("ndf"), Encoding::SMALL_LOSSLESS, AnyChannels::sort(SmallVec::from_vec(vec![channel])));
+    let layer = Layer::new(
+        (res, res),
+        LayerAttributes::named("ndf"),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(vec![channel])),
+    );
     let image = Image::from_layer(layer);
     let mut buf = std::io::Cursor::new(Vec::new());
     image.write().to_buffered(&mut buf).map_err(|e| Error::new(ErrorKind::Io, format!("EXR encoding failed: {e}")).with_path(path))?;

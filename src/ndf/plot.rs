@@ -34,7 +34,8 @@ fn peak(ndf: &EmpiricalNdf) -> Vector3<f64> {
 /// `pk` within which 99% of the samples lie, at most 0.5 (a quarter of the disk's width, so the window is
 /// always a zoom) and at least 1e-4.
 pub fn zoom_half(ndf: &EmpiricalNdf, pk: Vector3<f64>) -> f64 {
-    let mut d: Vec<(f64, u64)> = ndf.bins.iter().filter(|b| b.count > 0).map(|b| (((b.m.x - pk.x).powi(2) + (b.m.y - pk.y).powi(2)).sqrt(), b.count)).collect();
+    let mut d: Vec<(f64, u64)> =
+        ndf.bins.iter().filter(|b| b.count > 0).map(|b| (((b.m.x - pk.x).powi(2) + (b.m.y - pk.y).powi(2)).sqrt(), b.count)).collect();
     d.sort_by(|a, b| a.0.total_cmp(&b.0));
     let total: u64 = d.iter().map(|x| x.1).sum();
     let mut acc = 0u64;
@@ -75,10 +76,9 @@ fn plot_map_to(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
         let root = root.titled(title, (crate::plot::FONT, 20)).map_err(perr)?;
         let (panels, _footer) = root.split_vertically(h - 70);
         let (left, right) = panels.split_horizontally(w / 2);
-        for (area, data, c, hw, label) in [
-            (&left, &full, [0.0, 0.0], 1.0, "projected hemisphere (m_x, m_y)"),
-            (&right, &zoom, [pk.x, pk.y], half, "zoom on the peak"),
-        ] {
+        for (area, data, c, hw, label) in
+            [(&left, &full, [0.0, 0.0], 1.0, "projected hemisphere (m_x, m_y)"), (&right, &zoom, [pk.x, pk.y], half, "zoom on the peak")]
+        {
             let mut chart = ChartBuilder::on(area)
                 .margin(12)
                 .caption(label, (crate::plot::FONT, 15))
@@ -153,7 +153,8 @@ fn plot_slices_to(path: &Path, ndf: &EmpiricalNdf, title: &str) -> Result<()> {
     let (xmin, xmax) = all.clone().fold((0.0f64, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
     let (ymin, ymax) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
     let x = crate::plot::axis(xmin, xmax, 1.0, "angle").map_err(|e| e.with_path(path))?;
-    let y = if ymax >= ymin { crate::plot::axis(ymin - 0.2, ymax + 0.2, 1.0, "log10 D").map_err(|e| e.with_path(path))? } else { -1.0..1.0 };
+    let y =
+        if ymax >= ymin { crate::plot::axis(ymin - 0.2, ymax + 0.2, 1.0, "log10 D").map_err(|e| e.with_path(path))? } else { -1.0..1.0 };
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(perr)?;

@@ -58,17 +58,16 @@ impl HeightsF32 {
         }
         let offset = if n > 0 { sum / n as f64 } else { 0.0 };
         let mut max_deviation = 0.0f64;
-        let z: Vec<f32> = hf
-            .z
-            .iter()
-            .map(|&h| {
-                let d = h - offset;
-                if d.abs() > max_deviation {
-                    max_deviation = d.abs();
-                }
-                d as f32
-            })
-            .collect();
+        let z: Vec<f32> =
+            hf.z.iter()
+                .map(|&h| {
+                    let d = h - offset;
+                    if d.abs() > max_deviation {
+                        max_deviation = d.abs();
+                    }
+                    d as f32
+                })
+                .collect();
         HeightsF32 { nx: hf.nx, ny: hf.ny, dx: hf.dx, dy: hf.dy, z, offset, max_deviation, invalid: hf.z.len() - n }
     }
 

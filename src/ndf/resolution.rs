@@ -45,7 +45,12 @@ fn unresolved_at<H: HeightRows>(hf: &H, frame: &SlopeFrame, i: usize, j: usize, 
 pub const MAX_UNRESOLVED_SHARE: f64 = 0.25;
 
 /// Visit every central-difference sample of `hf` (rows in parallel), folding `f(acc, i, j, sx, sy)`.
-fn fold_samples<H: HeightRows, A: Send>(hf: &H, zero: impl Fn() -> A + Sync + Send, f: impl Fn(&mut A, usize, usize, f64, f64) + Sync + Send, merge: impl Fn(A, A) -> A + Sync + Send) -> A {
+fn fold_samples<H: HeightRows, A: Send>(
+    hf: &H,
+    zero: impl Fn() -> A + Sync + Send,
+    f: impl Fn(&mut A, usize, usize, f64, f64) + Sync + Send,
+    merge: impl Fn(A, A) -> A + Sync + Send,
+) -> A {
     let (nx, ny) = (hf.nx(), hf.ny());
     if nx < 3 || ny < 3 {
         return zero();
@@ -56,7 +61,8 @@ fn fold_samples<H: HeightRows, A: Send>(hf: &H, zero: impl Fn() -> A + Sync + Se
         .fold(&zero, |mut acc, i| {
             let (rd, rc, ru) = (hf.row(i - 1), hf.row(i), hf.row(i + 1));
             for j in 1..nx - 1 {
-                let (c, l, r, d, u): (f64, f64, f64, f64, f64) = (rc[j].into(), rc[j - 1].into(), rc[j + 1].into(), rd[j].into(), ru[j].into());
+                let (c, l, r, d, u): (f64, f64, f64, f64, f64) =
+                    (rc[j].into(), rc[j - 1].into(), rc[j + 1].into(), rd[j].into(), ru[j].into());
                 if !(c.is_finite() && l.is_finite() && r.is_finite() && d.is_finite() && u.is_finite()) {
                     continue;
                 }

@@ -241,7 +241,11 @@ mod tests {
     /// options apply, and an explicit grid size wins over its binning.
     #[test]
     fn presets_set_stride_binning_and_tolerance() {
-        let o = Options { preset: Some(Preset::Fast), ndf: NdfOptions { cells_across: Some(31), ..NdfOptions::default() }, ..Options::default() };
+        let o = Options {
+            preset: Some(Preset::Fast),
+            ndf: NdfOptions { cells_across: Some(31), ..NdfOptions::default() },
+            ..Options::default()
+        };
         assert_eq!(o.preprocess().subsample, preset::FAST_STRIDE);
         assert_eq!(o.fit_options().tolerances, Preset::Fast.fit_options().tolerances);
         let hf = surface();

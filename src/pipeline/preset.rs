@@ -46,9 +46,30 @@ impl Preset {
     /// the pipeline but properties of the job).
     pub fn knobs(self) -> PresetKnobs {
         match self {
-            Preset::Fast => PresetKnobs { stride: FAST_STRIDE, scheme: NormalScheme::Central, target_count: DEFAULT_TARGET_COUNT, max_cells: MAX_AUTO_CELLS, tol: 1e-6, extra_starts: 0 },
-            Preset::Balanced => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: DEFAULT_TARGET_COUNT, max_cells: MAX_AUTO_CELLS, tol: 1e-10, extra_starts: 0 },
-            Preset::Accurate => PresetKnobs { stride: 1, scheme: NormalScheme::Central, target_count: DEFAULT_TARGET_COUNT, max_cells: MAX_AUTO_CELLS, tol: 1e-12, extra_starts: 4 },
+            Preset::Fast => PresetKnobs {
+                stride: FAST_STRIDE,
+                scheme: NormalScheme::Central,
+                target_count: DEFAULT_TARGET_COUNT,
+                max_cells: MAX_AUTO_CELLS,
+                tol: 1e-6,
+                extra_starts: 0,
+            },
+            Preset::Balanced => PresetKnobs {
+                stride: 1,
+                scheme: NormalScheme::Central,
+                target_count: DEFAULT_TARGET_COUNT,
+                max_cells: MAX_AUTO_CELLS,
+                tol: 1e-10,
+                extra_starts: 0,
+            },
+            Preset::Accurate => PresetKnobs {
+                stride: 1,
+                scheme: NormalScheme::Central,
+                target_count: DEFAULT_TARGET_COUNT,
+                max_cells: MAX_AUTO_CELLS,
+                tol: 1e-12,
+                extra_starts: 4,
+            },
         }
     }
 

@@ -65,8 +65,7 @@ fn polynomial_residual(hf: &Scan, order: usize, plane_path: bool) -> Result<Vec<
     // An axis with one sample cannot carry a slope along it; drop those terms rather than solve a
     // singular system.
     let all = terms(order);
-    let t: Vec<(usize, usize)> =
-        all.into_iter().filter(|&(p, q)| (p == 0 || hf.nx > 1) && (q == 0 || hf.ny > 1)).collect();
+    let t: Vec<(usize, usize)> = all.into_iter().filter(|&(p, q)| (p == 0 || hf.nx > 1) && (q == 0 || hf.ny > 1)).collect();
     let m = t.len();
     let nx = hf.nx;
     let blocks = |rows: std::ops::Range<usize>| rows.step_by(ROWS_PER_TASK).collect::<Vec<usize>>();
@@ -81,10 +80,7 @@ fn polynomial_residual(hf: &Scan, order: usize, plane_path: bool) -> Result<Vec<
         .collect();
     let valid: usize = sums.iter().map(|p| p.0).sum();
     if valid < m {
-        return Err(Error::new(
-            ErrorKind::BadData,
-            format!("{valid} valid points cannot determine a {m}-term form of order {order}"),
-        ));
+        return Err(Error::new(ErrorKind::BadData, format!("{valid} valid points cannot determine a {m}-term form of order {order}")));
     }
     let mean = sums.iter().map(|p| p.1).sum::<f64>() / valid as f64;
     if plane_path && t == [(0, 0), (1, 0), (0, 1)] {
@@ -137,9 +133,7 @@ fn polynomial_residual(hf: &Scan, order: usize, plane_path: bool) -> Result<Vec<
     // line of points); the minimum-norm solution is then still a least-squares fit.
     let svd = ata.svd(true, true);
     let smax = svd.singular_values.max();
-    let coef = svd
-        .solve(&atb, smax * 1e-12)
-        .map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
+    let coef = svd.solve(&atb, smax * 1e-12).map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
     let mut out = vec![0.0; hf.z.len()];
     out.par_chunks_mut(nx.max(1)).enumerate().for_each(|(i, o)| {
         for (j, (o, &h)) in o.iter_mut().zip(hf.row(i)).enumerate() {

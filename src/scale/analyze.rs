@@ -3,16 +3,14 @@
 use nalgebra::Matrix2;
 
 use super::footprint::{footprint_field, footprint_stats, kernel_sigma, slope_field, FootprintStats};
-use super::ndf_at::{
-    bin_slopes, counts_on, gaussian_slopes, sample_slopes, sample_slopes_with, slope_moments, Blur, SlopeMoments,
-};
+use super::ndf_at::{bin_slopes, counts_on, gaussian_slopes, sample_slopes, sample_slopes_with, slope_moments, Blur, SlopeMoments};
+use crate::error::{Error, ErrorKind, Result};
 use crate::models::roughness::{
     add_kernel_matrix, aniso_params, filter_isotropic, model_from_slope_form, skew_offset, slope_form, IsoRule, SlopeForm,
 };
-use crate::error::{Error, ErrorKind, Result};
-use crate::scan::Heightfield;
 use crate::models::{Model, ModelId, Ndf};
 use crate::ndf::{EmpiricalNdf, NdfOptions};
+use crate::scan::Heightfield;
 
 /// A fitted model and what the information criterion needs, as the fitting code reports them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -54,7 +52,14 @@ pub struct ScaleOptions {
 
 impl Default for ScaleOptions {
     fn default() -> Self {
-        ScaleOptions { footprints: vec![], models: ModelId::ALL.to_vec(), samples_per_point: 4, bins: None, seed: 1, blur: Blur::PerFootprint }
+        ScaleOptions {
+            footprints: vec![],
+            models: ModelId::ALL.to_vec(),
+            samples_per_point: 4,
+            bins: None,
+            seed: 1,
+            blur: Blur::PerFootprint,
+        }
     }
 }
 
@@ -243,7 +248,8 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
         // A footprint below the grid spacing has Sigma_w = 0 everywhere: no spread to speak of.
         let sigma_w_spread = if tm > 0.0 { tv.sqrt() / tm } else { 0.0 };
         // Independent footprints: one per kernel area pi (2 sigma_K)^2 = pi F^2 (at least one).
-        let n_independent = (stats.n_points as f64 * hf.dx * hf.dy / (std::f64::consts::PI * fp * fp)).clamp(1.0, stats.n_points.max(1) as f64);
+        let n_independent =
+            (stats.n_points as f64 * hf.dx * hf.dy / (std::f64::consts::PI * fp * fp)).clamp(1.0, stats.n_points.max(1) as f64);
         // Share of the slope variance the kernel carries (S3); 0 for a flat scan.
         let share = if stats.cov_slopes.trace() > 0.0 { (stats.sigma_f.trace() / stats.cov_slopes.trace()).clamp(0.0, 1.0) } else { 0.0 };
         let viol = violations(&resolved, sigma_w_spread, share, opts.blur, n_independent);
@@ -267,9 +273,11 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
             .iter()
             .map(|&id| {
                 let kernel = if ggx_family(id) { ggx_kernel.map(|k| k.matrix) } else { None };
-                let ctx = RouteCtx { stats: &stats, resolved: &resolved, ndf_res: &ndf_res, ndf_at: &ndf_at, halves: (&halves.0, &halves.1) };
+                let ctx =
+                    RouteCtx { stats: &stats, resolved: &resolved, ndf_res: &ndf_res, ndf_at: &ndf_at, halves: (&halves.0, &halves.1) };
                 let mut m = model_at_footprint(id, &ctx, kernel, fitter);
-                m.0.analytic_caveats = caveats(&m.0, &viol, ggx_family(id), kernel.is_none() && stats.sigma_f.trace() > crate::models::ALPHA_MIN.powi(2));
+                m.0.analytic_caveats =
+                    caveats(&m.0, &viol, ggx_family(id), kernel.is_none() && stats.sigma_f.trace() > crate::models::ALPHA_MIN.powi(2));
                 m
             })
             .collect();
@@ -443,7 +451,9 @@ fn summary(models: &[ModelAtFootprint]) -> String {
     let bad: Vec<&str> = models.iter().filter(|m| !m.analytic_trusted()).map(|m| m.id.as_str()).collect();
     match (ok.is_empty(), bad.is_empty()) {
         (_, true) => "the analytic route (fit of the filtered surface plus the kernel) can be trusted for every model here".into(),
-        (true, false) => "the analytic route cannot be trusted here for any model (see each model's analytic_caveats); use the empirical route".into(),
+        (true, false) => {
+            "the analytic route cannot be trusted here for any model (see each model's analytic_caveats); use the empirical route".into()
+        }
         (false, false) => format!(
             "the analytic route can be trusted here for {} but not for {} (see analytic_caveats); use the empirical route for those",
             ok.join(", "),
@@ -593,7 +603,8 @@ pub fn recommend(results: &[FootprintResult], tolerance: f64) -> Recommendation 
             ));
         }
     } else {
-        let best = cands.iter().filter(|c| c.worst_delta_model.is_finite()).min_by(|a, b| a.worst_delta_model.total_cmp(&b.worst_delta_model));
+        let best =
+            cands.iter().filter(|c| c.worst_delta_model.is_finite()).min_by(|a, b| a.worst_delta_model.total_cmp(&b.worst_delta_model));
         match best {
             Some(b) => words.push(format!(
                 "The smallest worst-case error is {}'s, {:.3} at {:.3e} m; raise --tolerance above it or use that model with its reported error.",
@@ -620,11 +631,7 @@ fn one_lobe_suffices(results: &[FootprintResult], chosen: Option<ModelId>, toler
     let mut order: Vec<&FootprintResult> = results.iter().collect();
     order.sort_by(|a, b| a.stats.footprint.total_cmp(&b.stats.footprint));
     let singles = |r: &FootprintResult| -> Vec<ModelId> {
-        r.models
-            .iter()
-            .filter(|m| !m.id.is_mixture() && m.empirical.delta.is_some_and(|d| d.excess <= tolerance))
-            .map(|m| m.id)
-            .collect()
+        r.models.iter().filter(|m| !m.id.is_mixture() && m.empirical.delta.is_some_and(|d| d.excess <= tolerance)).map(|m| m.id).collect()
     };
     let mut from = None;
     for (i, r) in order.iter().enumerate().rev() {

@@ -13,8 +13,8 @@ use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 
 use crate::error::{Error, Result};
-use crate::scan::Heightfield;
 use crate::models::ellipsoid::rotation_xyz;
+use crate::scan::Heightfield;
 
 /// One cosine mode `amp * cos(kx x + ky y + phase)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -44,15 +44,7 @@ impl FourierSurface {
     /// `n_modes` modes with wave vectors drawn from a Gaussian spectrum of correlation lengths
     /// `(corr_x, corr_y)` rotated by `theta` (rounded to the period's lattice), equal amplitudes scaled so
     /// that the continuous surface's RMS slope magnitude is `rms_slope`.
-    pub fn gaussian_spectrum(
-        n: usize,
-        dx: f64,
-        n_modes: usize,
-        corr: (f64, f64),
-        theta: f64,
-        rms_slope: f64,
-        seed: u64,
-    ) -> Result<Self> {
+    pub fn gaussian_spectrum(n: usize, dx: f64, n_modes: usize, corr: (f64, f64), theta: f64, rms_slope: f64, seed: u64) -> Result<Self> {
         if n < 8 || n_modes == 0 || !(dx > 0.0 && corr.0 > 0.0 && corr.1 > 0.0 && rms_slope > 0.0) {
             return Err(Error::invalid("FourierSurface: need n >= 8, modes > 0 and positive lengths"));
         }
@@ -160,7 +152,7 @@ impl BumpField {
         let r = rotation_xyz(self.angles[0], self.angles[1], self.angles[2]);
         let s = Matrix3::from_diagonal(&self.semi_axes.map(|v| 1.0 / (v * v)));
         let q = r.transpose() * s * r; // p^T Q p = 1 on the ellipsoid surface
-        // The cap's horizontal extent: the ellipsoid's shadow radius bounds it; it must fit in the cell.
+                                       // The cap's horizontal extent: the ellipsoid's shadow radius bounds it; it must fit in the cell.
         if self.semi_axes.max() >= 0.5 * self.period || self.depth < 0.0 {
             return Err(Error::invalid("BumpField: every semi-axis must be below half the period, depth >= 0"));
         }

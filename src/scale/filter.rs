@@ -42,13 +42,7 @@ pub fn gaussian_taps(sigma: f64) -> Result<Vec<f64>> {
 /// `fields[c][i * nx + j]` is channel `c` at row `i`, column `j`; NaN marks a masked point. A point is
 /// masked in the output when it is masked in *any* input channel, or when the valid kernel mass around it
 /// is below [`MIN_VALID_MASS`].
-pub fn filter_channels(
-    nx: usize,
-    ny: usize,
-    fields: &[Vec<f64>],
-    sigma_x: f64,
-    sigma_y: f64,
-) -> Result<Vec<Vec<f64>>> {
+pub fn filter_channels(nx: usize, ny: usize, fields: &[Vec<f64>], sigma_x: f64, sigma_y: f64) -> Result<Vec<Vec<f64>>> {
     let n = nx.checked_mul(ny).ok_or_else(|| Error::invalid("grid size overflows"))?;
     if fields.iter().any(|f| f.len() != n) {
         return Err(Error::invalid(format!("filter: every channel must have {nx} x {ny} values")));

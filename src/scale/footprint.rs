@@ -80,15 +80,7 @@ impl FootprintField {
 
 /// The footprint statistics of a slope field `(sx, sy)` for a kernel of standard deviation `sigma`
 /// metres on a grid of spacing `(dx, dy)`.
-pub fn footprint_field(
-    nx: usize,
-    ny: usize,
-    dx: f64,
-    dy: f64,
-    sx: &[f64],
-    sy: &[f64],
-    sigma: f64,
-) -> Result<FootprintField> {
+pub fn footprint_field(nx: usize, ny: usize, dx: f64, dy: f64, sx: &[f64], sy: &[f64], sigma: f64) -> Result<FootprintField> {
     if !(sigma.is_finite() && sigma >= 0.0) {
         return Err(Error::invalid(format!("footprint kernel sigma must be finite and >= 0, got {sigma}")));
     }
@@ -166,13 +158,7 @@ pub fn footprint_stats(ff: &FootprintField, sx: &[f64], sy: &[f64], footprint: f
 }
 
 /// [`footprint_stats`] over the given points only (those of them where every statistic is defined).
-pub fn footprint_stats_over(
-    ff: &FootprintField,
-    sx: &[f64],
-    sy: &[f64],
-    footprint: f64,
-    points: &[usize],
-) -> Result<FootprintStats> {
+pub fn footprint_stats_over(ff: &FootprintField, sx: &[f64], sy: &[f64], footprint: f64, points: &[usize]) -> Result<FootprintStats> {
     let pts: Vec<usize> = points
         .iter()
         .copied()

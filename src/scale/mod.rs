@@ -15,8 +15,8 @@ pub mod analyze;
 pub mod fields;
 pub mod filter;
 pub mod fitter;
-pub mod ndf_at;
 pub mod footprint;
+pub mod ndf_at;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod report;

@@ -66,9 +66,7 @@ pub fn sample_slopes_with(ff: &FootprintField, per_point: usize, blur: Option<Bl
 pub fn gaussian_slopes(cov: &Matrix2<f64>, n: usize, seed: u64) -> Vec<Vector2<f64>> {
     let l = chol2(cov);
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    (0..n)
-        .map(|_| l * Vector2::new(rng.sample::<f64, _>(StandardNormal), rng.sample::<f64, _>(StandardNormal)))
-        .collect()
+    (0..n).map(|_| l * Vector2::new(rng.sample::<f64, _>(StandardNormal), rng.sample::<f64, _>(StandardNormal))).collect()
 }
 
 /// Lower Cholesky factor of a PSD 2x2 (zero where a variance is zero: a footprint with one slope).

@@ -56,11 +56,8 @@ pub fn write_plot(path: &Path, results: &[FootprintResult]) -> Result<()> {
         let pix: Vec<(f64, f64, f64)> =
             results.iter().filter_map(|r| r.pixel_roughness.map(|(a, b, _)| (r.stats.footprint, a, b))).collect();
         // Footprints where the model's analytic route is flagged (analytic_caveats): hollow triangles.
-        let untrusted: Vec<f64> = results
-            .iter()
-            .filter(|r| r.models.iter().any(|m| m.id == id && !m.analytic_trusted()))
-            .map(|r| r.stats.footprint)
-            .collect();
+        let untrusted: Vec<f64> =
+            results.iter().filter(|r| r.models.iter().any(|m| m.id == id && !m.analytic_trusted())).map(|r| r.stats.footprint).collect();
         let untrusted = untrusted.as_slice();
         // Panel 1: alphas.
         // Label, points, colour, dashed: one row per series, read as a table below.
@@ -73,9 +70,26 @@ pub fn write_plot(path: &Path, results: &[FootprintResult]) -> Result<()> {
             lines.push(("alpha_y empirical".into(), series(results, id, false, param(1)), RED, false));
             lines.push(("alpha_y analytic".into(), series(results, id, true, param(1)), RED, true));
         }
-        lines.push(("pixel roughness (2 Sigma_F) alpha_x".into(), pix.iter().map(|p| (p.0, p.1)).collect(), RGBColor(120, 120, 120), false));
-        lines.push(("pixel roughness (2 Sigma_F) alpha_y".into(), pix.iter().map(|p| (p.0, p.2)).collect(), RGBColor(190, 190, 190), false));
-        draw_panel(&panels[0], &format!("{id}: roughness vs footprint (hollow triangles: analytic route not trusted)"), "alpha", (lo, hi), &lines, untrusted)?;
+        lines.push((
+            "pixel roughness (2 Sigma_F) alpha_x".into(),
+            pix.iter().map(|p| (p.0, p.1)).collect(),
+            RGBColor(120, 120, 120),
+            false,
+        ));
+        lines.push((
+            "pixel roughness (2 Sigma_F) alpha_y".into(),
+            pix.iter().map(|p| (p.0, p.2)).collect(),
+            RGBColor(190, 190, 190),
+            false,
+        ));
+        draw_panel(
+            &panels[0],
+            &format!("{id}: roughness vs footprint (hollow triangles: analytic route not trusted)"),
+            "alpha",
+            (lo, hi),
+            &lines,
+            untrusted,
+        )?;
         // Panel 2: angles.
         let mut ang = Vec::new();
         if id == ModelId::Ellipsoid {
@@ -166,12 +180,6 @@ fn draw_panel<DB: DrawingBackend>(
             chart.draw_series(pts.iter().map(|&(x, y)| Circle::new((x, y), 4, c.filled()))).map_err(plot_err)?;
         }
     }
-    chart
-        .configure_series_labels()
-        .label_font((FONT, 12))
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(plot_err)?;
+    chart.configure_series_labels().label_font((FONT, 12)).background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(plot_err)?;
     Ok(())
 }

@@ -26,8 +26,7 @@ fn num(v: f64) -> Value {
 /// `{"model": id, "params": {...}, "matrix_a": [...]}` of a model.
 pub fn model_json(m: &Model) -> Value {
     let id = m.id();
-    let params: serde_json::Map<String, Value> =
-        id.param_names().iter().zip(m.params()).map(|(k, v)| (k.to_string(), num(v))).collect();
+    let params: serde_json::Map<String, Value> = id.param_names().iter().zip(m.params()).map(|(k, v)| (k.to_string(), num(v))).collect();
     let mut o = json!({"model": id.as_str(), "params": params, "skew_offset": num(model_skew(m))});
     if let Some(a) = m.matrix_a() {
         o["matrix_a"] = json!((0..3).map(|r| (0..3).map(|c| a[(r, c)]).collect::<Vec<_>>()).collect::<Vec<_>>());
@@ -79,9 +78,7 @@ pub fn footprint_json(r: &FootprintResult) -> Value {
             o
         })
         .collect();
-    let mom = |m: &super::ndf_at::SlopeMoments| {
-        json!({"n": m.n, "mean": [m.mean[0], m.mean[1]], "cov": mat2(&m.cov), "skewness": num(m.skewness), "kurtosis": num(m.kurtosis)})
-    };
+    let mom = |m: &super::ndf_at::SlopeMoments| json!({"n": m.n, "mean": [m.mean[0], m.mean[1]], "cov": mat2(&m.cov), "skewness": num(m.skewness), "kurtosis": num(m.kurtosis)});
     json!({
         "footprint_m": s.footprint,
         "kernel_sigma_m": s.sigma_k,
@@ -114,7 +111,8 @@ pub fn report_json(input: Value, options: Value, results: &[FootprintResult], re
 }
 
 /// CSV header of [`write_csv`].
-pub const CSV_HEADER: &str = "footprint_m,model,route,source,alpha_x,alpha_y,theta_x,theta_y,theta_z,skew_offset,delta,delta_noise,delta_model,ic";
+pub const CSV_HEADER: &str =
+    "footprint_m,model,route,source,alpha_x,alpha_y,theta_x,theta_y,theta_z,skew_offset,delta,delta_noise,delta_model,ic";
 
 /// One row per footprint, model and route. Parameters a model lacks are empty (isotropic: `alpha_x =
 /// alpha_y = alpha`; aniso: no `theta_x`, `theta_y`).

@@ -29,9 +29,8 @@ impl FootprintRange {
 
 /// Parse a `lo..hi` range or a single value.
 fn parse_range(key: &str, v: &str) -> Result<(f64, f64)> {
-    let num = |t: &str| -> Result<f64> {
-        t.trim().parse::<f64>().map_err(|_| Error::invalid(format!("scene: {key}='{t}' is not a number")))
-    };
+    let num =
+        |t: &str| -> Result<f64> { t.trim().parse::<f64>().map_err(|_| Error::invalid(format!("scene: {key}='{t}' is not a number"))) };
     let (lo, hi) = match v.split_once("..") {
         Some((a, b)) => (num(a)?, num(b)?),
         None => {
@@ -51,9 +50,7 @@ fn parse_range(key: &str, v: &str) -> Result<(f64, f64)> {
 pub fn parse_scene(spec: &str) -> Result<FootprintRange> {
     let mut kv = std::collections::BTreeMap::new();
     for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let (k, v) = part
-            .split_once('=')
-            .ok_or_else(|| Error::invalid(format!("scene: '{part}' is not key=value")))?;
+        let (k, v) = part.split_once('=').ok_or_else(|| Error::invalid(format!("scene: '{part}' is not key=value")))?;
         let k = k.trim();
         const KEYS: [&str; 7] = ["footprint", "distance", "fov_deg", "pixels", "pixel_pitch", "focal", "max_incidence_deg"];
         if !KEYS.contains(&k) {
@@ -116,8 +113,18 @@ mod tests {
 
     #[test]
     fn bad_scenes() {
-        for s in ["", "distance=1", "footprint=-1", "footprint=2..1", "fov_deg=40", "distance=1,fov_deg=200,pixels=10",
-            "footprint=1e-5,footprint=2e-5", "color=red", "footprint=abc", "distance=1,fov_deg=40,pixels=100,focal=0.05"] {
+        for s in [
+            "",
+            "distance=1",
+            "footprint=-1",
+            "footprint=2..1",
+            "fov_deg=40",
+            "distance=1,fov_deg=200,pixels=10",
+            "footprint=1e-5,footprint=2e-5",
+            "color=red",
+            "footprint=abc",
+            "distance=1,fov_deg=40,pixels=100,focal=0.05",
+        ] {
             assert!(parse_scene(s).is_err(), "{s}");
         }
     }

@@ -16,8 +16,8 @@ use serde_json::json;
 
 use super::{SynthSettings, Truth};
 use crate::error::{Error, Result};
-use crate::scan::Heightfield;
 use crate::models::{Ellipsoid, Model};
+use crate::scan::Heightfield;
 
 /// Parameters of the ellipsoid surface (contract names, Walter et al. eq. 2-3).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -91,7 +91,11 @@ impl EllipsoidGeometry {
         let disc = b * b - q[(2, 2)] * c;
         // Guard: the silhouette itself (disc = 0) has a vertical tangent, no finite slope; only the open
         // footprint is surface.
-        if disc > 0.0 { Some((disc.sqrt() - b) / q[(2, 2)]) } else { None }
+        if disc > 0.0 {
+            Some((disc.sqrt() - b) / q[(2, 2)])
+        } else {
+            None
+        }
     }
 
     /// The exact slope `grad h` at `(x, y)` on the footprint: `-(Q p)_xy / (Q p)_z` (eq. 15, 22).
@@ -114,8 +118,7 @@ impl EllipsoidGeometry {
         let p = u * (self.c / k.sqrt());
         let q = &self.q;
         let (x, y) = (p.x, p.y);
-        let vmv = q[(2, 2)] * (q[(0, 0)] * x * x + 2.0 * q[(0, 1)] * x * y + q[(1, 1)] * y * y)
-            - (q[(0, 2)] * x + q[(1, 2)] * y).powi(2);
+        let vmv = q[(2, 2)] * (q[(0, 0)] * x * x + 2.0 * q[(0, 1)] * x * y + q[(1, 1)] * y * y) - (q[(0, 2)] * x + q[(1, 2)] * y).powi(2);
         Some((p, 1.0 - vmv / (q[(2, 2)] * self.c * self.c)))
     }
 }

@@ -20,8 +20,8 @@ use serde_json::json;
 use super::fft::fft2;
 use super::{SynthSettings, Truth};
 use crate::error::{Error, Result};
-use crate::scan::Heightfield;
 use crate::models::{Beckmann, Model};
+use crate::scan::Heightfield;
 use rand::RngExt;
 
 /// Parameters of a Gaussian surface.
@@ -119,12 +119,15 @@ fn covariances(a2: &[f64], px: usize, py: usize, dx: f64, dy: f64) -> Covariance
             }
             acc
         })
-        .reduce(|| [0.0; 9], |mut x, y| {
-            for k in 0..9 {
-                x[k] += y[k];
-            }
-            x
-        });
+        .reduce(
+            || [0.0; 9],
+            |mut x, y| {
+                for k in 0..9 {
+                    x[k] += y[k];
+                }
+                x
+            },
+        );
     let s = |v: f64| v * norm;
     Covariances {
         central: [[s(sums[0]), s(sums[1])], [s(sums[1]), s(sums[2])]],

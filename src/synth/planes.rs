@@ -38,7 +38,11 @@ pub fn tilted_planes(s: &SynthSettings, facets: &[PlaneFacet]) -> Result<(Height
     let mut acc = 0.0;
     for (k, f) in facets.iter().enumerate() {
         acc += f.weight;
-        let end = if k + 1 == facets.len() { s.nx } else { ((acc / total * s.nx as f64).round() as usize).clamp(bounds[k] + 1, s.nx - (facets.len() - k - 1)) };
+        let end = if k + 1 == facets.len() {
+            s.nx
+        } else {
+            ((acc / total * s.nx as f64).round() as usize).clamp(bounds[k] + 1, s.nx - (facets.len() - k - 1))
+        };
         bounds.push(end);
     }
     // Heights: continuous along the middle row (y = 0) across strip boundaries.

@@ -51,12 +51,7 @@ impl Truth {
     /// A truth for a contract model.
     pub(crate) fn for_model(model: &Model, generator: &str, settings: serde_json::Value, derived: serde_json::Value) -> Self {
         let id = model.id();
-        let params = id
-            .param_names()
-            .iter()
-            .zip(model.params())
-            .map(|(k, v)| (k.to_string(), serde_json::Value::from(v)))
-            .collect();
+        let params = id.param_names().iter().zip(model.params()).map(|(k, v)| (k.to_string(), serde_json::Value::from(v))).collect();
         let matrix_a = model.matrix_a().map(|a| {
             let mut out = [[0.0; 3]; 3];
             for (r, row) in out.iter_mut().enumerate() {

@@ -7,8 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use ndfit::batch::{
-    self, discover, summary, Baseline, JobContext, JobFailure, JobOutput, Quality, RunOptions, RunOutcome, ScanSpec,
-    Tolerances,
+    self, discover, summary, Baseline, JobContext, JobFailure, JobOutput, Quality, RunOptions, RunOutcome, ScanSpec, Tolerances,
 };
 use serde_json::{json, Value};
 
@@ -31,7 +30,8 @@ fn fake_job(spec: &ScanSpec, ctx: &JobContext<'_>) -> Result<JobOutput, JobFailu
         let v: Vec<u8> = Vec::new();
         let _ = v[text.len()]; // index out of bounds: a panic inside "a dependency"
     }
-    let v: Value = serde_json::from_str(&text).map_err(|e| JobFailure::new("corrupt", format!("{}: not a scan: {e}", spec.file.display())))?;
+    let v: Value =
+        serde_json::from_str(&text).map_err(|e| JobFailure::new("corrupt", format!("{}: not a scan: {e}", spec.file.display())))?;
     let alpha = v["alpha"].as_f64().unwrap_or(0.1);
     let kl = v["kl"].as_f64().unwrap_or(1e-3);
     std::thread::sleep(std::time::Duration::from_millis((alpha * 100.0) as u64 % 40));
@@ -47,7 +47,14 @@ fn fake_job(spec: &ScanSpec, ctx: &JobContext<'_>) -> Result<JobOutput, JobFailu
 }
 
 fn opts(out: &Path, jobs: usize) -> RunOptions {
-    RunOptions { out_dir: out.to_path_buf(), jobs, resume: false, settings: "test".into(), tolerances: Tolerances::default(), extras: Vec::new() }
+    RunOptions {
+        out_dir: out.to_path_buf(),
+        jobs,
+        resume: false,
+        settings: "test".into(),
+        tolerances: Tolerances::default(),
+        extras: Vec::new(),
+    }
 }
 
 fn run_dir(dir: &Path, o: &RunOptions, baseline: Option<&Baseline>, job: &batch::Job<'_>) -> RunOutcome {
@@ -156,7 +163,11 @@ fn results_do_not_depend_on_jobs() {
     let dir = t.path().join("in");
     for i in 0..12 {
         // Sleeps vary with alpha, so with 3 jobs completion order differs from path order.
-        fake_scan(&dir, &format!("s{i:02}.x3p"), &format!(r#"{{"alpha": {}, "kl": {}}}"#, 0.37 * ((i * 7) % 12) as f64 / 12.0 + 0.01, 1e-3 * i as f64));
+        fake_scan(
+            &dir,
+            &format!("s{i:02}.x3p"),
+            &format!(r#"{{"alpha": {}, "kl": {}}}"#, 0.37 * ((i * 7) % 12) as f64 / 12.0 + 0.01, 1e-3 * i as f64),
+        );
     }
     let mut got = Vec::new();
     for jobs in [1, 2, 3] {
@@ -484,10 +495,12 @@ fn synthetic_set_corrupt_scan_own_baseline_and_ggx_regression() {
     let mut rows = csv.lines();
     let head: Vec<&str> = rows.next().unwrap().split(',').collect();
     let (id, iw) = (head.iter().position(|h| *h == "d").unwrap(), head.iter().position(|h| *h == "proj_solid_angle").unwrap());
-    let total: f64 = rows.map(|r| {
-        let c: Vec<f64> = r.split(',').map(|x| x.parse().unwrap()).collect();
-        c[id] * c[iw]
-    }).sum();
+    let total: f64 = rows
+        .map(|r| {
+            let c: Vec<f64> = r.split(',').map(|x| x.parse().unwrap()).collect();
+            c[id] * c[iw]
+        })
+        .sum();
     assert!((total - 1.0).abs() < 1e-9, "sum d W = {total}");
     assert!(std::fs::read(base.join("plots/aniso.x3p.png")).unwrap().starts_with(b"\x89PNG"));
     let baseline = base.join("summary.json");

@@ -59,7 +59,8 @@ fn quick_bench_csv_is_sane_against_truth() {
     for r in &rows[1..] {
         let group = col(&rows, r, "group");
         // Stage times are positive and add up to the total (up to the CSV's float printing).
-        let parts: f64 = ["t_read_ms", "t_subsample_ms", "t_convert_ms", "t_ndf_ms", "t_fit_ms"].iter().map(|c| num(&rows, r, c).expect("time")).sum();
+        let parts: f64 =
+            ["t_read_ms", "t_subsample_ms", "t_convert_ms", "t_ndf_ms", "t_fit_ms"].iter().map(|c| num(&rows, r, c).expect("time")).sum();
         let total = num(&rows, r, "t_total_ms").expect("total");
         assert!(total > 0.0 && (parts - total).abs() <= 1e-9 * total.max(1.0), "{group}: {parts} vs {total}");
         // The samples are the valid stencils of the (subsampled) scan, counted independently.
@@ -149,9 +150,12 @@ fn fit_cli_presets_recover_truth() {
     let n_all = default["quality"]["n_samples_total"].as_f64().expect("n_samples_total");
     let want = [p.alpha_x, p.alpha_y, p.theta_x, p.theta_y, p.theta_z];
     let mut starts = Vec::new();
-    for (preset, max_delta, alpha_tol, angle_tol) in [("fast", 1e-2, 1e-2, 1e-2), ("balanced", 1e-3, 2e-3, 2e-3), ("accurate", 1e-3, 2e-3, 2e-3)] {
+    for (preset, max_delta, alpha_tol, angle_tol) in
+        [("fast", 1e-2, 1e-2, 1e-2), ("balanced", 1e-3, 2e-3, 2e-3), ("accurate", 1e-3, 2e-3, 2e-3)]
+    {
         let v = run(Some(preset));
-        let got: Vec<f64> = ["alpha_x", "alpha_y", "theta_x", "theta_y", "theta_z"].iter().map(|k| v["params"][k].as_f64().expect("param")).collect();
+        let got: Vec<f64> =
+            ["alpha_x", "alpha_y", "theta_x", "theta_y", "theta_z"].iter().map(|k| v["params"][k].as_f64().expect("param")).collect();
         let fit = ndfit::models::Model::from_params(ndfit::models::ModelId::Ellipsoid, &got).expect("valid fit");
         let d = crate::fit::fixtures::delta_to_truth(&fit, &truth);
         eprintln!("preset {preset}: {got:?} delta {d:.2e}");

@@ -160,7 +160,9 @@ fn tangent_angle_is_minus_theta_z() {
     assert!((axes.alpha_x_azimuth - 1.043).abs() < 1e-12);
     assert!((axes.alpha_x[0] - 1.043f64.cos()).abs() < 1e-12 && (axes.alpha_x[1] - 1.043f64.sin()).abs() < 1e-12);
     // D falls off slowest along alpha_x: at 20 degrees from the pole, largest there, smallest along alpha_y.
-    let at = |phi: f64| fit.d(Vector3::new(20f64.to_radians().sin() * phi.cos(), 20f64.to_radians().sin() * phi.sin(), 20f64.to_radians().cos()));
+    let at = |phi: f64| {
+        fit.d(Vector3::new(20f64.to_radians().sin() * phi.cos(), 20f64.to_radians().sin() * phi.sin(), 20f64.to_radians().cos()))
+    };
     let (best, _) = (0..3600).map(|k| k as f64 * PI / 3600.0).map(|p| (p, at(p))).fold((0.0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
     assert!((best - 1.043).abs() < 1e-3, "{best}");
 }

@@ -22,7 +22,25 @@ fn batch_and_fit_share_flags_and_results() {
     let d = tempfile::tempdir().expect("temp dir");
     let scans = d.path().join("scans");
     std::fs::create_dir(&scans).expect("mkdir");
-    run(d.path(), &["synth", "scans/s.x3p", "--nx", "192", "--ny", "192", "--alpha-x", "0.3", "--alpha-y", "0.15", "--theta-z", "0.4", "--truth", "s.truth.json"]);
+    run(
+        d.path(),
+        &[
+            "synth",
+            "scans/s.x3p",
+            "--nx",
+            "192",
+            "--ny",
+            "192",
+            "--alpha-x",
+            "0.3",
+            "--alpha-y",
+            "0.15",
+            "--theta-z",
+            "0.4",
+            "--truth",
+            "s.truth.json",
+        ],
+    );
     let flags = ["--max-theta", "50", "--preset", "fast"];
     let mut fit_args = vec!["fit", "scans/s.x3p", "--model", "ggx-aniso", "-q", "-o", "fit.json"];
     fit_args.extend(flags);
@@ -31,7 +49,11 @@ fn batch_and_fit_share_flags_and_results() {
     batch_args.extend(flags);
     run(d.path(), &batch_args);
     run(d.path(), &["batch", "scans", "-o", "plain", "--model", "ggx-aniso"]);
-    let (f, b, plain) = (json(&d.path().join("fit.json")), json(&d.path().join("out/fits/s.x3p.fit.json")), json(&d.path().join("plain/fits/s.x3p.fit.json")));
+    let (f, b, plain) = (
+        json(&d.path().join("fit.json")),
+        json(&d.path().join("out/fits/s.x3p.fit.json")),
+        json(&d.path().join("plain/fits/s.x3p.fit.json")),
+    );
     for key in ["params", "std_errors", "quality"] {
         assert_eq!(f.get(key), b.get(key), "{key}");
     }

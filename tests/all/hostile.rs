@@ -392,7 +392,11 @@ fn negative_values_reach_batch_scans_from_the_command_line_and_the_manifest() {
         .collect();
     std::fs::write(d.path().join("r.asc"), rows.join("\n") + "\n").unwrap();
     // Negative values with exponents, after `--` and in manifest cells; a scan's own value replaces the run's.
-    std::fs::write(d.path().join("m.csv"), "path,id,z_scale,options\nr.asc,neg,-2e-9,\nr.asc,pos,2e-9,\nr.asc,opt,,--z-scale -2e-9\nr.asc,run,,\n").unwrap();
+    std::fs::write(
+        d.path().join("m.csv"),
+        "path,id,z_scale,options\nr.asc,neg,-2e-9,\nr.asc,pos,2e-9,\nr.asc,opt,,--z-scale -2e-9\nr.asc,run,,\n",
+    )
+    .unwrap();
     let out = run(d.path(), &["batch", "m.csv", "-o", "out", "--model", "ggx", "--", "--dx", "1e-6", "--z-scale", "-1e-9"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.path().join("out/summary.json")).unwrap()).unwrap();
@@ -442,15 +446,34 @@ fn degenerate_ndfs() -> Vec<(&'static str, ndfit::ndf::EmpiricalNdf)> {
         solid_angle: 1e-3,
         proj_solid_angle: 1e-3 * th.cos(),
     };
-    let ramp = |f: &dyn Fn(usize) -> (f64, u64)| (0..40).map(|k| { let (d, c) = f(k); bin(k as f64 * 0.035, d, c) }).collect::<Vec<_>>();
+    let ramp = |f: &dyn Fn(usize) -> (f64, u64)| {
+        (0..40)
+            .map(|k| {
+                let (d, c) = f(k);
+                bin(k as f64 * 0.035, d, c)
+            })
+            .collect::<Vec<_>>()
+    };
     vec![
         ("one bin", EmpiricalNdf::from_bins(vec![bin(0.0, 1.0 / 1e-3, 100)], 100)),
         ("all empty", EmpiricalNdf::from_bins(ramp(&|_| (0.0, 0)), 0)),
         ("constant", EmpiricalNdf::from_bins(ramp(&|_| (25.0, 10)), 400)),
         ("huge range", EmpiricalNdf::from_bins(ramp(&|k| (10f64.powi(300 - 15 * k as i32), 1 + k as u64)), 820)),
         ("tiny", EmpiricalNdf::from_bins(ramp(&|_| (f64::MIN_POSITIVE, 1)), 40)),
-        ("zero solid angle", EmpiricalNdf::from_bins(ramp(&|k| (1.0, k as u64)).into_iter().map(|b| NdfBin { proj_solid_angle: 0.0, solid_angle: 0.0, ..b }).collect(), 780)),
-        ("denormal solid angle", EmpiricalNdf::from_bins(ramp(&|k| (1e300, k as u64)).into_iter().map(|b| NdfBin { proj_solid_angle: 1e-320, ..b }).collect(), 780)),
+        (
+            "zero solid angle",
+            EmpiricalNdf::from_bins(
+                ramp(&|k| (1.0, k as u64)).into_iter().map(|b| NdfBin { proj_solid_angle: 0.0, solid_angle: 0.0, ..b }).collect(),
+                780,
+            ),
+        ),
+        (
+            "denormal solid angle",
+            EmpiricalNdf::from_bins(
+                ramp(&|k| (1e300, k as u64)).into_iter().map(|b| NdfBin { proj_solid_angle: 1e-320, ..b }).collect(),
+                780,
+            ),
+        ),
     ]
 }
 
@@ -469,7 +492,12 @@ fn plots_of_degenerate_ndfs_draw_or_fail_cleanly() {
             ("slices".into(), ndfit::ndf::plot::plot_slices(&d.path().join("slices.png"), &ndf, name)),
         ]
         .into_iter()
-        .chain(models.iter().enumerate().map(|(k, m)| (format!("fit{k}"), ndfit::fit::plot::plot_fit(&d.path().join(format!("fit{k}.png")), &ndf, m, name))))
+        .chain(
+            models
+                .iter()
+                .enumerate()
+                .map(|(k, m)| (format!("fit{k}"), ndfit::fit::plot::plot_fit(&d.path().join(format!("fit{k}.png")), &ndf, m, name))),
+        )
         .collect();
         for (what, r) in outs {
             let p = d.path().join(format!("{what}.png"));
@@ -510,7 +538,8 @@ fn resume_writes_deleted_ndf_files_and_plots_again() {
     let args = ["batch", "scans", "-o", "out", "--model", "ggx", "--write-ndf", "--plots", "--jobs", "1"];
     let out = run(d.path(), &args);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let (ndf, png, other) = (d.path().join("out/ndf/a.x3p.ndf.csv"), d.path().join("out/plots/a.x3p.png"), d.path().join("out/ndf/b.x3p.ndf.csv"));
+    let (ndf, png, other) =
+        (d.path().join("out/ndf/a.x3p.ndf.csv"), d.path().join("out/plots/a.x3p.png"), d.path().join("out/ndf/b.x3p.ndf.csv"));
     let (first_ndf, first_png) = (std::fs::read(&ndf).unwrap(), std::fs::read(&png).unwrap());
     let other_mtime = std::fs::metadata(&other).unwrap().modified().unwrap();
     std::fs::remove_file(&ndf).unwrap();

@@ -92,7 +92,13 @@ fn ellipsoid_ndf_matches_analytic_d() {
             let kf = c.k as f64;
             eprintln!(
                 "ellipsoid {a:?} {nx}x{ny} {scheme:?}: grid {} bins {} K {} chi2/K {:.3} sum c/E {:.6} midpoint max {:.2e} rms {:.2e}",
-                ndf.grid.n, ndf.bins.len(), c.k, c.chi2 / kf, c.sum_c / c.sum_e, c.max_mid, c.rms_mid
+                ndf.grid.n,
+                ndf.bins.len(),
+                c.k,
+                c.chi2 / kf,
+                c.sum_c / c.sum_e,
+                c.max_mid,
+                c.rms_mid
             );
             assert!(c.k > 500, "too few bins compared: {}", c.k);
             assert!(c.chi2 < kf + 5.0 * (2.0 * kf).sqrt(), "chi2 {} for K {}", c.chi2, c.k);
@@ -174,8 +180,8 @@ fn schemes_differ_on_rough_surfaces_as_predicted() {
     let c_central = truth_cov(&truth, "slope_cov_central");
     let (lo, up) = (truth_cov(&truth, "slope_cov_triangles_lower"), truth_cov(&truth, "slope_cov_triangles_upper"));
     let central = empirical_ndf(&hf, &NdfOptions { cells_across: Some(41), ..Default::default() }).expect("valid");
-    let tri = empirical_ndf(&hf, &NdfOptions { scheme: NormalScheme::Triangles, cells_across: Some(41), ..Default::default() })
-        .expect("valid");
+    let tri =
+        empirical_ndf(&hf, &NdfOptions { scheme: NormalScheme::Triangles, cells_across: Some(41), ..Default::default() }).expect("valid");
     let d_central = |m: Vector3<f64>| gaussian_d(c_central, m);
     let d_tri = |m: Vector3<f64>| 0.5 * (gaussian_d(lo, m) + gaussian_d(up, m));
     let (x_cc, k_cc) = chi2_against(&central, d_central);
@@ -272,7 +278,10 @@ fn height_offset_changes_nothing_beyond_rounding() {
     let eps_p = eps_s / sigma_min;
     let expected = a.n_samples as f64 * 4.0 * eps_p / a.grid.h;
     let max_rel_d = a.bins.iter().zip(&b.bins).filter(|(x, _)| x.count > 0).map(|(x, y)| ((x.d - y.d) / x.d).abs()).fold(0.0, f64::max);
-    eprintln!("offset: moved {moved} samples (expected {expected:.2e}), frame centre shift {:?}", [b.frame.center[0] - a.frame.center[0], b.frame.center[1] - a.frame.center[1]]);
+    eprintln!(
+        "offset: moved {moved} samples (expected {expected:.2e}), frame centre shift {:?}",
+        [b.frame.center[0] - a.frame.center[0], b.frame.center[1] - a.frame.center[1]]
+    );
     assert!((moved as f64) <= 10.0 * expected + 10.0, "moved {moved}");
     assert!((b.frame.center[0] - a.frame.center[0]).abs() < 1e-8 && (b.frame.cov[0][0] / a.frame.cov[0][0] - 1.0).abs() < 1e-6);
     // The robust frame moves by the slopes' rounding too (relative to the slope scale); the bins'
@@ -301,7 +310,11 @@ fn planes_are_deltas_without_nan() {
     assert!(angle < 1e-6, "peak bin direction off by {angle} rad");
     assert!(ndf.bins.iter().all(|b| b.d.is_finite() && b.m.iter().all(|v| v.is_finite())));
 
-    let facets = [PlaneFacet { slope: [0.3, 0.0], weight: 1.0 }, PlaneFacet { slope: [-0.2, 0.0], weight: 2.0 }, PlaneFacet { slope: [0.0, 0.0], weight: 1.0 }];
+    let facets = [
+        PlaneFacet { slope: [0.3, 0.0], weight: 1.0 },
+        PlaneFacet { slope: [-0.2, 0.0], weight: 2.0 },
+        PlaneFacet { slope: [0.0, 0.0], weight: 1.0 },
+    ];
     let (hf, truth) = tilted_planes(&s, &facets).expect("valid");
     let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("valid");
     for f in truth.facets.as_ref().expect("facets") {
@@ -346,7 +359,8 @@ fn cli_synth_and_ndf() {
         .output()
         .expect("runs");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let truth: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("e.truth.json")).expect("truth written")).expect("JSON");
+    let truth: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("e.truth.json")).expect("truth written")).expect("JSON");
     assert_eq!(truth["schema"], "ndfit.synth/1");
     assert_eq!(truth["model"], "ellipsoid");
     let csv = dir.path().join("e.csv");

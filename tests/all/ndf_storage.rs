@@ -109,7 +109,10 @@ fn real_quantized_scan_has_no_comb_needs_shared() {
     for hf in [raw.clone(), ndfit::preprocess::apply(raw, &Default::default()).expect("plane removal")] {
         let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("valid");
         let (all, empty) = core_bins(&ndf, 1.0);
-        eprintln!("st_plu-1: quantization {:?}, grid {}, core bins {all}, empty {empty}, warnings {:?}", ndf.quantization, ndf.grid.n, ndf.warnings);
+        eprintln!(
+            "st_plu-1: quantization {:?}, grid {}, core bins {all}, empty {empty}, warnings {:?}",
+            ndf.quantization, ndf.grid.n, ndf.warnings
+        );
         let q = ndf.quantization.expect("st_plu-1 heights are on a lattice");
         assert!(q.on_lattice >= 0.99 && (q.quantum / 3.90625e-9 - 1.0).abs() < 1e-6, "{q:?}");
         assert!(q.lattice.is_some(), "rigid: {:?}", q.rigidity);

@@ -106,7 +106,11 @@ fn gaussian_surface_alpha_squared_grows_by_twice_the_kernel_variance() {
         let n = at_f.len() as f64;
         let tol = 5.0 * (2.0 * 2.0 * kernel_var * kernel_var / n).sqrt() + 1e-12;
         let grown = a2_at - a2_f;
-        assert!((grown - 2.0 * kernel_var).abs() < tol, "F={footprint:e}: alpha^2 grew by {grown}, 2 sigma_F^2 = {}, tol {tol}", 2.0 * kernel_var);
+        assert!(
+            (grown - 2.0 * kernel_var).abs() < tol,
+            "F={footprint:e}: alpha^2 grew by {grown}, 2 sigma_F^2 = {}, tol {tol}",
+            2.0 * kernel_var
+        );
     }
 }
 
@@ -131,9 +135,16 @@ fn bump_field_skew_fades_with_footprint() {
         skews.push(m.skewness);
         // Second moments are preserved (S3) up to edge reweighting and sampling: 5 %.
         let st = footprint_stats(&ff, &sx, &sy, footprint).unwrap();
-        assert!((m.cov.trace() / st.cov_slopes.trace() - 1.0).abs() < 0.05, "F={footprint:e}: {} vs {}", m.cov.trace(), st.cov_slopes.trace());
+        assert!(
+            (m.cov.trace() / st.cov_slopes.trace() - 1.0).abs() < 0.05,
+            "F={footprint:e}: {} vs {}",
+            m.cov.trace(),
+            st.cov_slopes.trace()
+        );
     }
-    let raw = slope_moments(&sx.iter().zip(&sy).filter(|(a, _)| a.is_finite()).map(|(a, b)| nalgebra::Vector2::new(*a, *b)).collect::<Vec<_>>()).unwrap();
+    let raw =
+        slope_moments(&sx.iter().zip(&sy).filter(|(a, _)| a.is_finite()).map(|(a, b)| nalgebra::Vector2::new(*a, *b)).collect::<Vec<_>>())
+            .unwrap();
     assert!((skews[0] - raw.skewness).abs() < 1e-9, "F=0 must be the raw NDF");
     assert!(skews[0] > 0.5, "tilted caps must be skewed: {}", skews[0]);
     eprintln!("skewness vs footprint: {skews:?}");
@@ -199,8 +210,8 @@ mod cli {
         assert_eq!(j["schema"], "ndfit.scale/1");
         let fps = j["footprints"].as_array().unwrap();
         assert_eq!(fps.len(), 5); // 2 given + 3 scene steps
-        // The explanation a new user reads: the choice first, what the error means, and for every simpler
-        // model the error it would cost at the scene's footprints (the numbers of `candidates`).
+                                  // The explanation a new user reads: the choice first, what the error means, and for every simpler
+                                  // model the error it would cost at the scene's footprints (the numbers of `candidates`).
         let rec = &j["recommendation"];
         let expl = rec["explanation"].as_str().unwrap();
         match rec["model"].as_str() {
@@ -617,11 +628,8 @@ mod robust {
         let fps = [1e-5, 3e-5, 1e-4, 2e-4];
         let fields: Vec<_> = fps.iter().map(|&f| footprint_field(hf.nx, hf.ny, hf.dx, hf.dy, &sx, &sy, kernel_sigma(f)).unwrap()).collect();
         let common = fields.last().unwrap().valid_points();
-        let traces: Vec<f64> = fields
-            .iter()
-            .zip(fps)
-            .map(|(ff, f)| footprint_stats_over(ff, &sx, &sy, f, &common).unwrap().sigma_f.trace())
-            .collect();
+        let traces: Vec<f64> =
+            fields.iter().zip(fps).map(|(ff, f)| footprint_stats_over(ff, &sx, &sy, f, &common).unwrap().sigma_f.trace()).collect();
         eprintln!("tr Sigma_F at {fps:?}: {traces:?}");
         assert!(traces.windows(2).all(|w| w[1] > w[0]), "{traces:?}");
     }

@@ -151,8 +151,9 @@ fn seeds_noise_holes_and_bad_settings() {
 #[test]
 fn truth_json_round_trips() {
     let s = SynthSettings { nx: 64, ny: 64, ..Default::default() };
-    let (_, t) = ellipsoid_surface(&s, &EllipsoidParams { alpha_x: 0.2, alpha_y: 0.3, theta_x: 0.1, theta_y: 0.0, theta_z: 0.4, fill: 0.9 })
-        .expect("valid");
+    let (_, t) =
+        ellipsoid_surface(&s, &EllipsoidParams { alpha_x: 0.2, alpha_y: 0.3, theta_x: 0.1, theta_y: 0.0, theta_z: 0.4, fill: 0.9 })
+            .expect("valid");
     let text = t.to_json();
     let v: serde_json::Value = serde_json::from_str(&text).expect("valid JSON");
     assert_eq!(v["schema"], "ndfit.synth/1");

@@ -46,7 +46,13 @@ fn add_spikes(hf: &mut Heightfield) -> Vec<usize> {
 /// surface) lose no point to the spike test.
 #[test]
 fn despike_masks_nothing_on_clean_synthetic_scans() {
-    for p in [[0.05, 0.05, 0.0, 0.0, 0.0], [1.2, 1.2, 0.0, 0.0, 0.0], [0.2, 0.02, 0.0, 0.4, 0.0], [0.5, 0.05, -0.4, 0.1, 1.0], [0.02, 0.02, 0.3, -0.3, 0.0]] {
+    for p in [
+        [0.05, 0.05, 0.0, 0.0, 0.0],
+        [1.2, 1.2, 0.0, 0.0, 0.0],
+        [0.2, 0.02, 0.0, 0.4, 0.0],
+        [0.5, 0.05, -0.4, 0.1, 1.0],
+        [0.02, 0.02, 0.3, -0.3, 0.0],
+    ] {
         let (mut hf, _) = cap(512, p);
         let r = despike(&mut hf, Despike::Median).expect("report");
         assert_eq!(r.masked, 0, "{p:?}: {r:?}");
@@ -74,7 +80,13 @@ fn spikes_are_masked_and_the_fit_matches_the_clean_scan() {
     assert!(r.masked as f64 >= 0.95 * sites.len() as f64, "masked {} of {} spikes", r.masked, sites.len());
     let d = delta_to_model(&fit(&spiky, &FitOptions::default()), &clean_fit).expect("delta");
     let d_raw = delta_to_model(&raw_fit, &clean_fit).expect("delta");
-    eprintln!("spikes: {} sites, {} masked; NDF error against the clean fit {:.3}% despiked, {:.3}% not", sites.len(), r.masked, 100.0 * d, 100.0 * d_raw);
+    eprintln!(
+        "spikes: {} sites, {} masked; NDF error against the clean fit {:.3}% despiked, {:.3}% not",
+        sites.len(),
+        r.masked,
+        100.0 * d,
+        100.0 * d_raw
+    );
     assert!(d < 5e-3, "{d}");
     assert!(d_raw > d, "{d_raw} vs {d}");
 }
@@ -102,7 +114,12 @@ fn na_cut_at_45_degrees_fits_within_one_percent() {
     let d45 = delta_to_model(&fit(&hf, &opts), &truth).expect("delta");
     let d45t = delta_to_model(&fit(&hf, &FitOptions { cut_unresolved: true, ..opts }), &truth).expect("delta");
     let d40 = delta_to_model(&fit(&hf, &FitOptions { max_theta: 40f64.to_radians(), ..opts }), &truth).expect("delta");
-    eprintln!("NA cut: {dropped} points steeper than 45 deg dropped; NDF error {:.3}% (max_theta 45), {:.3}% (45, tail cut), {:.3}% (40)", 100.0 * d45, 100.0 * d45t, 100.0 * d40);
+    eprintln!(
+        "NA cut: {dropped} points steeper than 45 deg dropped; NDF error {:.3}% (max_theta 45), {:.3}% (45, tail cut), {:.3}% (40)",
+        100.0 * d45,
+        100.0 * d45t,
+        100.0 * d40
+    );
     assert!(dropped > 0);
     assert!(d40 < 1e-2 && d45t < 1e-2, "{d40} {d45t}");
 }
@@ -127,7 +144,12 @@ fn unresolved_tail_cut_leaves_out_flagged_bins_and_helps_a_narrow_cap() {
     assert_eq!(data.tail.bins_excluded, flagged.iter().filter(|&&k| inside(k)).count());
     let off = delta_to_model(&fit(&hf, &FitOptions::default()), &truth).expect("delta");
     let on = delta_to_model(&fit(&hf, &FitOptions { cut_unresolved: true, ..FitOptions::default() }), &truth).expect("delta");
-    eprintln!("tail cut: {:.2}% of the normals left out; NDF error {:.3}% -> {:.3}%", 100.0 * data.tail.excluded_fraction, 100.0 * off, 100.0 * on);
+    eprintln!(
+        "tail cut: {:.2}% of the normals left out; NDF error {:.3}% -> {:.3}%",
+        100.0 * data.tail.excluded_fraction,
+        100.0 * off,
+        100.0 * on
+    );
     assert!(on < 0.5 * off, "{on} vs {off}");
 }
 
@@ -141,10 +163,18 @@ fn cli_na_despike_and_tail_options() {
     std::fs::create_dir_all(&dir).expect("dir");
     let scan = dir.join("cap.x3p");
     let bin = crate::common::ndfit_bin();
-    let o = Command::new(&bin).arg("synth").arg(&scan).args(["--surface", "ellipsoid", "--nx", "128", "--ny", "128", "--dx", "1e-6", "--alpha-x", "0.3"]).output().expect("synth");
+    let o = Command::new(&bin)
+        .arg("synth")
+        .arg(&scan)
+        .args(["--surface", "ellipsoid", "--nx", "128", "--ny", "128", "--dx", "1e-6", "--alpha-x", "0.3"])
+        .output()
+        .expect("synth");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let fit = |args: &[&str], out: &std::path::Path| Command::new(&bin).arg("fit").arg(&scan).args(["--model", "ggx", "-q", "-o"]).arg(out).args(args).output().expect("fit");
-    let json = |p: &std::path::Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).expect("json")).expect("parse") };
+    let fit = |args: &[&str], out: &std::path::Path| {
+        Command::new(&bin).arg("fit").arg(&scan).args(["--model", "ggx", "-q", "-o"]).arg(out).args(args).output().expect("fit")
+    };
+    let json =
+        |p: &std::path::Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).expect("json")).expect("parse") };
 
     let a = dir.join("a.json");
     let o = fit(&["--na", "0.5", "--tail", "unresolved"], &a);

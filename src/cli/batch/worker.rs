@@ -127,7 +127,10 @@ pub fn run_in_child(
     }
     let how = describe_exit(&status);
     let last = err.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("").trim().to_string();
-    Err(JobFailure::new("crash", format!("{}: worker process {how}{}", spec.key, if last.is_empty() { String::new() } else { format!(": {last}") })))
+    Err(JobFailure::new(
+        "crash",
+        format!("{}: worker process {how}{}", spec.key, if last.is_empty() { String::new() } else { format!(": {last}") }),
+    ))
 }
 
 fn describe_exit(status: &std::process::ExitStatus) -> String {

@@ -12,7 +12,15 @@ fn fit_real_scan_writes_valid_json_and_plot_needs_shared() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let out = tmp.path().join("fit.json");
     let png = tmp.path().join("fit.png");
-    let st = Command::new(ndfit_bin()).arg("fit").arg(&scan).args(["--model", "auto", "-o"]).arg(&out).arg("--plot").arg(&png).output().expect("runs");
+    let st = Command::new(ndfit_bin())
+        .arg("fit")
+        .arg(&scan)
+        .args(["--model", "auto", "-o"])
+        .arg(&out)
+        .arg("--plot")
+        .arg(&png)
+        .output()
+        .expect("runs");
     assert!(st.status.success(), "stderr: {}", String::from_utf8_lossy(&st.stderr));
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).expect("json written")).expect("json");
     super::schema::assert_valid(&v);
@@ -49,7 +57,9 @@ fn bad_input_is_one_line_and_no_output() {
 fn subsample_zero_is_refused_even_with_a_preset() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let scan = tmp.path().join("small.txt");
-    let text: String = (0..40).map(|i| (0..40).map(|j| format!("{:e}", 1e-7 * ((i * 7 + j * 3) % 11) as f64)).collect::<Vec<_>>().join(" ") + "\n").collect();
+    let text: String = (0..40)
+        .map(|i| (0..40).map(|j| format!("{:e}", 1e-7 * ((i * 7 + j * 3) % 11) as f64)).collect::<Vec<_>>().join(" ") + "\n")
+        .collect();
     std::fs::write(&scan, text).expect("write");
     for preset in [None, Some("fast")] {
         let mut cmd = Command::new(ndfit_bin());

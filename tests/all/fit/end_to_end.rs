@@ -3,9 +3,12 @@
 
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
-use ndfit::ndf::{empirical_ndf, NdfOptions};
 use ndfit::ndf::NormalScheme;
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, gaussian::GaussianParams, gaussian_surface, planes::PlaneFacet, tilted_planes, SynthSettings};
+use ndfit::ndf::{empirical_ndf, NdfOptions};
+use ndfit::synth::{
+    ellipsoid::EllipsoidParams, ellipsoid_surface, gaussian::GaussianParams, gaussian_surface, planes::PlaneFacet, tilted_planes,
+    SynthSettings,
+};
 
 use super::fixtures::delta_to_truth;
 
@@ -23,7 +26,12 @@ fn ellipsoid_case(p: [f64; 5], n: usize, offset: f64, scheme: ndfit::ndf::Normal
     let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions::default()).expect("fit");
     assert!(rep.param_vec().iter().all(|v| v.is_finite()));
     let d = delta_to_truth(&rep.to_model().expect("model"), &truth);
-    eprintln!("{p:?} n={n} offset={offset} {scheme:?}: fit {:?} se {:?} delta {d:.2e} chi2r {:?}", rep.param_vec(), rep.std_error_vec(), rep.quality.reduced_chi2);
+    eprintln!(
+        "{p:?} n={n} offset={offset} {scheme:?}: fit {:?} se {:?} delta {d:.2e} chi2r {:?}",
+        rep.param_vec(),
+        rep.std_error_vec(),
+        rep.quality.reduced_chi2
+    );
     // A single-lobe truth that the fit recovers must be trusted (data_formats/objective.md, "The verdict").
     assert_eq!(rep.quality.verdict, ndfit::fit::verdict::Verdict::Ok, "{p:?}: {:?}", rep.quality.reasons);
     (d, rep)
@@ -97,4 +105,3 @@ fn gaussian_scan_fits_beckmann_aniso_to_sqrt2_rms_slope() {
     assert!(super::fixtures::angle_diff(p[2], 0.4, std::f64::consts::PI).abs() < 0.01, "theta_z {}", p[2]);
     assert_eq!(rep.quality.verdict, ndfit::fit::verdict::Verdict::Ok, "{:?}", rep.quality.reasons);
 }
-

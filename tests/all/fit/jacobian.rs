@@ -74,7 +74,9 @@ fn residual_jacobian_matches_central_differences() {
     // that both signs of c - E occur; bins with small and zero counts included.
     // Both on the hemisphere and on a region cut at 40 deg (the normalization's rank-one term then
     // matters most: a good share of the mass is outside).
-    for (objective, max_theta) in [(Objective::Poisson, 90f64), (Objective::Logd, 90.0), (Objective::Poisson, 40.0), (Objective::Logd, 40.0)] {
+    for (objective, max_theta) in
+        [(Objective::Poisson, 90f64), (Objective::Logd, 90.0), (Objective::Poisson, 40.0), (Objective::Logd, 40.0)]
+    {
         for (id, truth, at) in [
             (ModelId::Ellipsoid, vec![0.3, 0.15, 0.2, -0.1, 0.5], vec![0.25, 0.2, 0.1, -0.2, 0.7]),
             (ModelId::BeckmannAniso, vec![0.2, 0.1, 0.3], vec![0.18, 0.12, 0.2]),

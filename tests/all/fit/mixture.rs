@@ -230,7 +230,13 @@ fn two_lobe_heightfields_recover_the_mixture_and_auto_takes_two_lobes() {
         let ndf = empirical_ndf(&hf, &tri).expect("ndf");
         let rep = fit_model(&ndf, id, &FitOptions::default()).expect("fit");
         let d = delta_to_truth(&rep.to_model().expect("model"), &truth);
-        eprintln!("{id} tail weight {:.2}: fit {:?} truth {:?} delta {d:.2e} dispersion {:?}", 1.0 - w, rep.param_vec(), truth.canonical().params(), rep.quality.dispersion);
+        eprintln!(
+            "{id} tail weight {:.2}: fit {:?} truth {:?} delta {d:.2e} dispersion {:?}",
+            1.0 - w,
+            rep.param_vec(),
+            truth.canonical().params(),
+            rep.quality.dispersion
+        );
         assert!(d <= 0.005, "{id} tail weight {:.2}: delta {d}", 1.0 - w);
         let auto = fit_auto(&ndf, &FitOptions::default()).expect("auto");
         let sel = auto.selection.as_ref().expect("selection");
@@ -259,7 +265,8 @@ fn beckmann_mixture_counts_recover_the_truth() {
 #[test]
 fn single_lobe_truths_keep_one_lobe() {
     for p in [[0.2, 0.2, 0.0, 0.0, 0.0], [0.4, 0.04, 0.0, 0.0, 0.7], [0.25, 0.1, 0.2, -0.15, 0.3]] {
-        let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+        let ep =
+            EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
         let (hf, _) = ellipsoid_surface(&SynthSettings { nx: 512, ny: 512, seed: 3, ..SynthSettings::default() }, &ep).expect("synth");
         let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
         let auto = fit_auto(&ndf, &FitOptions::default()).expect("auto");

@@ -5,10 +5,10 @@
 pub(crate) mod fixtures;
 
 mod cli;
-mod jacobian;
-mod mixture;
 mod compare;
 mod covariance;
 mod end_to_end;
+mod jacobian;
+mod mixture;
 mod recovery;
 mod schema;

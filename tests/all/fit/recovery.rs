@@ -32,7 +32,10 @@ fn ellipsoid_fits_match_the_truth_at_1024_squared() {
         let canon = truth.canonical().params();
         let got = rep.param_vec();
         let se = rep.std_error_vec();
-        eprintln!("case {i}: truth {canon:?}\n   fit {got:?}\n   se  {se:?}\n   delta {d:.2e} chi2r {:?} evals {} starts {:?}", rep.quality.reduced_chi2, rep.solver.evaluations, rep.solver.start_objectives);
+        eprintln!(
+            "case {i}: truth {canon:?}\n   fit {got:?}\n   se  {se:?}\n   delta {d:.2e} chi2r {:?} evals {} starts {:?}",
+            rep.quality.reduced_chi2, rep.solver.evaluations, rep.solver.start_objectives
+        );
         assert!(d <= DELTA_MAX, "case {i}: delta {d} > {DELTA_MAX}");
         assert!(got.iter().all(|v| v.is_finite()));
     }
@@ -93,7 +96,17 @@ fn theta_z_of_a_near_isotropic_lobe_is_reported_unidentified() {
     let mut flagged = 0;
     for seed in 0..8 {
         let mut rep = fit_model(&ndf_on(&iso, 96, N_1024, 50 + seed), ModelId::Ellipsoid, &FitOptions::default()).expect("fit");
-        rep.input = Some(ndfit::fit::InputInfo { path: "synthetic".into(), format: "binned".into(), nx: 1024, ny: 1024, dx: 1e-6, dy: 1e-6, invalid: 0, file_grid: None, despike: None });
+        rep.input = Some(ndfit::fit::InputInfo {
+            path: "synthetic".into(),
+            format: "binned".into(),
+            nx: 1024,
+            ny: 1024,
+            dx: 1e-6,
+            dy: 1e-6,
+            invalid: 0,
+            file_grid: None,
+            despike: None,
+        });
         eprintln!("isotropic truth: fit {:?} se {:?} unidentified {:?}", rep.param_vec(), rep.std_error_vec(), rep.unidentified);
         if rep.unidentified.is_empty() {
             continue;

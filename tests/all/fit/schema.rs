@@ -24,7 +24,17 @@ fn library_reports_of_every_model_validate() {
     use ndfit::models::ModelId;
     let truth = super::fixtures::model(ModelId::Ellipsoid, &[0.3, 0.1, 0.1, -0.1, 0.4]);
     let ndf = ndfit::fit::synthetic::binned_ndf(&truth, &ndfit::fit::synthetic::Grid::for_model(&truth, 63), 2e5, 9);
-    let input = InputInfo { path: "x.x3p".into(), format: "x3p".into(), nx: 10, ny: 10, dx: 1e-6, dy: 1e-6, invalid: 0, file_grid: None, despike: None };
+    let input = InputInfo {
+        path: "x.x3p".into(),
+        format: "x3p".into(),
+        nx: 10,
+        ny: 10,
+        dx: 1e-6,
+        dy: 1e-6,
+        invalid: 0,
+        file_grid: None,
+        despike: None,
+    };
     let mut reports: Vec<_> = ModelId::ALL.iter().map(|&id| fit_model(&ndf, id, &FitOptions::default()).expect("fit")).collect();
     reports.push(fit_auto(&ndf, &FitOptions::default()).expect("auto"));
     for mut r in reports {

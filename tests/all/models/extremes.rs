@@ -3,8 +3,8 @@
 
 use nalgebra::{Complex, Matrix2, Matrix3, Vector2, Vector3};
 use ndfit::models::{
-    fresnel_conductor, sampling, Beckmann, Ellipsoid, Ggx, GgxMatrix, MaskingShadowing, Masking, MicrofacetBrdf,
-    Model, Ndf, SquaredEllipsoidalLobe,
+    fresnel_conductor, sampling, Beckmann, Ellipsoid, Ggx, GgxMatrix, Masking, MaskingShadowing, MicrofacetBrdf, Model, Ndf,
+    SquaredEllipsoidalLobe,
 };
 
 /// Assert `x` is finite; the message is only built on failure (formatting is costly in these loops).

@@ -7,7 +7,6 @@
 //! (Heitz eq. 109). The integral is taken in the lobe's own frame (where it is round) with the kink line
 //! `w.o_xy = o_z` rotated onto the edge of the domain (see `projected_visible`).
 
-
 use nalgebra::{Matrix2, Vector2, Vector3};
 use ndfit::models::{Ellipsoid, Model, ModelId, Ndf};
 
@@ -34,7 +33,11 @@ fn projected_visible(d: &dyn Fn(Vector3<f64>) -> f64, o: Vector3<f64>, w0: Vecto
         let f = |t1: f64, t2: f64| {
             let w = w0 + l * Vector2::new(g(t1), g(t2));
             let v = integrand_at(w) * det * dg(t1) * dg(t2);
-            if v.is_finite() { v } else { 0.0 }
+            if v.is_finite() {
+                v
+            } else {
+                0.0
+            }
         };
         return integrate_2d(f, (-1.0, 1.0), (-1.0, 1.0), 4, 1e-300, 1e-9, 40_000);
     }
@@ -46,7 +49,11 @@ fn projected_visible(d: &dyn Fn(Vector3<f64>) -> f64, o: Vector3<f64>, w0: Vecto
     let f = |t1: f64, t2: f64| {
         let xi = e * g(t1) + e_perp * g(t2);
         let v = integrand_at(w0 + l * xi) * det * dg(t1) * dg(t2);
-        if v.is_finite() { v } else { 0.0 }
+        if v.is_finite() {
+            v
+        } else {
+            0.0
+        }
     };
     integrate_2d(f, (-1.0, t_c), (-1.0, 1.0), 4, 1e-300, 1e-9, 60_000)
 }

@@ -83,7 +83,10 @@ fn eval_cli_of_a_mixture() {
     let p = [0.1, 0.05, 0.45, 0.3, 0.4, 0.85];
     let json = serde_json::json!({"model": "ggx2", "params": {"alpha_x1": p[0], "alpha_y1": p[1], "alpha_x2": p[2], "alpha_y2": p[3], "theta_z": p[4], "weight": p[5]}});
     let (l1, l2) = (model(ModelId::GgxAniso, &[p[0], p[1], p[4]]), model(ModelId::GgxAniso, &[p[2], p[3], p[4]]));
-    let dirs = [(Vector3::new(0.1, -0.2, 1.0).normalize(), Vector3::new(0.5, 0.3, 0.6).normalize()), (Vector3::z(), Vector3::new(-0.8, 0.1, 0.3).normalize())];
+    let dirs = [
+        (Vector3::new(0.1, -0.2, 1.0).normalize(), Vector3::new(0.5, 0.3, 0.6).normalize()),
+        (Vector3::z(), Vector3::new(-0.8, 0.1, 0.3).normalize()),
+    ];
     let stdin: String = std::iter::once("mx,my,mz,ux,uy,uz".to_string())
         .chain(dirs.iter().map(|(m, u)| format!("{},{},{},{},{},{}", m.x, m.y, m.z, u.x, u.y, u.z)))
         .collect::<Vec<_>>()

@@ -173,9 +173,7 @@ pub fn slope_frame(ax: f64, ay: f64, tx: f64, ty: f64, tz: f64) -> (Vector2<f64>
     let w0 = m2_inv * b;
     let qmin = m[(2, 2)] - b.dot(&w0);
     let eig = nalgebra::SymmetricEigen::new(m2);
-    let inv_sqrt = eig.eigenvectors
-        * Matrix2::from_diagonal(&eig.eigenvalues.map(|l| 1.0 / l.sqrt()))
-        * eig.eigenvectors.transpose();
+    let inv_sqrt = eig.eigenvectors * Matrix2::from_diagonal(&eig.eigenvalues.map(|l| 1.0 / l.sqrt())) * eig.eigenvectors.transpose();
     (w0, inv_sqrt * qmin.sqrt())
 }
 

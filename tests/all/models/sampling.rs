@@ -8,7 +8,6 @@ use std::f64::consts::PI;
 use nalgebra::Vector3;
 use ndfit::models::{fresnel::checked_eta, Ellipsoid, MaskingShadowing, MicrofacetBrdf, Model, Ndf};
 
-
 use super::equivalence::Rng;
 
 /// Regularized upper incomplete gamma `Q(a, x)` (series for x < a + 1, Lentz continued fraction otherwise;
@@ -71,7 +70,8 @@ fn cell_of(m: Vector3<f64>) -> usize {
 
 /// Integral of `f` over each cell: 2x2 sub-cells with 6-point Gauss-Legendre each way.
 fn cell_integrals(f: &dyn Fn(Vector3<f64>) -> f64) -> Vec<f64> {
-    const X: [f64; 6] = [-0.932469514203152, -0.661209386466265, -0.238619186083197, 0.238619186083197, 0.661209386466265, 0.932469514203152];
+    const X: [f64; 6] =
+        [-0.932469514203152, -0.661209386466265, -0.238619186083197, 0.238619186083197, 0.661209386466265, 0.932469514203152];
     const W: [f64; 6] = [0.171324492379170, 0.360761573048139, 0.467913934572691, 0.467913934572691, 0.360761573048139, 0.171324492379170];
     const SUB: usize = 2;
     let (dt, dp) = (1.0 / (NT * SUB) as f64, 2.0 * PI / (NP * SUB) as f64);
@@ -121,11 +121,11 @@ fn chi2_p_value(obs: &[f64], exp: &[f64]) -> f64 {
 }
 
 const PARAMS: [[f64; 5]; 5] = [
-    [0.3, 0.3, 0.0, 0.0, 0.0],   // GGX
-    [0.5, 0.3, 0.0, 0.0, 0.4],   // GTR2aniso
-    [0.3, 0.6, 0.4, -0.3, 1.0],  // skewed
-    [0.8, 0.2, -0.9, 0.5, 0.2],  // strongly skewed
-    [1.5, 0.5, 0.3, 0.3, -0.5],  // rough
+    [0.3, 0.3, 0.0, 0.0, 0.0],  // GGX
+    [0.5, 0.3, 0.0, 0.0, 0.4],  // GTR2aniso
+    [0.3, 0.6, 0.4, -0.3, 1.0], // skewed
+    [0.8, 0.2, -0.9, 0.5, 0.2], // strongly skewed
+    [1.5, 0.5, 0.3, 0.3, -0.5], // rough
 ];
 const THETAS: [f64; 4] = [0.0, 45.0, 80.0, 89.5];
 

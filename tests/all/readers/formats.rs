@@ -82,13 +82,9 @@ fn raw_formats_need_and_use_dx_and_z_scale() {
     check(&hf, "csv", 1e-6, 1e-6, &HOLES, |i, j| stored(i, j) as f64 * 1e-9);
 
     // Each raw format says which option is missing.
-    for (bytes, name) in [
-        (gen::npy(), "a.npy"),
-        (gen::exr(), "a.exr"),
-        (gen::png16(), "a.png"),
-        (gen::tiff16(), "a.tif"),
-        (gen::ascii(false, " "), "a.txt"),
-    ] {
+    for (bytes, name) in
+        [(gen::npy(), "a.npy"), (gen::exr(), "a.exr"), (gen::png16(), "a.png"), (gen::tiff16(), "a.tif"), (gen::ascii(false, " "), "a.txt")]
+    {
         let e = read_as(&bytes, name, &ReadOptions { z_scale: Some(1e-9), ..Default::default() }).expect_err("needs --dx");
         assert_eq!(e.kind(), ndfit::ErrorKind::MissingOption, "{name}: {e}");
         assert!(e.to_string().contains("--dx"), "{name}: {e}");

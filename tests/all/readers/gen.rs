@@ -312,9 +312,7 @@ pub fn ascii(header: bool, sep: &str) -> Vec<u8> {
         s.push_str(&format!("AsciiMatrix {NX} {NY} 2 3\n"));
     }
     for i in 0..NY {
-        let row: Vec<String> = (0..NX)
-            .map(|j| if is_hole(i * NX + j) { "nan".to_string() } else { stored(i, j).to_string() })
-            .collect();
+        let row: Vec<String> = (0..NX).map(|j| if is_hole(i * NX + j) { "nan".to_string() } else { stored(i, j).to_string() }).collect();
         s.push_str(&row.join(sep));
         s.push('\n');
     }

@@ -3,10 +3,10 @@
 mod cli_info;
 mod formats;
 pub mod gen;
-mod peers;
-mod preprocess;
 mod npy_layouts;
 mod npy_strided;
 mod npy_zero_copy;
+mod peers;
+mod preprocess;
 mod robust;
 mod x3p;

@@ -49,7 +49,11 @@ fn check(ny: usize, nx: usize, descr: &str, fortran: bool) {
             let got = hf.at(i, j);
             if want.is_finite() {
                 // Integers of magnitude < 2^24 times 1e-9: the reader's one multiply is exact to 1 ulp.
-                assert!((got - want * zs).abs() <= (want * zs).abs() * f64::EPSILON, "{descr} F={fortran} ({i},{j}): {got} vs {}", want * zs);
+                assert!(
+                    (got - want * zs).abs() <= (want * zs).abs() * f64::EPSILON,
+                    "{descr} F={fortran} ({i},{j}): {got} vs {}",
+                    want * zs
+                );
             } else {
                 assert!(got.is_nan(), "{descr} F={fortran} ({i},{j}): non-finite {want} must read as NaN, got {got}");
             }

@@ -66,7 +66,11 @@ fn check(name: &str, bytes: &[u8], z_scale: f64, as_f32: bool) {
                 let v = if as_f32 { v as f32 as f64 } else { v };
                 let g = got.at(i, j);
                 if v.is_finite() {
-                    assert!((g - v * z_scale).abs() <= (v * z_scale).abs() * f64::EPSILON, "{name} stride {stride} ({i},{j}): {g} vs {}", v * z_scale);
+                    assert!(
+                        (g - v * z_scale).abs() <= (v * z_scale).abs() * f64::EPSILON,
+                        "{name} stride {stride} ({i},{j}): {g} vs {}",
+                        v * z_scale
+                    );
                 } else {
                     assert!(g.is_nan(), "{name} stride {stride} ({i},{j}) must be invalid, got {g}");
                 }
@@ -87,7 +91,8 @@ fn subsampled_read_equals_read_then_subsample() {
 fn small_and_text_files_are_read_whole_then_subsampled() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("small.txt");
-    let text: String = (0..9).map(|i| (0..11).map(|j| format!("{}", (i * 11 + j) as f64 * 1e-7)).collect::<Vec<_>>().join(" ") + "\n").collect();
+    let text: String =
+        (0..9).map(|i| (0..11).map(|j| format!("{}", (i * 11 + j) as f64 * 1e-7)).collect::<Vec<_>>().join(" ") + "\n").collect();
     std::fs::write(&path, text).expect("write");
     let o = ReadOptions { dx: Some(1e-6), dy: None, z_scale: Some(1.0), format: None };
     let got = read_scan_subsampled(&path, &o, 3).expect("subsampled read");

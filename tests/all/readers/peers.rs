@@ -58,7 +58,10 @@ fn every_shared_scan_agrees_with_surface_topography_needs_shared() {
         let sdq = c["Sdq_central"].as_f64().expect("Sdq_central");
         assert!(rel(st.sdq, sdq) < 1e-6, "{name}: Sdq_central {} vs {who} {}", st.sdq, sdq);
         assert_eq!(st.sdq_points as u64, c["Sdq_central_n_points"].as_u64().expect("n"), "{name}: Sdq points");
-        eprintln!("{name}: {} {}x{} invalid {} Sq {:.6e} m Sdq {:.6} agree with {who}", hf.meta.format, hf.nx, hf.ny, st.invalid, st.sq, st.sdq);
+        eprintln!(
+            "{name}: {} {}x{} invalid {} Sq {:.6e} m Sdq {:.6} agree with {who}",
+            hf.meta.format, hf.nx, hf.ny, st.invalid, st.sq, st.sdq
+        );
         checked += 1;
         by_peer += usize::from(who == "SurfaceTopography");
     }

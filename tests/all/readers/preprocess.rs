@@ -9,9 +9,7 @@ use ndfit::Heightfield;
 
 /// A heightfield of `f(x, y)` (metres) on an nx x ny grid with spacing dx, dy; `holes` set NaN.
 fn field(nx: usize, ny: usize, dx: f64, dy: f64, holes: &[usize], f: impl Fn(f64, f64) -> f64) -> Heightfield {
-    let z = (0..nx * ny)
-        .map(|k| if holes.contains(&k) { f64::NAN } else { f((k % nx) as f64 * dx, (k / nx) as f64 * dy) })
-        .collect();
+    let z = (0..nx * ny).map(|k| if holes.contains(&k) { f64::NAN } else { f((k % nx) as f64 * dx, (k / nx) as f64 * dy) }).collect();
     Heightfield::new(nx, ny, dx, dy, z).expect("grid")
 }
 
@@ -25,9 +23,7 @@ fn polynomial_forms_are_removed_exactly_and_holes_stay() {
     let holes = [5, 77, 300];
     let (dx, dy) = (2e-6, 3e-6);
     // Order-3 form with a 76 mm absolute offset (the AL3D case) and micrometre-scale curvature.
-    let f = |x: f64, y: f64| {
-        0.0763 + 1e-3 * x - 2e-3 * y + 40.0 * x * x - 25.0 * x * y + 10.0 * y * y + 2e5 * x * x * x - 1e5 * x * y * y
-    };
+    let f = |x: f64, y: f64| 0.0763 + 1e-3 * x - 2e-3 * y + 40.0 * x * x - 25.0 * x * y + 10.0 * y * y + 2e5 * x * x * x - 1e5 * x * y * y;
     let hf = field(41, 23, dx, dy, &holes, f);
     let r3 = remove_polynomial(&hf, 3).expect("order 3");
     // f64 holds 0.0763 m to ~1e-17 m; a few thousand points' sums keep the residual near 1e-15 m.
@@ -82,8 +78,16 @@ fn crop_and_subsample_keep_positions_and_holes() {
     let s = subsample(&hf, 3).expect("subsample");
     assert_eq!((s.nx, s.ny, s.dx, s.dy), (4, 3, 3e-6, 6e-6));
     assert_eq!(s.at(2, 3), hf.at(6, 9));
-    let all = apply(hf.clone(), &Preprocess { form: FormRemoval::None, crop: Some(Crop { x: 0, y: 0, nx: 10, ny: 8 }), subsample: 1, despike: ndfit::preprocess::Despike::None })
-        .expect("identity");
+    let all = apply(
+        hf.clone(),
+        &Preprocess {
+            form: FormRemoval::None,
+            crop: Some(Crop { x: 0, y: 0, nx: 10, ny: 8 }),
+            subsample: 1,
+            despike: ndfit::preprocess::Despike::None,
+        },
+    )
+    .expect("identity");
     assert_eq!(all.z.iter().filter(|h| h.is_nan()).count(), 1);
 }
 

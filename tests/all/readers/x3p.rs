@@ -192,10 +192,7 @@ fn x3p_defects_give_one_precise_line() {
     let data: Vec<u8> = (0..6).flat_map(|k| (k as f64).to_le_bytes()).collect();
     let cases: Vec<(Vec<u8>, &str)> = vec![
         // Header claims more points than data.bin holds.
-        (
-            build_x3p(&[("main.xml", main_xml(NS_OPEN, NS_CLOSE, "D", "", 300, 200, LINK).as_bytes()), ("bindata/data.bin", &data)]),
-            "need",
-        ),
+        (build_x3p(&[("main.xml", main_xml(NS_OPEN, NS_CLOSE, "D", "", 300, 200, LINK).as_bytes()), ("bindata/data.bin", &data)]), "need"),
         // Absurd sizes: the multiplication overflows.
         (
             build_x3p(&[
