@@ -16,7 +16,7 @@ if [ ! -f ../shared/data/scans/peer_readings.json ]; then
 fi
 
 echo "== lints: clippy and rustdoc (warnings are errors); the library alone builds without clap, indicatif, plotters"
-cargo clippy --release --locked --all-targets -- -D warnings 2>&1
+cargo clippy --release --locked --workspace --all-targets -- -D warnings 2>&1
 RUSTDOCFLAGS=-Dwarnings cargo doc --locked --no-deps 2>&1
 if cargo tree --locked -e normal --no-default-features | grep -E '^[^a-z]*(clap|indicatif|plotters) '; then
   echo "FAIL: the library without default features depends on clap, indicatif or plotters" >&2

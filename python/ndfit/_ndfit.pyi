@@ -11,7 +11,7 @@ __version__: str
 _Path = Union[str, PathLike[str]]
 _Source = Union["Scan", _Path]
 _Form = Literal["none", "plane", "poly2", "poly3", "cylinder"]
-_Model = Literal["auto", "ggx", "ggx-aniso", "beckmann", "beckmann-aniso", "ellipsoid"]
+_Model = Literal["auto", "ggx", "ggx-aniso", "beckmann", "beckmann-aniso", "ellipsoid", "ggx2", "beckmann2", "ellipsoid+ggx"]
 _Directions = npt.ArrayLike  # shape (n, 3) or (3,)
 
 class NdfitError(Exception):
@@ -112,6 +112,7 @@ def ndf(
     format: Optional[str] = None,
     crop: Optional[str] = None,
     subsample: int = 1,
+    despike: Literal["median", "none"] = "median",
     normals: Literal["central", "triangles"] = "central",
     ndf_cells: Optional[int] = None,
     target_count: Optional[float] = None,
@@ -129,6 +130,7 @@ def fit(
     format: Optional[str] = None,
     crop: Optional[str] = None,
     subsample: int = 1,
+    despike: Literal["median", "none"] = "median",
     normals: Literal["central", "triangles"] = "central",
     ndf_cells: Optional[int] = None,
     target_count: Optional[float] = None,
@@ -136,5 +138,7 @@ def fit(
     solver: Literal["lm", "nelder-mead", "lbfgs"] = "lm",
     extra_starts: int = 0,
     max_theta: Optional[float] = None,
+    na: Optional[float] = None,
+    tail: Literal["all", "unresolved"] = "all",
     threads: Optional[int] = None,
 ) -> Fit: ...

@@ -21,7 +21,7 @@ use ndfit::fit::{FitOptions, FitReport, Objective, Solver};
 use ndfit::io::ReadOptions;
 use ndfit::models::{Model, Ndf as _};
 use ndfit::ndf::{EmpiricalNdf, NdfOptions, NormalScheme};
-use ndfit::preprocess::{Crop, FormRemoval, Preprocess};
+use ndfit::preprocess::{Crop, Despike, FormRemoval, Preprocess};
 use ndfit::{Heightfield, ModelChoice, Options, Pipeline, Preset};
 
 create_exception!(
@@ -77,6 +77,7 @@ fn work<T: Send>(py: Python<'_>, threads: Option<usize>, f: impl FnOnce() -> ndf
 }
 
 /// Where a [`Scan`]'s heights live.
+#[allow(clippy::large_enum_variant)] // one per Python Scan object; boxing would only add an indirection to every access
 enum Held {
     /// Read from a file (owned, or a view of the file's memory map).
     File(Heightfield),
@@ -306,6 +307,7 @@ impl ScanOpts {
         form: &str,
         crop: Option<&str>,
         subsample: usize,
+        despike: &str,
     ) -> PyResult<ScanOpts> {
         let read = ReadOptions { dx, dy, z_scale, format };
         if matches!(src, Source::Scan(..)) && (read.dx.is_some() || read.dy.is_some() || read.z_scale.is_some() || read.format.is_some()) {
@@ -319,8 +321,36 @@ impl ScanOpts {
             "cylinder" => FormRemoval::Cylinder,
             other => return Err(invalid(format!("form: unknown form {other:?}: use none, plane, poly2, poly3 or cylinder"))),
         };
+        let despike = match despike {
+            "median" => Despike::Median,
+            "none" => Despike::None,
+            other => return Err(invalid(format!("despike: unknown despike {other:?}: use median or none"))),
+        };
         let crop = crop.map(parse_crop).transpose()?;
-        Ok(ScanOpts { read, pre: Preprocess { form, crop, subsample } })
+        Ok(ScanOpts { read, pre: Preprocess { form, crop, subsample, despike } })
+    }
+}
+
+/// The fit region's largest polar angle (degrees) from `max_theta` and `na` (`asin(NA)`), as `--max-theta`
+/// and `--na`: both given must agree to 1e-6 degrees.
+fn max_theta_deg(max_theta: Option<f64>, na: Option<f64>) -> PyResult<f64> {
+    if let Some(t) = max_theta {
+        if !(t > 0.0 && t <= 90.0) {
+            return Err(invalid(format!("max_theta {t} must be in (0, 90] degrees")));
+        }
+    }
+    let from_na = match na {
+        Some(a) if !(a > 0.0 && a <= 1.0) => return Err(invalid(format!("na {a} must be in (0, 1]"))),
+        Some(a) => Some(a.asin().to_degrees()),
+        None => None,
+    };
+    match (max_theta, from_na) {
+        (Some(t), Some(n)) if (t - n).abs() > 1e-6 => {
+            Err(invalid(format!("max_theta {t} and na disagree: the aperture sets max_theta = asin(NA) = {n:.6} degrees")))
+        }
+        (Some(t), _) => Ok(t),
+        (None, Some(n)) => Ok(n),
+        (None, None) => Ok(ndfit::fit::objective::DEFAULT_MAX_THETA_DEG),
     }
 }
 
@@ -456,11 +486,11 @@ impl Ndf {
 
 /// `ndfit.ndf(scan_or_path, form="plane", *, ...) -> Ndf`: the empirical NDF, as `ndfit ndf` computes it.
 /// Options are those of `ndfit ndf` by name: reading (`dx`, `dy`, `z_scale`, `format`; files only),
-/// preprocessing (`form`, `crop` as "NXxNY+X+Y", `subsample`) and binning (`normals` central|triangles,
+/// preprocessing (`form`, `crop` as "NXxNY+X+Y", `subsample`, `despike` median|none) and binning (`normals` central|triangles,
 /// `ndf_cells` odd 3-1023, `target_count` mean samples per bin, default 64); `threads` caps the work's threads (default: all cores).
 #[pyfunction]
 #[pyo3(signature = (source, form="plane", *, dx=None, dy=None, z_scale=None, format=None, crop=None, subsample=1,
-    normals="central", ndf_cells=None, target_count=None, threads=None))]
+    despike="median", normals="central", ndf_cells=None, target_count=None, threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn ndf(
     py: Python<'_>,
@@ -472,13 +502,14 @@ fn ndf(
     format: Option<String>,
     crop: Option<&str>,
     subsample: usize,
+    despike: &str,
     normals: &str,
     ndf_cells: Option<usize>,
     target_count: Option<f64>,
     threads: Option<usize>,
 ) -> PyResult<Ndf> {
     let src = Source::from_py(source)?;
-    let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample)?;
+    let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample, despike)?;
     let ndf = ndf_options(normals, ndf_cells, target_count)?;
     let pipeline = Pipeline::new(Options { read: so.read, preprocess: so.pre, ndf, ..Options::default() });
     let label = match &src {
@@ -639,18 +670,21 @@ fn finish<'py>(py: Python<'py>, out: Vec<f64>, single: bool) -> PyResult<Bound<'
 /// preprocess, build the empirical NDF and fit, as `ndfit fit` does with the same options; the result's
 /// `to_json()` is the document `ndfit fit` writes.
 ///
-/// - `model`: ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid, or auto (the nested models, chosen by
+/// - `model`: ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid, the mixtures ggx2, beckmann2, ellipsoid+ggx,
+///   or auto (the nested models and their mixtures, chosen by
 ///   the quasi-likelihood BIC).
 /// - reading (files only): `dx`, `dy` (m), `z_scale` (m per stored unit), `format`.
-/// - preprocessing: `form` (none|plane|poly2|poly3|cylinder), `crop` ("NXxNY+X+Y"), `subsample`.
+/// - preprocessing: `form` (none|plane|poly2|poly3|cylinder), `crop` ("NXxNY+X+Y"), `subsample`,
+///   `despike` (median|none).
 /// - the NDF: `normals` (central|triangles), `ndf_cells` (odd, 3-1023), `target_count` (default 64).
 /// - the fit: `objective` (poisson|logd), `solver` (lm|nelder-mead|lbfgs), `extra_starts` (0-4),
-///   `max_theta` (degrees, (0, 90], default 70), `preset` (fast|balanced|accurate, as `--preset`).
+///   `max_theta` (degrees, (0, 90], default 70) or `na` (numerical aperture: max_theta = asin(NA)),
+///   `tail` (all|unresolved, as `--tail`), `preset` (fast|balanced|accurate, as `--preset`).
 /// - `threads`: threads for this call (default: all cores, as the CLI).
 #[pyfunction]
 #[pyo3(signature = (source, model="auto", form="plane", preset=None, *, dx=None, dy=None, z_scale=None, format=None, crop=None,
-    subsample=1, normals="central", ndf_cells=None, target_count=None, objective="poisson", solver="lm",
-    extra_starts=0, max_theta=None, threads=None))]
+    subsample=1, despike="median", normals="central", ndf_cells=None, target_count=None, objective="poisson", solver="lm",
+    extra_starts=0, max_theta=None, na=None, tail="all", threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -664,6 +698,7 @@ fn fit(
     format: Option<String>,
     crop: Option<&str>,
     subsample: usize,
+    despike: &str,
     normals: &str,
     ndf_cells: Option<usize>,
     target_count: Option<f64>,
@@ -671,13 +706,21 @@ fn fit(
     solver: &str,
     extra_starts: usize,
     max_theta: Option<f64>,
+    na: Option<f64>,
+    tail: &str,
     threads: Option<usize>,
 ) -> PyResult<Fit> {
     let src = Source::from_py(source)?;
-    let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample)?;
+    let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample, despike)?;
     let ndf = ndf_options(normals, ndf_cells, target_count)?;
-    let max_theta = max_theta.unwrap_or(ndfit::fit::objective::DEFAULT_MAX_THETA_DEG);
+    let max_theta = max_theta_deg(max_theta, na)?;
+    let cut_unresolved = match tail {
+        "unresolved" => true,
+        "all" => false,
+        other => return Err(invalid(format!("tail {other:?}: use unresolved or all"))),
+    };
     let fit = FitOptions {
+        cut_unresolved,
         objective: objective.parse::<Objective>().map_err(|e| invalid(format!("objective: {}", e.message())))?,
         solver: solver.parse::<Solver>().map_err(|e| invalid(format!("solver: {}", e.message())))?,
         extra_starts,
@@ -686,9 +729,6 @@ fn fit(
     };
     if extra_starts > 4 {
         return Err(invalid(format!("extra_starts {extra_starts} must be between 0 and 4")));
-    }
-    if !(max_theta > 0.0 && max_theta <= 90.0) {
-        return Err(invalid(format!("max_theta {max_theta} must be in (0, 90] degrees")));
     }
     let model = model.parse::<ModelChoice>().map_err(|e| invalid(format!("model: {}", e.message())))?;
     let preset = parse_preset(preset)?;

@@ -15,7 +15,7 @@ from conftest import real_scan_files, run_cli
 
 pd = pytest.importorskip("pandas")
 distributed = pytest.importorskip("dask.distributed")
-from ndfit.dask import COLUMNS, fit_many  # noqa: E402
+from ndfit.dask import COLUMNS, PARAM_COLUMNS, fit_many  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def assert_rows_match_batch(df, root, entries):
         assert row["model"] == fit["model"], key
         for name, v in fit["params"].items():
             assert row[name] == v, (key, name, row[name], v)  # the same fit: bit for bit
-        for name in set(COLUMNS[3:9]) - set(fit["params"]):
+        for name in set(PARAM_COLUMNS) - set(fit["params"]):
             assert math.isnan(row[name]), (key, name)
         assert row["verdict"] == fit["quality"]["verdict"]
         assert row["reduced_chi2"] == fit["quality"]["reduced_chi2"]

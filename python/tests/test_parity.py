@@ -49,6 +49,9 @@ SYNTH_CASES = [
     ("gauss_holes.x3p", ["--model", "ggx-aniso", "--crop", "150x120+10+20", "--subsample", "2", "--form", "poly2", "--extra-starts", "2"],
      dict(model="ggx-aniso", crop="150x120+10+20", subsample=2, form="poly2", extra_starts=2)),
     ("ell_aniso.x3p", ["--model", "ggx", "--solver", "nelder-mead", "--target-count", "100"], dict(model="ggx", solver="nelder-mead", target_count=100)),
+    ("ell_skew.x3p", ["--model", "ellipsoid", "--na", "0.8", "--tail", "unresolved", "--despike", "none"],
+     dict(model="ellipsoid", na=0.8, tail="unresolved", despike="none")),
+    ("gauss.x3p", ["--model", "ggx2"], dict(model="ggx2")),
 ]
 
 
@@ -90,3 +93,11 @@ def test_ndf_matches_cli_csv(synth_dir, ndfit_bin, tmp_path):
     np.testing.assert_array_equal(e.count, np.array([int(r["count"]) for r in rows], dtype=np.uint64))
     assert e.n_samples == int(e.count.sum())
     assert e.normals == "triangles"
+
+
+def test_na_and_max_theta_must_agree(synth_dir):
+    scan = str(synth_dir / "gauss.x3p")
+    with pytest.raises(ndfit.NdfitError, match="disagree"):
+        ndfit.fit(scan, model="ggx", na=0.5, max_theta=45)
+    with pytest.raises(ndfit.NdfitError, match="despike"):
+        ndfit.fit(scan, model="ggx", despike="mean")
