@@ -13,6 +13,10 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::{check_grid, checked_size, field_text, Cursor};
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `al3d` format ([`crate::io::Reader`]).
+pub const READER: crate::io::Reader =
+    crate::io::Reader { id: "al3d", extensions: &["al3d"], magic: Some(|h| h.starts_with(AL3D_MAGIC)), read: |b, _| read_al3d(b) };
+
 /// The AL3D signature.
 pub const AL3D_MAGIC: &[u8] = b"AliconaImaging\x00\r\n";
 /// Bound on tags: real files carry a few dozen.

@@ -10,6 +10,10 @@ use crate::io::bytes::check_grid;
 use crate::io::units::metres_per;
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `gsf` format ([`crate::io::Reader`]).
+pub const READER: crate::io::Reader =
+    crate::io::Reader { id: "gsf", extensions: &["gsf"], magic: Some(|h| h.starts_with(GSF_MAGIC)), read: |b, _| read_gsf(b) };
+
 /// The GSF signature line.
 pub const GSF_MAGIC: &[u8] = b"Gwyddion Simple Field 1.0\n";
 /// Headers are short; bound the search for their end.

@@ -12,6 +12,24 @@ use crate::io::raw_opts::{spacing, z_scale};
 use crate::io::ReadOptions;
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `exr` format ([`crate::io::Reader`]).
+pub const EXR_READER: crate::io::Reader =
+    crate::io::Reader { id: "exr", extensions: &["exr"], magic: Some(|h| h.starts_with(&[0x76, 0x2f, 0x31, 0x01])), read: read_exr };
+/// The registry entry of the `png` format ([`crate::io::Reader`]).
+pub const PNG_READER: crate::io::Reader = crate::io::Reader {
+    id: "png",
+    extensions: &["png"],
+    magic: Some(|h| h.starts_with(b"\x89PNG\r\n\x1a\n")),
+    read: |b, o| read_image16(b, o, image::ImageFormat::Png, "PNG"),
+};
+/// The registry entry of the `tiff` format ([`crate::io::Reader`]).
+pub const TIFF_READER: crate::io::Reader = crate::io::Reader {
+    id: "tiff",
+    extensions: &["tif", "tiff"],
+    magic: Some(|h| h.starts_with(b"II*\0") || h.starts_with(b"MM\0*")),
+    read: |b, o| read_image16(b, o, image::ImageFormat::Tiff, "TIFF"),
+};
+
 /// No lossless codec here expands more than deflate's 1032:1; more pixels than that is a lie.
 const MAX_RATIO: u64 = 1032;
 

@@ -15,6 +15,14 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::{check_grid, field_text, Cursor};
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `metropro` format ([`crate::io::Reader`]).
+pub const READER: crate::io::Reader = crate::io::Reader {
+    id: "metropro",
+    extensions: &["dat"],
+    magic: Some(|h| h.len() >= 4 && h[..3] == [0x88, 0x1B, 0x03] && (0x6F..=0x71).contains(&h[3])),
+    read: |b, _| read_metropro(b),
+};
+
 /// Phase values at or above this are "no data".
 const INVALID_PHASE: i32 = 2_147_483_640;
 

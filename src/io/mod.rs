@@ -45,43 +45,61 @@ pub struct ReadOptions {
     pub format: Option<String>,
 }
 
-/// The formats ndfit reads, by id (the id is what `ScanMeta::format` and `ndfit info` report).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Format {
-    /// ISO 25178-72 X3P.
-    X3p,
-    /// Digital Surf SUR (classic and compressed).
-    Sur,
-    /// Zygo MetroPro DAT.
-    MetroPro,
-    /// Alicona AL3D.
-    Al3d,
-    /// GelSight/TrueMap TMD.
-    Tmd,
-    /// Veeco/Wyko OPD.
-    Opd,
-    /// Sensofar PLU (no magic: found by extension).
-    Plu,
-    /// Gwyddion Simple Field.
-    Gsf,
-    /// NumPy array.
-    Npy,
-    /// OpenEXR (a float channel).
-    Exr,
-    /// 16-bit grey PNG.
-    Png,
-    /// 16-bit grey TIFF.
-    Tiff,
-    /// Plain text matrix (optionally with an `AsciiMatrix` header).
-    Ascii,
-    /// Comma-separated matrix or x,y,z columns.
-    Csv,
-    /// x y z point list on a regular grid.
-    Xyz,
+/// One file format: everything the registry needs to detect and read it. Each reader's file defines its
+/// entry (`pub const READER: Reader`), and [`Format::ALL`] lists the entries in detection order.
+#[derive(Debug)]
+pub struct Reader {
+    /// Format id (what `ScanMeta::format`, `ndfit info` and `--format` use).
+    pub id: &'static str,
+    /// File extensions (lower case, no dot) that suggest the format when no signature matches.
+    pub extensions: &'static [&'static str],
+    /// Whether the first bytes of a file carry the format's signature; `None` for formats found by
+    /// extension only.
+    pub magic: Option<fn(&[u8]) -> bool>,
+    /// Parse a whole file held in memory (the options give what the format may lack: spacing, units).
+    pub read: fn(&[u8], &ReadOptions) -> Result<Heightfield>,
 }
 
+/// A format ndfit reads: a handle on its [`Reader`] entry, compared by id.
+#[derive(Clone, Copy)]
+pub struct Format(&'static Reader);
+
+// The registry's names keep the spelling of the enum variants they replaced (callers write `Format::X3p`).
+#[allow(non_upper_case_globals)]
 impl Format {
-    /// Every format, in detection order.
+    /// ISO 25178-72 X3P.
+    pub const X3p: Format = Format(&x3p::READER);
+    /// Digital Surf SUR (classic and compressed).
+    pub const Sur: Format = Format(&sur::READER);
+    /// Zygo MetroPro DAT.
+    pub const MetroPro: Format = Format(&metropro::READER);
+    /// Alicona AL3D.
+    pub const Al3d: Format = Format(&al3d::READER);
+    /// GelSight/TrueMap TMD.
+    pub const Tmd: Format = Format(&tmd::READER);
+    /// Veeco/Wyko OPD.
+    pub const Opd: Format = Format(&opd::READER);
+    /// Sensofar PLU (no magic: found by extension).
+    pub const Plu: Format = Format(&plu::READER);
+    /// Gwyddion Simple Field.
+    pub const Gsf: Format = Format(&gsf::READER);
+    /// NumPy array.
+    pub const Npy: Format = Format(&npy::READER);
+    /// OpenEXR (a float channel).
+    pub const Exr: Format = Format(&image::EXR_READER);
+    /// 16-bit grey PNG.
+    pub const Png: Format = Format(&image::PNG_READER);
+    /// 16-bit grey TIFF.
+    pub const Tiff: Format = Format(&image::TIFF_READER);
+    /// Plain text matrix (optionally with an `AsciiMatrix` header).
+    pub const Ascii: Format = Format(&text::ASCII_READER);
+    /// Comma-separated matrix or x,y,z columns.
+    pub const Csv: Format = Format(&text::CSV_READER);
+    /// x y z point list on a regular grid.
+    pub const Xyz: Format = Format(&text::XYZ_READER);
+
+    /// The registry: every format, in detection order (signatures are tried in this order, then
+    /// extensions). A new reader adds its entry here.
     pub const ALL: &'static [Format] = &[
         Format::X3p,
         Format::Sur,
@@ -102,23 +120,12 @@ impl Format {
 
     /// The format id.
     pub fn id(self) -> &'static str {
-        match self {
-            Format::X3p => "x3p",
-            Format::Sur => "sur",
-            Format::MetroPro => "metropro",
-            Format::Al3d => "al3d",
-            Format::Tmd => "tmd",
-            Format::Opd => "opd",
-            Format::Plu => "plu",
-            Format::Gsf => "gsf",
-            Format::Npy => "npy",
-            Format::Exr => "exr",
-            Format::Png => "png",
-            Format::Tiff => "tiff",
-            Format::Ascii => "ascii",
-            Format::Csv => "csv",
-            Format::Xyz => "xyz",
-        }
+        self.0.id
+    }
+
+    /// The format's registry entry.
+    pub fn reader(self) -> &'static Reader {
+        self.0
     }
 
     /// The format with id `id` (case-insensitive).
@@ -129,44 +136,26 @@ impl Format {
 
     /// File extensions (lower case, no dot) that suggest this format.
     fn extensions(self) -> &'static [&'static str] {
-        match self {
-            Format::X3p => &["x3p"],
-            Format::Sur => &["sur"],
-            Format::MetroPro => &["dat"],
-            Format::Al3d => &["al3d"],
-            Format::Tmd => &["tmd"],
-            Format::Opd => &["opd"],
-            Format::Plu => &["plu", "apx"],
-            Format::Gsf => &["gsf"],
-            Format::Npy => &["npy"],
-            Format::Exr => &["exr"],
-            Format::Png => &["png"],
-            Format::Tiff => &["tif", "tiff"],
-            Format::Ascii => &["asc", "txt", "ascii"],
-            Format::Csv => &["csv"],
-            Format::Xyz => &["xyz"],
-        }
+        self.0.extensions
     }
 
     /// Whether `head` (the first bytes of the file) carries this format's signature.
     fn magic(self, head: &[u8]) -> bool {
-        match self {
-            Format::X3p => head.starts_with(b"PK\x03\x04"),
-            Format::Sur => head.starts_with(b"DIGITAL SURF") || head.starts_with(b"DSCOMPRESSED"),
-            Format::MetroPro => head.len() >= 4 && head[..3] == [0x88, 0x1B, 0x03] && (0x6F..=0x71).contains(&head[3]),
-            Format::Al3d => head.starts_with(al3d::AL3D_MAGIC),
-            Format::Tmd => head.starts_with(tmd::TMD_MAGIC),
-            // Two bytes, then the directory entry named "Directory".
-            Format::Opd => head.len() >= 11 && &head[2..11] == b"Directory",
-            Format::Plu => false,
-            Format::Gsf => head.starts_with(gsf::GSF_MAGIC),
-            Format::Npy => head.starts_with(npy::NPY_MAGIC),
-            Format::Exr => head.starts_with(&[0x76, 0x2f, 0x31, 0x01]),
-            Format::Png => head.starts_with(b"\x89PNG\r\n\x1a\n"),
-            Format::Tiff => head.starts_with(b"II*\0") || head.starts_with(b"MM\0*"),
-            Format::Ascii => head.starts_with(b"AsciiMatrix"),
-            Format::Csv | Format::Xyz => false,
-        }
+        self.0.magic.is_some_and(|m| m(head))
+    }
+}
+
+impl PartialEq for Format {
+    fn eq(&self, other: &Format) -> bool {
+        self.0.id == other.0.id
+    }
+}
+
+impl Eq for Format {}
+
+impl std::fmt::Debug for Format {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.0.id)
     }
 }
 
@@ -247,14 +236,14 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
     // Large native float64 NPY files are read in place (zero-copy, `crate::heights`); every other case
     // decodes into an owned buffer.
     let strided = match (&file, format) {
-        (FileBytes::Mapped(map), Format::Npy) if stride > 1 => npy::read_npy_strided(map, opts, stride)?,
+        (FileBytes::Mapped(map), f) if f == Format::Npy && stride > 1 => npy::read_npy_strided(map, opts, stride)?,
         _ => None,
     };
     let mut hf = match strided {
         Some(hf) => hf,
         None => {
             let mut whole = match (&file, format) {
-                (FileBytes::Mapped(map), Format::Npy) => npy::read_npy_mapped(map, opts)?,
+                (FileBytes::Mapped(map), f) if f == Format::Npy => npy::read_npy_mapped(map, opts)?,
                 _ => read_bytes(format, bytes, opts)?,
             };
             whole.meta.file_grid = Some([whole.nx, whole.ny]);
@@ -316,23 +305,7 @@ impl std::ops::Deref for FileBytes {
 
 /// Parse `bytes` as `format`.
 pub fn read_bytes(format: Format, bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
-    match format {
-        Format::X3p => x3p::read_x3p(bytes),
-        Format::Sur => sur::read_sur(bytes),
-        Format::MetroPro => metropro::read_metropro(bytes),
-        Format::Al3d => al3d::read_al3d(bytes),
-        Format::Tmd => tmd::read_tmd(bytes),
-        Format::Opd => opd::read_opd(bytes),
-        Format::Plu => plu::read_plu(bytes),
-        Format::Gsf => gsf::read_gsf(bytes),
-        Format::Npy => npy::read_npy(bytes, opts),
-        Format::Exr => image::read_exr(bytes, opts),
-        Format::Png => image::read_image16(bytes, opts, ::image::ImageFormat::Png, "PNG"),
-        Format::Tiff => image::read_image16(bytes, opts, ::image::ImageFormat::Tiff, "TIFF"),
-        Format::Ascii => text::read_ascii_matrix(bytes, opts),
-        Format::Csv => text::read_csv(bytes, opts),
-        Format::Xyz => text::read_xyz(bytes, opts),
-    }
+    (format.0.read)(bytes, opts)
 }
 
 /// Reject scans nothing can be computed from: every point invalid.
@@ -345,4 +318,24 @@ fn check_usable(hf: &Heightfield) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn registry_ids_are_unique_and_each_extension_finds_its_format() {
+        let ids: std::collections::BTreeSet<_> = Format::ALL.iter().map(|f| f.id()).collect();
+        assert_eq!(ids.len(), Format::ALL.len());
+        for &f in Format::ALL {
+            assert_eq!(Format::from_id(&f.id().to_uppercase()), Some(f));
+            for ext in f.extensions() {
+                // No signature in an empty head: the extension decides (a `.dat` is MetroPro's).
+                assert_eq!(detect(Path::new(&format!("scan.{ext}")), b""), Some(f), "{ext}");
+            }
+        }
+        assert_eq!(detect(Path::new("scan.bin"), b"PK\x03\x04rest"), Some(Format::X3p));
+        assert_eq!(detect(Path::new("scan.bin"), b"\x00\x01"), None);
+    }
 }

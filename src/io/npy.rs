@@ -17,6 +17,10 @@ use crate::scan::heights;
 use crate::scan::heights::Heights;
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `npy` format ([`crate::io::Reader`]).
+pub const READER: crate::io::Reader =
+    crate::io::Reader { id: "npy", extensions: &["npy"], magic: Some(|h| h.starts_with(NPY_MAGIC)), read: read_npy };
+
 /// The NPY signature.
 pub const NPY_MAGIC: &[u8] = b"\x93NUMPY";
 

@@ -14,7 +14,16 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::{check_grid, field_text, Cursor};
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `opd` format ([`crate::io::Reader`]). Two bytes, then the directory entry named "Directory".
+pub const READER: crate::io::Reader = crate::io::Reader {
+    id: "opd",
+    extensions: &["opd"],
+    magic: Some(|h| h.len() >= 11 && &h[2..11] == b"Directory"),
+    read: |b, _| read_opd(b),
+};
+
 const ENTRY: usize = 24;
+
 /// |value| at or above this marks a bad pixel in float data (Wyko writes 1.7e38).
 const BAD_FLOAT: f32 = 1e32;
 /// 16-bit data mark a bad pixel with the largest value.

@@ -12,6 +12,9 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::{check_grid, field_text, Cursor};
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `plu` format ([`crate::io::Reader`]). No signature: found by extension.
+pub const READER: crate::io::Reader = crate::io::Reader { id: "plu", extensions: &["plu", "apx"], magic: None, read: |b, _| read_plu(b) };
+
 /// The marker Sensofar writes for a point that was not measured.
 pub const PLU_INVALID: f32 = 1_000_001.0;
 

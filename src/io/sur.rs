@@ -19,6 +19,14 @@ use crate::io::bytes::{check_grid, checked_size, Cursor};
 use crate::io::units::{latin1, metres_per};
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `sur` format ([`crate::io::Reader`]).
+pub const READER: crate::io::Reader = crate::io::Reader {
+    id: "sur",
+    extensions: &["sur"],
+    magic: Some(|h| h.starts_with(b"DIGITAL SURF") || h.starts_with(b"DSCOMPRESSED")),
+    read: |b, _| read_sur(b),
+};
+
 /// Deflate/zlib cannot expand more than about 1032:1; a stream claiming more is lying.
 const MAX_ZLIB_RATIO: usize = 1032;
 

@@ -13,6 +13,18 @@ use crate::io::raw_opts::{spacing, z_scale};
 use crate::io::ReadOptions;
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `ascii` format ([`crate::io::Reader`]).
+pub const ASCII_READER: crate::io::Reader = crate::io::Reader {
+    id: "ascii",
+    extensions: &["asc", "txt", "ascii"],
+    magic: Some(|h| h.starts_with(b"AsciiMatrix")),
+    read: read_ascii_matrix,
+};
+/// The registry entry of the `csv` format ([`crate::io::Reader`]). No signature: found by extension.
+pub const CSV_READER: crate::io::Reader = crate::io::Reader { id: "csv", extensions: &["csv"], magic: None, read: read_csv };
+/// The registry entry of the `xyz` format ([`crate::io::Reader`]). No signature: found by extension.
+pub const XYZ_READER: crate::io::Reader = crate::io::Reader { id: "xyz", extensions: &["xyz"], magic: None, read: read_xyz };
+
 /// Largest text file parsed (bounds memory: tokens are held as f64).
 const MAX_TEXT: usize = 1 << 31;
 

@@ -10,6 +10,10 @@ use crate::error::{Error, Result};
 use crate::io::bytes::{check_grid, Cursor};
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `tmd` format ([`crate::io::Reader`]).
+pub const READER: crate::io::Reader =
+    crate::io::Reader { id: "tmd", extensions: &["tmd"], magic: Some(|h| h.starts_with(TMD_MAGIC)), read: |b, _| read_tmd(b) };
+
 /// The TMD signature.
 pub const TMD_MAGIC: &[u8] = b"Binary TrueMap Data File v2.0";
 /// The comment is short text; bound the scan for its terminator.

@@ -26,6 +26,10 @@ use crate::io::xml::{self, Element};
 use crate::scan::heights;
 use crate::scan::{Heightfield, ScanMeta};
 
+/// The registry entry of the `x3p` format ([`crate::io::Reader`]).
+pub const READER: crate::io::Reader =
+    crate::io::Reader { id: "x3p", extensions: &["x3p"], magic: Some(|h| h.starts_with(b"PK\x03\x04")), read: |b, _| read_x3p(b) };
+
 /// Largest `main.xml` read (an inline `DataList` of a big scan can be large; this bounds memory).
 const MAX_MAIN_XML: u64 = 1 << 30;
 /// Deflate cannot expand data by more than 1032:1 (RFC 1951 maximum), so an entry that claims more
