@@ -1,7 +1,6 @@
 //! `ndfit export FIT.json --to mitsuba|pbrt|blender|openpbr|materialx [--json]`: a fit as a renderer's
 //! parameters (the math is in `ndfit::export`).
 
-use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -39,29 +38,24 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         for note in [&out.core.note, &out.tail.note].into_iter().flatten() {
             eprintln!("ndfit: {path}: {note}");
         }
-        let text = if args.json {
-            let mut s = serde_json::to_string_pretty(&out.to_json()).map_err(|e| anyhow!("{path}: {e}"))?;
-            s.push('\n');
-            s
-        } else {
-            out.snippet(&name)
-        };
-        let mut stdout = std::io::stdout().lock();
-        stdout.write_all(text.as_bytes()).and_then(|_| stdout.flush()).map_err(|e| anyhow!("<stdout>: {e}"))?;
-        return Ok(ExitCode::SUCCESS);
+        return emit(args.json, &path, || out.to_json(), || out.snippet(&name));
     }
     let out = export(&model, target, max_theta).map_err(|e| anyhow!("{path}: {}", e.message()))?;
     if let Some(note) = &out.note {
         eprintln!("ndfit: {path}: {note}");
     }
-    let text = if args.json {
-        let mut s = serde_json::to_string_pretty(&out.to_json()).map_err(|e| anyhow!("{path}: {e}"))?;
+    emit(args.json, &path, || out.to_json(), || out.snippet(&name))
+}
+
+/// Write the export to standard output: the JSON document with `--json`, the renderer's snippet otherwise.
+fn emit(as_json: bool, path: &str, json: impl FnOnce() -> serde_json::Value, snippet: impl FnOnce() -> String) -> anyhow::Result<ExitCode> {
+    let text = if as_json {
+        let mut s = serde_json::to_string_pretty(&json()).map_err(|e| anyhow!("{path}: {e}"))?;
         s.push('\n');
         s
     } else {
-        out.snippet(&name)
+        snippet()
     };
-    let mut stdout = std::io::stdout().lock();
-    stdout.write_all(text.as_bytes()).and_then(|_| stdout.flush()).map_err(|e| anyhow!("<stdout>: {e}"))?;
+    super::write_stdout(text.as_bytes())?;
     Ok(ExitCode::SUCCESS)
 }
