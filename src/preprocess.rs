@@ -51,6 +51,33 @@ pub enum FormRemoval {
     Cylinder,
 }
 
+impl std::str::FromStr for FormRemoval {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "none" => Ok(FormRemoval::None),
+            "plane" => Ok(FormRemoval::Plane),
+            "poly2" => Ok(FormRemoval::Polynomial(2)),
+            "poly3" => Ok(FormRemoval::Polynomial(3)),
+            "cylinder" => Ok(FormRemoval::Cylinder),
+            other => Err(Error::invalid(format!("unknown form {other:?}: use none, plane, poly2, poly3 or cylinder"))),
+        }
+    }
+}
+
+/// `NXxNY+X+Y`: columns `X..X+NX`, rows `Y..Y+NY`.
+impl std::str::FromStr for Crop {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        let bad = || Error::invalid(format!("{s:?} is not NXxNY+X+Y (for example 512x512+0+0)"));
+        let (size, rest) = s.split_once('+').ok_or_else(bad)?;
+        let (x, y) = rest.split_once('+').ok_or_else(bad)?;
+        let (nx, ny) = size.split_once('x').ok_or_else(bad)?;
+        let p = |t: &str| t.trim().parse::<usize>().map_err(|_| bad());
+        Ok(Crop { x: p(x)?, y: p(y)?, nx: p(nx)?, ny: p(ny)? })
+    }
+}
+
 impl Default for Preprocess {
     fn default() -> Self {
         Preprocess { form: FormRemoval::Plane, crop: None, subsample: 1, despike: Despike::Median }

@@ -21,6 +21,7 @@ use ndfit::fit::{FitOptions, FitReport, Objective, Solver};
 use ndfit::io::ReadOptions;
 use ndfit::models::{Model, Ndf as _};
 use ndfit::ndf::{EmpiricalNdf, NdfOptions, NormalScheme};
+use ndfit::pipeline::check::{self, Spelling};
 use ndfit::preprocess::{Crop, Despike, FormRemoval, Preprocess};
 use ndfit::{Heightfield, ModelChoice, Options, Pipeline, Preset};
 
@@ -313,84 +314,21 @@ impl ScanOpts {
         if matches!(src, Source::Scan(..)) && (read.dx.is_some() || read.dy.is_some() || read.z_scale.is_some() || read.format.is_some()) {
             return Err(invalid("dx, dy, z_scale and format apply to reading a file; this scan is already read"));
         }
-        let form = match form {
-            "none" => FormRemoval::None,
-            "plane" => FormRemoval::Plane,
-            "poly2" => FormRemoval::Polynomial(2),
-            "poly3" => FormRemoval::Polynomial(3),
-            "cylinder" => FormRemoval::Cylinder,
-            other => return Err(invalid(format!("form: unknown form {other:?}: use none, plane, poly2, poly3 or cylinder"))),
-        };
-        let despike = match despike {
-            "median" => Despike::Median,
-            "none" => Despike::None,
-            other => return Err(invalid(format!("despike: unknown despike {other:?}: use median or none"))),
-        };
-        let crop = crop.map(parse_crop).transpose()?;
+        let form = check::parse::<FormRemoval>("form", form, Spelling::Keyword).map_err(to_py)?;
+        let despike = check::parse::<Despike>("despike", despike, Spelling::Keyword).map_err(to_py)?;
+        let crop = crop.map(|c| check::parse::<Crop>("crop", c, Spelling::Keyword)).transpose().map_err(to_py)?;
         Ok(ScanOpts { read, pre: Preprocess { form, crop, subsample, despike } })
     }
 }
 
-/// The fit region's largest polar angle (degrees) from `max_theta` and `na` (`asin(NA)`), as `--max-theta`
-/// and `--na`: both given must agree to 1e-6 degrees.
-fn max_theta_deg(max_theta: Option<f64>, na: Option<f64>) -> PyResult<f64> {
-    if let Some(t) = max_theta {
-        if !(t > 0.0 && t <= 90.0) {
-            return Err(invalid(format!("max_theta {t} must be in (0, 90] degrees")));
-        }
-    }
-    let from_na = match na {
-        Some(a) if !(a > 0.0 && a <= 1.0) => return Err(invalid(format!("na {a} must be in (0, 1]"))),
-        Some(a) => Some(a.asin().to_degrees()),
-        None => None,
-    };
-    match (max_theta, from_na) {
-        (Some(t), Some(n)) if (t - n).abs() > 1e-6 => {
-            Err(invalid(format!("max_theta {t} and na disagree: the aperture sets max_theta = asin(NA) = {n:.6} degrees")))
-        }
-        (Some(t), _) => Ok(t),
-        (None, Some(n)) => Ok(n),
-        (None, None) => Ok(ndfit::fit::objective::DEFAULT_MAX_THETA_DEG),
-    }
-}
-
-/// `NXxNY+X+Y` (columns X..X+NX, rows Y..Y+NY), as `--crop`.
-fn parse_crop(s: &str) -> PyResult<Crop> {
-    let bad = || invalid(format!("crop {s:?} is not NXxNY+X+Y (for example 512x512+0+0)"));
-    let (size, rest) = s.split_once('+').ok_or_else(bad)?;
-    let (x, y) = rest.split_once('+').ok_or_else(bad)?;
-    let (nx, ny) = size.split_once('x').ok_or_else(bad)?;
-    let p = |t: &str| t.trim().parse::<usize>().map_err(|_| bad());
-    Ok(Crop { x: p(x)?, y: p(y)?, nx: p(nx)?, ny: p(ny)? })
-}
-
-/// The NDF options of `--normals`, `--ndf-cells`, `--target-count`, range-checked as the CLI does.
+/// The NDF options of `normals`, `ndf_cells`, `target_count`, range-checked as the CLI does.
 fn ndf_options(normals: &str, ndf_cells: Option<usize>, target_count: Option<f64>) -> PyResult<NdfOptions> {
-    let target_count = target_count.unwrap_or(ndfit::ndf::DEFAULT_TARGET_COUNT);
-    let scheme: NormalScheme = normals.parse().map_err(|e: ndfit::Error| invalid(format!("normals: {}", e.message())))?;
-    if let Some(c) = ndf_cells {
-        let max = ndfit::ndf::grid::MAX_CELLS_ACROSS;
-        if !(3..=max).contains(&c) {
-            return Err(invalid(format!("ndf_cells {c} must be between 3 and {max}")));
-        }
-        if c % 2 == 0 {
-            return Err(invalid(format!("ndf_cells {c} must be odd (the grid has a centre cell): use {} or {}", c - 1, c + 1)));
-        }
-    }
-    if !(target_count.is_finite() && target_count >= 1.0) {
-        return Err(invalid(format!("target_count {target_count} must be at least 1")));
-    }
-    Ok(NdfOptions { scheme, cells_across: ndf_cells, target_count, frame: None })
+    let scheme: NormalScheme = check::parse("normals", normals, Spelling::Keyword).map_err(to_py)?;
+    check::ndf_options(scheme, ndf_cells, target_count, Spelling::Keyword).map_err(to_py)
 }
 
 fn parse_preset(s: Option<&str>) -> PyResult<Option<Preset>> {
-    s.map(|s| {
-        Preset::ALL
-            .into_iter()
-            .find(|p| p.as_str() == s)
-            .ok_or_else(|| invalid(format!("preset: unknown preset {s:?}: use fast, balanced or accurate")))
-    })
-    .transpose()
+    s.map(|s| check::parse::<Preset>("preset", s, Spelling::Keyword)).transpose().map_err(to_py)
 }
 
 /// `ndfit.read(path, dx=None, dy=None, z_scale=None, format=None) -> Scan`: read a scan file as stored
@@ -713,7 +651,8 @@ fn fit(
     let src = Source::from_py(source)?;
     let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample, despike)?;
     let ndf = ndf_options(normals, ndf_cells, target_count)?;
-    let max_theta = max_theta_deg(max_theta, na)?;
+    let max_theta = check::aperture_deg(max_theta, na, Spelling::Keyword).map_err(to_py)?;
+    let extra_starts = check::extra_starts(extra_starts, Spelling::Keyword).map_err(to_py)?;
     let cut_unresolved = match tail {
         "unresolved" => true,
         "all" => false,
@@ -727,9 +666,6 @@ fn fit(
         max_theta: max_theta.to_radians(),
         ..FitOptions::default()
     };
-    if extra_starts > 4 {
-        return Err(invalid(format!("extra_starts {extra_starts} must be between 0 and 4")));
-    }
     let model = model.parse::<ModelChoice>().map_err(|e| invalid(format!("model: {}", e.message())))?;
     let preset = parse_preset(preset)?;
     let pipeline = Pipeline::new(Options { read: so.read, preprocess: so.pre, preset, ndf, model, fit });

@@ -3,6 +3,7 @@
 //! drift; it resolves into the library's [`ndfit::Options`].
 
 use ndfit::fit::{FitOptions, Objective, Solver};
+use ndfit::pipeline::check::{self, Spelling};
 use ndfit::{ModelChoice, Options, Preset};
 
 use super::ndf::NdfArgs;
@@ -51,48 +52,17 @@ impl FitArgs {
         let bad = |flag: &str, e: ndfit::Error| ndfit::Error::invalid(format!("{flag}: {}", e.message()));
         let objective = self.objective.parse::<Objective>().map_err(|e| bad("--objective", e))?;
         let solver = self.solver.parse::<Solver>().map_err(|e| bad("--solver", e))?;
-        if self.extra_starts > 4 {
-            return Err(ndfit::Error::invalid(format!("--extra-starts {} must be between 0 and 4", self.extra_starts)));
-        }
-        let max_theta = max_theta_deg(self.max_theta, self.na)?;
+        let extra_starts = check::extra_starts(self.extra_starts, Spelling::Flag)?;
+        let max_theta = check::aperture_deg(self.max_theta, self.na, Spelling::Flag)?;
         let cut_unresolved = match self.tail.as_str() {
             "unresolved" => true,
             "all" => false,
             other => return Err(ndfit::Error::invalid(format!("--tail {other:?}: use unresolved or all"))),
         };
         let ndf = self.ndf.options().map_err(|e| ndfit::Error::invalid(e.to_string()))?;
-        let fit = FitOptions {
-            objective,
-            solver,
-            extra_starts: self.extra_starts,
-            max_theta: max_theta.to_radians(),
-            cut_unresolved,
-            ..FitOptions::default()
-        };
+        let fit =
+            FitOptions { objective, solver, extra_starts, max_theta: max_theta.to_radians(), cut_unresolved, ..FitOptions::default() };
         Ok(Options { read: self.scan.read_options(), preprocess: self.scan.preprocess(), preset: self.preset, ndf, model, fit })
-    }
-}
-
-/// The fit region's largest polar angle (degrees) from `--max-theta` and `--na` (`asin(NA)`); both
-/// given must agree to 1e-6 degrees.
-pub fn max_theta_deg(max_theta: Option<f64>, na: Option<f64>) -> ndfit::Result<f64> {
-    if let Some(t) = max_theta {
-        if !(t > 0.0 && t <= 90.0) {
-            return Err(ndfit::Error::invalid(format!("--max-theta {t} must be in (0, 90] degrees")));
-        }
-    }
-    let from_na = match na {
-        Some(a) if !(a > 0.0 && a <= 1.0) => return Err(ndfit::Error::invalid(format!("--na {a} must be in (0, 1]"))),
-        Some(a) => Some(a.asin().to_degrees()),
-        None => None,
-    };
-    match (max_theta, from_na) {
-        (Some(t), Some(n)) if (t - n).abs() > 1e-6 => Err(ndfit::Error::invalid(format!(
-            "--max-theta {t} and --na disagree: the aperture sets max_theta = asin(NA) = {n:.6} degrees"
-        ))),
-        (Some(t), _) => Ok(t),
-        (None, Some(n)) => Ok(n),
-        (None, None) => Ok(ndfit::fit::objective::DEFAULT_MAX_THETA_DEG),
     }
 }
 

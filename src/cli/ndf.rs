@@ -7,6 +7,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use ndfit::fit::InputInfo;
 use ndfit::ndf::{output, plot, EmpiricalNdf, NdfOptions, NormalScheme};
+use ndfit::pipeline::check::{self, Spelling};
 use ndfit::{Options, Pipeline};
 
 use super::scan_args::ScanArgs;
@@ -31,20 +32,7 @@ impl NdfArgs {
     /// The library options these flags ask for.
     pub fn options(&self) -> anyhow::Result<NdfOptions> {
         let scheme: NormalScheme = self.normals.parse()?;
-        if let Some(c) = self.ndf_cells {
-            anyhow::ensure!(
-                (3..=ndfit::ndf::grid::MAX_CELLS_ACROSS).contains(&c),
-                "--ndf-cells {c} must be between 3 and {}",
-                ndfit::ndf::grid::MAX_CELLS_ACROSS
-            );
-            anyhow::ensure!(c % 2 == 1, "--ndf-cells {c} must be odd (the grid has a centre cell): use {} or {}", c - 1, c + 1);
-        }
-        anyhow::ensure!(
-            self.target_count.is_finite() && self.target_count >= 1.0,
-            "--target-count {} must be at least 1",
-            self.target_count
-        );
-        Ok(NdfOptions { scheme, cells_across: self.ndf_cells, target_count: self.target_count, frame: None })
+        Ok(check::ndf_options(scheme, self.ndf_cells, Some(self.target_count), Spelling::Flag)?)
     }
 }
 

@@ -25,17 +25,17 @@ pub struct ScanArgs {
     pub format: Option<String>,
     /// Form removed before anything else is computed: none, plane (least squares, the default),
     /// poly2, poly3 (least-squares polynomials in x and y) or cylinder (axis in the xy plane).
-    #[arg(long, value_parser = parse_form)]
+    #[arg(long)]
     pub form: Option<FormRemoval>,
     /// Keep only a window of the grid, in samples: NXxNY+X+Y (columns X..X+NX, rows Y..Y+NY).
-    #[arg(long, value_parser = parse_crop)]
+    #[arg(long)]
     pub crop: Option<Crop>,
     /// Keep every N-th point along x and y (after the crop; no averaging).
     #[arg(long, default_value_t = 1, allow_hyphen_values = true)]
     pub subsample: usize,
     /// Spike removal after the form removal: `median` (default; isolated height outliers masked,
     /// reported in the fit JSON's input.despike) or `none`.
-    #[arg(long, value_parser = parse_despike, default_value = "median")]
+    #[arg(long, default_value = "median")]
     pub despike: ndfit::preprocess::Despike,
 }
 
@@ -70,32 +70,4 @@ impl ScanArgs {
     pub fn load(&self) -> anyhow::Result<ndfit::Heightfield> {
         Ok(ndfit::pipeline::read_preprocessed(&self.scan, &self.read_options(), &self.preprocess())?)
     }
-}
-
-fn parse_form(s: &str) -> Result<FormRemoval, String> {
-    match s {
-        "none" => Ok(FormRemoval::None),
-        "plane" => Ok(FormRemoval::Plane),
-        "poly2" => Ok(FormRemoval::Polynomial(2)),
-        "poly3" => Ok(FormRemoval::Polynomial(3)),
-        "cylinder" => Ok(FormRemoval::Cylinder),
-        other => Err(format!("unknown form {other:?}: use none, plane, poly2, poly3 or cylinder")),
-    }
-}
-
-fn parse_despike(s: &str) -> Result<ndfit::preprocess::Despike, String> {
-    match s {
-        "median" => Ok(ndfit::preprocess::Despike::Median),
-        "none" => Ok(ndfit::preprocess::Despike::None),
-        other => Err(format!("unknown despike {other:?}: use median or none")),
-    }
-}
-
-fn parse_crop(s: &str) -> Result<Crop, String> {
-    let bad = || format!("crop {s:?} is not NXxNY+X+Y (for example 512x512+0+0)");
-    let (size, rest) = s.split_once('+').ok_or_else(bad)?;
-    let (x, y) = rest.split_once('+').ok_or_else(bad)?;
-    let (nx, ny) = size.split_once('x').ok_or_else(bad)?;
-    let p = |t: &str| t.trim().parse::<usize>().map_err(|_| bad());
-    Ok(Crop { x: p(x)?, y: p(y)?, nx: p(nx)?, ny: p(ny)? })
 }

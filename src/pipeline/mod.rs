@@ -7,6 +7,7 @@
 //!  Scan (in memory) ─preprocess─┘            (Options::ndf_options)   (Options::fit_options, ModelChoice)
 //! ```
 
+pub mod check;
 pub mod preset;
 
 use std::path::Path;

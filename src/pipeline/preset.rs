@@ -114,6 +114,16 @@ impl std::fmt::Display for Preset {
     }
 }
 
+impl std::str::FromStr for Preset {
+    type Err = crate::Error;
+    fn from_str(s: &str) -> crate::Result<Self> {
+        Preset::ALL
+            .into_iter()
+            .find(|p| p.as_str() == s)
+            .ok_or_else(|| crate::Error::invalid(format!("unknown preset {s:?}: use fast, balanced or accurate")))
+    }
+}
+
 /// The knob values a preset sets.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PresetKnobs {

@@ -30,6 +30,17 @@ pub enum Despike {
     None,
 }
 
+impl std::str::FromStr for Despike {
+    type Err = crate::Error;
+    fn from_str(s: &str) -> crate::Result<Self> {
+        match s {
+            "median" => Ok(Despike::Median),
+            "none" => Ok(Despike::None),
+            other => Err(crate::Error::invalid(format!("unknown despike {other:?}: use median or none"))),
+        }
+    }
+}
+
 /// What the despiking did (the fit JSON's `input.despike`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DespikeReport {
