@@ -8,6 +8,7 @@
 //! (valid points along the grid row and column through the centre, the smaller).
 
 use ndfit::fit::metric::delta_to_model;
+use ndfit::fit::tail::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, NdfOptions, NormalScheme};
@@ -31,7 +32,12 @@ fn main() {
             let col = (0..n).filter(|&i| hf.z[i * n + n / 2].is_finite()).count();
             let err = |scheme: NormalScheme, cut: bool| -> (f64, f64) {
                 let ndf = empirical_ndf(&hf, &NdfOptions { scheme, ..NdfOptions::default() }).expect("ndf");
-                let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions { cut_unresolved: cut, ..FitOptions::default() }).expect("fit");
+                let rep = fit_model(
+                    &ndf,
+                    ModelId::Ellipsoid,
+                    &FitOptions { tail: if cut { TailRule::Unresolved } else { TailRule::All }, ..FitOptions::default() },
+                )
+                .expect("fit");
                 let cutf = rep.quality.tail.as_ref().map_or(0.0, |t| t.excluded_fraction);
                 (delta_to_model(&rep.to_model().expect("model"), &truth).expect("delta"), cutf)
             };

@@ -2,6 +2,7 @@
 //! Truths are the synthetic ellipsoid caps, whose NDF is exactly the ellipsoid NDF (Walter et al. eq. 1).
 
 use ndfit::fit::metric::delta_to_model;
+use ndfit::fit::tail::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{Model, ModelId};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
@@ -112,7 +113,7 @@ fn na_cut_at_45_degrees_fits_within_one_percent() {
     }
     let opts = FitOptions { max_theta: 45f64.to_radians(), ..FitOptions::default() };
     let d45 = delta_to_model(&fit(&hf, &opts), &truth).expect("delta");
-    let d45t = delta_to_model(&fit(&hf, &FitOptions { cut_unresolved: true, ..opts }), &truth).expect("delta");
+    let d45t = delta_to_model(&fit(&hf, &FitOptions { tail: TailRule::Unresolved, ..opts }), &truth).expect("delta");
     let d40 = delta_to_model(&fit(&hf, &FitOptions { max_theta: 40f64.to_radians(), ..opts }), &truth).expect("delta");
     eprintln!(
         "NA cut: {dropped} points steeper than 45 deg dropped; NDF error {:.3}% (max_theta 45), {:.3}% (45, tail cut), {:.3}% (40)",
@@ -134,7 +135,8 @@ fn unresolved_tail_cut_leaves_out_flagged_bins_and_helps_a_narrow_cap() {
     let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
     assert_eq!(ndf.unresolved.len(), ndf.bins.len());
     let cos_max = 70f64.to_radians().cos();
-    let data = ndfit::fit::FitData::with_tail(&ndf, ndfit::fit::Objective::Poisson, 70f64.to_radians(), true).expect("data");
+    let data =
+        ndfit::fit::FitData::with_tail(&ndf, ndfit::fit::Objective::Poisson, 70f64.to_radians(), TailRule::Unresolved).expect("data");
     let flagged: Vec<usize> = (0..ndf.bins.len()).filter(|&k| 2 * ndf.unresolved[k] > ndf.bins[k].count).collect();
     let inside = |k: usize| ndf.bins[k].proj_solid_angle > 0.0 && ndf.bins[k].m.z >= cos_max;
     let want = (0..ndf.bins.len()).filter(|&k| inside(k) && !flagged.contains(&k)).count();
@@ -142,8 +144,8 @@ fn unresolved_tail_cut_leaves_out_flagged_bins_and_helps_a_narrow_cap() {
     let n_in: f64 = (0..ndf.bins.len()).filter(|&k| inside(k) && !flagged.contains(&k)).map(|k| ndf.bins[k].count as f64).sum();
     assert_eq!(data.n, n_in);
     assert_eq!(data.tail.bins_excluded, flagged.iter().filter(|&&k| inside(k)).count());
-    let off = delta_to_model(&fit(&hf, &FitOptions::default()), &truth).expect("delta");
-    let on = delta_to_model(&fit(&hf, &FitOptions { cut_unresolved: true, ..FitOptions::default() }), &truth).expect("delta");
+    let off = delta_to_model(&fit(&hf, &FitOptions { tail: TailRule::All, ..FitOptions::default() }), &truth).expect("delta");
+    let on = delta_to_model(&fit(&hf, &FitOptions { tail: TailRule::Unresolved, ..FitOptions::default() }), &truth).expect("delta");
     eprintln!(
         "tail cut: {:.2}% of the normals left out; NDF error {:.3}% -> {:.3}%",
         100.0 * data.tail.excluded_fraction,
