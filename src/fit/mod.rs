@@ -257,7 +257,12 @@ fn fit_aniso(s: &Session, id: ModelId, iso: Option<&Fitted>, opts: &FitOptions) 
 /// Fit the ellipsoid from the GTR2aniso optimum with zero skew, with the mean normal's skew, and the
 /// requested extra skews.
 fn fit_ellipsoid(s: &Session, aniso: &Fitted, opts: &FitOptions) -> Result<Fitted> {
-    let p = public(aniso);
+    // A GTR2aniso optimum outside the model's domain (a lobe whose peak lies outside the region, which the
+    // centred model can only flatten) starts nothing: the closed-form start from the slopes does.
+    let mut p = public(aniso);
+    if Model::from_params(aniso.id, &p).is_err() {
+        p = start::closed_form(ModelId::GgxAniso, &s.summary);
+    }
     let (ax, ay, tz) = (p[0], p[1], p[2]);
     let (tx, ty) = start::skew_start(&s.summary, tz);
     let mut starts = vec![vec![ax, ay, 0.0, 0.0, tz]];

@@ -19,7 +19,7 @@ pub const CORE_RADIUS: f64 = 1.0;
 
 /// Share of the region's normals in unresolved bins from which the `core` rule applies: below it the
 /// sampling resolves the tail (a broad or well-sampled bump) and the region is left whole.
-pub const MIN_TAIL_SHARE: f64 = 0.01;
+pub const MIN_TAIL_SHARE: f64 = 0.005;
 
 /// Which tail rule the fit applies (`--tail`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
