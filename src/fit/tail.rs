@@ -129,7 +129,7 @@ pub fn tail_cut(ndf: &EmpiricalNdf, cos_max: f64, rule: TailRule) -> TailCut {
         (0..ndf.bins.len()).filter(|&i| usable(&ndf.bins[i]) && ndf.bins[i].m.z >= cos_max * ndf.bins[i].m.norm()).collect();
     let n: f64 = region.iter().map(|&i| ndf.bins[i].count as f64).sum();
     let frac = |out: &dyn Fn(usize) -> bool| {
-        let cut: f64 = region.iter().filter(|&&i| out(i)).map(|&i| ndf.bins[i].count as f64).sum();
+        let cut = region.iter().filter(|&&i| out(i)).fold(0.0, |a, &i| a + ndf.bins[i].count as f64);
         (cut, region.iter().filter(|&&i| out(i)).count(), if n > 0.0 { cut / n } else { 0.0 })
     };
     let (_, _, tail) = frac(&|i| is_unresolved(ndf, i));

@@ -125,6 +125,62 @@ fn na_cut_at_45_degrees_fits_within_one_percent() {
     assert!(d40 < 1e-2 && d45t < 1e-2, "{d40} {d45t}");
 }
 
+/// The hard-end set of the issue at 1024^2 (anisotropy to 10:1, alpha to 0.02, skew to 0.4 rad), fitted
+/// with default options (the `core` tail rule): every case within 0.3% NDF error of the cap's exact NDF
+/// (the truth, Walter et al. eq. 1), except the 10:1 cap at alpha 0.02 (about 50 samples across its narrow
+/// half-width, objective.md), within 0.4%; and every case at least three times closer than with every bin
+/// kept (`--tail all`).
+#[test]
+fn hard_end_set_at_1024_with_default_options() {
+    let cases = [
+        ([0.35, 0.05, 0.16, 0.0, 0.3], 3e-3),
+        ([0.2, 0.02, 0.0, 0.4, 0.0], 4e-3),
+        ([0.5, 0.05, -0.4, 0.1, 1.0], 3e-3),
+        ([0.1, 0.02, 0.2, 0.2, -0.7], 3e-3),
+        ([0.05, 0.05, 0.4, 0.0, 0.0], 3e-3),
+        ([0.02, 0.02, 0.3, -0.3, 0.0], 3e-3),
+    ];
+    for (p, bound) in cases {
+        let (hf, truth) = cap(1024, p);
+        let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
+        let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions::default()).expect("fit");
+        assert_eq!(rep.quality.tail.as_ref().map(|t| t.rule.as_str()), Some("core"), "{p:?}");
+        let d = delta_to_model(&rep.to_model().expect("model"), &truth).expect("delta");
+        let all = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions { tail: TailRule::All, ..FitOptions::default() }).expect("fit");
+        let d_all = delta_to_model(&all.to_model().expect("model"), &truth).expect("delta");
+        eprintln!("{p:?}: NDF error {:.3}% (every bin: {:.3}%)", 100.0 * d, 100.0 * d_all);
+        assert!(d < bound && 3.0 * d < d_all, "{p:?}: {d} (every bin {d_all})");
+    }
+    // A round cap whose tail the sampling resolves: the region is left whole, the fit unchanged.
+    let (hf, truth) = cap(1024, [0.2, 0.2, 0.0, 0.0, 0.0]);
+    let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
+    let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions::default()).expect("fit");
+    let d = delta_to_model(&rep.to_model().expect("model"), &truth).expect("delta");
+    assert!(d < 3e-3, "{d}");
+}
+
+/// The tilted 10:1 cap behind an aperture of 45 degrees, fitted over 40 degrees: the lobe's peak (23
+/// degrees off the normal) leaves the centred GTR2aniso start nothing to fit (its optimum runs off to an
+/// unbounded alpha); the ellipsoid then starts from the slopes and fits within 1% of the truth.
+#[test]
+fn tilted_cap_behind_an_aperture_fits_from_the_slope_start() {
+    let (mut hf, truth) = cap(1024, [0.5, 0.05, -0.4, 0.1, 1.0]);
+    let (nx, ny) = (hf.nx, hf.ny);
+    let z0 = hf.z.to_vec();
+    for i in 1..ny - 1 {
+        for j in 1..nx - 1 {
+            let sx = (z0[i * nx + j + 1] - z0[i * nx + j - 1]) / (2.0 * hf.dx);
+            let sy = (z0[(i + 1) * nx + j] - z0[(i - 1) * nx + j]) / (2.0 * hf.dy);
+            if sx.hypot(sy) > 1.0 {
+                hf.z[i * nx + j] = f64::NAN;
+            }
+        }
+    }
+    let d = delta_to_model(&fit(&hf, &FitOptions { max_theta: 40f64.to_radians(), ..FitOptions::default() }), &truth).expect("delta");
+    eprintln!("tilted 10:1 cap, NA 45, max_theta 40: NDF error {:.3}%", 100.0 * d);
+    assert!(d < 1e-2, "{d}");
+}
+
 /// The unresolved-tail cut: on a narrow skewed cap at 1024^2 it leaves out the bins most of whose normals
 /// the Richardson estimate flags, removes none of them from the model's normalization inconsistently
 /// (every region bin is a resolved bin within max_theta), and brings the fit closer to the truth.
@@ -193,7 +249,7 @@ fn cli_na_despike_and_tail_options() {
     assert!(!b.exists());
 
     let c = dir.join("c.json");
-    let o = fit(&["--despike", "none"], &c);
+    let o = fit(&["--despike", "none", "--tail", "all"], &c);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let j = json(&c);
     assert!(j["input"].get("despike").is_none());
