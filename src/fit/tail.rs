@@ -148,3 +148,52 @@ pub fn tail_cut(ndf: &EmpiricalNdf, cos_max: f64, rule: TailRule) -> TailCut {
         unresolved_tail_fraction: tail,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ndf::{empirical_ndf, NdfOptions};
+    use crate::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
+
+    /// On a narrow cap (its rim unresolved) the core rule leaves out exactly the bins of the region whose
+    /// centre lies beyond `CORE_RADIUS` in the whitened Lambert disk (recomputed here from the slope
+    /// `-m_xy / m_z`, `|p| = sqrt(2 (1 - m'_z))`), and counts them; with no unresolved normal it cuts
+    /// nothing, and rough at the sampling step neither.
+    #[test]
+    fn core_rule_cuts_the_ring_beyond_the_core() {
+        let s = SynthSettings { nx: 256, ny: 256, seed: 3, ..SynthSettings::default() };
+        let (hf, _) =
+            ellipsoid_surface(&s, &EllipsoidParams { alpha_x: 0.05, alpha_y: 0.05, ..EllipsoidParams::default() }).expect("synth");
+        let mut ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
+        let cos_max = 70f64.to_radians().cos();
+        let cut = tail_cut(&ndf, cos_max, TailRule::Core);
+        assert_eq!(cut.rule, "core");
+        assert!(cut.unresolved_tail_fraction >= MIN_TAIL_SHARE);
+        let (mut n, mut out, mut k) = (0.0, 0.0, 0);
+        for (i, b) in ndf.bins.iter().enumerate() {
+            if !(usable(b) && b.m.z >= cos_max * b.m.norm()) {
+                continue;
+            }
+            let w = ndf.frame.whiten;
+            let (sx, sy) = (-b.m.x / b.m.z - ndf.frame.center[0], -b.m.y / b.m.z - ndf.frame.center[1]);
+            let (wx, wy) = (w[0][0] * sx + w[0][1] * sy, w[1][0] * sx + w[1][1] * sy);
+            let p = (2.0 * (1.0 - 1.0 / (1.0 + wx * wx + wy * wy).sqrt())).sqrt();
+            n += b.count as f64;
+            assert_eq!(cut.excludes(&ndf, i), p > CORE_RADIUS, "bin {i}: |p| {p}");
+            if p > CORE_RADIUS {
+                out += b.count as f64;
+                k += 1;
+            }
+        }
+        assert_eq!((cut.n_excluded, cut.bins_excluded), (out, k));
+        assert!((cut.excluded_fraction - out / n).abs() < 1e-15);
+        assert!(tail_cut(&ndf, cos_max, TailRule::All).rule == "none");
+        let saved = ndf.unresolved.clone();
+        ndf.unresolved.iter_mut().for_each(|u| *u = 0);
+        let none = tail_cut(&ndf, cos_max, TailRule::Core);
+        assert_eq!((none.rule.as_str(), none.bins_excluded), ("none (tail resolved)", 0));
+        ndf.unresolved = saved;
+        ndf.unresolved_share = Some(0.3);
+        assert_eq!(tail_cut(&ndf, cos_max, TailRule::Core).rule, "none (rough at the sampling step)");
+    }
+}
