@@ -189,8 +189,9 @@ def check_scan(ndfit: str, scan: str, name: str, model_list, work: str, ndf_args
     except ValueError as e:
         return [Row(scan=name, model=m, notes=[f"reading ndfit's NDF: {e}"]) for m in model_list]
     fit_args = []
-    if not tail:
-        # The default tail rule (core) needs the binning frame: the NDF's JSON carries it.
+    if not tail and bins.extra.get("unresolved") is not None:
+        # The default tail rule (core) needs the binning frame: the NDF's JSON carries it. (Without the
+        # CSV's unresolved counts no rule applies.)
         js = os.path.join(work, f"{name}.ndf.json")
         ok, _, msg = run([ndfit, "ndf", scan, "-o", js, *ndf_args], timeout)
         if not ok:
