@@ -1,14 +1,16 @@
 //! Measurement tool (not a test): the hard-end synthetic set of docs/ACCURACY.md. Ellipsoid caps with
 //! anisotropy up to 10:1, alpha down to 0.02 and skew up to 0.4 rad; per truth the NDF error of the
-//! ellipsoid fit against the truth with the tail cut off and on, the error of the despiked fit of the same
+//! ellipsoid fit against the truth with the default tail rule (`core`), with every bin and with the
+//! `unresolved` rule, the error of the despiked fit of the same
 //! scan with 0.05% spikes of +-50 Sq against the clean scan's fit, and with an aperture of 45 degrees
-//! (points steeper than 45 degrees dropped) the error against the truth over max_theta 45 (tail cut on)
-//! and 40 degrees.
+//! (points steeper than 45 degrees dropped) the error against the truth over max_theta 45 and 40
+//! degrees (default tail rule).
 //!
 //!     cargo run --release --example hard_end            # 1024^2
 //!     N=2048 cargo run --release --example hard_end
 
 use ndfit::fit::metric::delta_to_model;
+use ndfit::fit::tail::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{Model, ModelId};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
@@ -33,8 +35,8 @@ fn main() {
         [0.2, 0.2, 0.0, 0.0, 0.0],
     ];
     let n: usize = std::env::var("N").ok().map(|s| s.parse().expect("N")).unwrap_or(1024);
-    println!("| truth (ax, ay, tx, ty, tz), {n}^2 | default | --tail unresolved | spikes, despiked (not) vs clean fit | NA 45: max_theta 45 + tail cut / 40 |");
-    println!("| --- | --- | --- | --- | --- |");
+    println!("| truth (ax, ay, tx, ty, tz), {n}^2 | default (--tail core) | --tail all | --tail unresolved | spikes, despiked (not) vs clean fit | NA 45: max_theta 45 / 40 |");
+    println!("| --- | --- | --- | --- | --- | --- |");
     for p in cases {
         let ep =
             EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
@@ -46,7 +48,8 @@ fn main() {
         };
         let truth = Ok(truth);
         let clean = fit(&hf, &FitOptions::default());
-        let cut = fit(&hf, &FitOptions { cut_unresolved: true, ..FitOptions::default() });
+        let all = fit(&hf, &FitOptions { tail: TailRule::All, ..FitOptions::default() });
+        let cut = fit(&hf, &FitOptions { tail: TailRule::Unresolved, ..FitOptions::default() });
         // Spikes: 0.05% of the valid points, +-50 Sq, at sites of a congruential walk.
         let valid: Vec<usize> = (0..hf.z.len()).filter(|&k| hf.z[k].is_finite()).collect();
         let mean = valid.iter().map(|&k| hf.z[k]).sum::<f64>() / valid.len() as f64;
@@ -71,12 +74,13 @@ fn main() {
                 }
             }
         }
-        let o45 = FitOptions { max_theta: 45f64.to_radians(), cut_unresolved: true, ..FitOptions::default() };
+        let o45 = FitOptions { max_theta: 45f64.to_radians(), ..FitOptions::default() };
         let na45 = fit(&na, &o45);
         let na40 = fit(&na, &FitOptions { max_theta: 40f64.to_radians(), ..FitOptions::default() });
         println!(
-            "| {p:?} | {} | {} | {} ({}) | {} / {} |",
+            "| {p:?} | {} | {} | {} | {} ({}) | {} / {} |",
             d(&clean, &truth),
+            d(&all, &truth),
             d(&cut, &truth),
             d(&despiked, &clean),
             d(&raw, &clean),

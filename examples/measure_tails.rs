@@ -4,6 +4,7 @@
 //! `TOLS=0.005,0.01` the tolerances.
 
 use ndfit::fit::metric::delta_to_model;
+use ndfit::fit::tail::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, NdfOptions};
@@ -39,13 +40,13 @@ fn main() {
         let (hf, truth) = ellipsoid_surface(&SynthSettings { nx: n, ny: n, seed: 7, ..SynthSettings::default() }, &ep).unwrap();
         let truth = truth.to_model().unwrap();
         let mut ndf = empirical_ndf(&hf, &NdfOptions::default()).unwrap();
-        let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions { cut_unresolved: false, ..FitOptions::default() }).unwrap();
+        let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions { tail: TailRule::All, ..FitOptions::default() }).unwrap();
         let mut line =
             format!("{p:?} bins {}: off {:.3}%", ndf.bins.len(), 100.0 * delta_to_model(&rep.to_model().unwrap(), &truth).unwrap());
         for &t in &tols {
             ndf.resolution_tolerance = t;
             ndfit::ndf::resolution::assess(&hf, &mut ndf);
-            let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions { cut_unresolved: true, ..FitOptions::default() }).unwrap();
+            let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions { tail: TailRule::Unresolved, ..FitOptions::default() }).unwrap();
             let d = delta_to_model(&rep.to_model().unwrap(), &truth).unwrap();
             line += &format!(" {t}:{:.3}% (cut {:.3})", d * 100.0, rep.quality.tail.as_ref().unwrap().excluded_fraction);
         }

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from ndfitpy.bins import Bins, read_ndf_csv
-from ndfitpy.tail import cut_unresolved
+from ndfitpy.tail import cut_core, cut_unresolved, whitened_lambert_radius
 
 
 def _bins(count, unresolved):
@@ -49,3 +49,33 @@ def test_csv_column_is_read_and_checked(tmp_path):
     p.write_text(head + row.format(c=3, u=5))
     with pytest.raises(ValueError, match="line 2: unresolved"):
         read_ndf_csv(str(p))
+
+
+def test_whitened_lambert_radius_closed_form():
+    """|p| = 2 sin(theta'/2) of the whitened normal: a slope at the frame's centre is 0; whitened slope
+    radius sqrt 3 (theta' = 60 degrees) is exactly 1, the core's edge."""
+    frame = {"center": [0.1, -0.2], "whiten": [[2.0, 0.0], [0.0, 4.0]]}
+    s = np.array([[0.1, -0.2], [0.1 + np.sqrt(3.0) / 2.0, -0.2], [0.1, -0.2 + np.sqrt(3.0) / 4.0]])
+    m = np.column_stack([-s, np.ones(3)])
+    assert whitened_lambert_radius(m, frame) == pytest.approx([0.0, 1.0, 1.0], abs=1e-12)
+
+
+def test_core_rule_keeps_the_core_when_the_tail_is_unresolved():
+    """With 5% of the region's normals in a majority-unresolved bin the bins beyond |p| = 1 leave (N stays
+    the whole NDF's count); with the same bin only 20% unresolved (no unresolved bin) nothing does; rough at
+    the sampling step (29% unresolved), nothing does."""
+    frame = {"center": [0.0, 0.0], "whiten": [[1.0, 0.0], [0.0, 1.0]]}
+    r = np.array([0.0, 1.0, 1.5, 2.0])  # whitened slope radius: |p| = 0, 0.765, 0.944, 1.051 (63 deg)
+    m = np.column_stack([-r, np.zeros(4), np.ones(4)])
+    p = whitened_lambert_radius(m, frame)
+    assert list(p <= 1.0) == [True, True, True, False]
+    b = Bins(m=m, count=np.array([500.0, 300.0, 150.0, 50.0]), proj_solid_angle=np.full(4, 0.1))
+    b.extra["unresolved"] = np.array([0.0, 0.0, 0.0, 10.0])
+    cut, info = cut_core(b, frame)
+    assert info.rule == "none (tail resolved)" and len(cut) == 4
+    b.extra["unresolved"] = np.array([0.0, 0.0, 0.0, 30.0])
+    cut, info = cut_core(b, frame)
+    assert info.rule == "core" and list(cut.count) == [500, 300, 150] and cut.n_samples == 1000
+    b.extra["unresolved"] = np.array([200.0, 60.0, 0.0, 30.0])
+    cut, info = cut_core(b, frame)
+    assert info.rule.startswith("none (rough") and len(cut) == 4

@@ -617,12 +617,12 @@ fn finish<'py>(py: Python<'py>, out: Vec<f64>, single: bool) -> PyResult<Bound<'
 /// - the NDF: `normals` (central|triangles), `ndf_cells` (odd, 3-1023), `target_count` (default 64).
 /// - the fit: `objective` (poisson|logd), `solver` (lm|nelder-mead|lbfgs), `extra_starts` (0-4),
 ///   `max_theta` (degrees, (0, 90], default 70) or `na` (numerical aperture: max_theta = asin(NA)),
-///   `tail` (all|unresolved, as `--tail`), `preset` (fast|balanced|accurate, as `--preset`).
+///   `tail` (core|unresolved|all, as `--tail`), `preset` (fast|balanced|accurate, as `--preset`).
 /// - `threads`: threads for this call (default: all cores, as the CLI).
 #[pyfunction]
 #[pyo3(signature = (source, model="auto", form="plane", preset=None, *, dx=None, dy=None, z_scale=None, format=None, crop=None,
     subsample=1, despike="median", normals="central", ndf_cells=None, target_count=None, objective="poisson", solver="lm",
-    extra_starts=0, max_theta=None, na=None, tail="all", threads=None))]
+    extra_starts=0, max_theta=None, na=None, tail="core", threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -653,13 +653,9 @@ fn fit(
     let ndf = ndf_options(normals, ndf_cells, target_count)?;
     let max_theta = check::aperture_deg(max_theta, na, Spelling::Keyword).map_err(to_py)?;
     let extra_starts = check::extra_starts(extra_starts, Spelling::Keyword).map_err(to_py)?;
-    let cut_unresolved = match tail {
-        "unresolved" => true,
-        "all" => false,
-        other => return Err(invalid(format!("tail {other:?}: use unresolved or all"))),
-    };
+    let tail = check::parse::<ndfit::fit::tail::TailRule>("tail", tail, Spelling::Keyword).map_err(to_py)?;
     let fit = FitOptions {
-        cut_unresolved,
+        tail,
         objective: objective.parse::<Objective>().map_err(|e| invalid(format!("objective: {}", e.message())))?,
         solver: solver.parse::<Solver>().map_err(|e| invalid(format!("solver: {}", e.message())))?,
         extra_starts,

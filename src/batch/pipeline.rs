@@ -7,7 +7,7 @@ use serde_json::Value;
 
 use super::compare::BaselineEntry;
 use super::job::JobOutput;
-use super::quality::{model_of_fit, quality};
+use super::quality::{model_of_fit, quality_in};
 use crate::error::{Error, ErrorKind, Result};
 use crate::ndf::EmpiricalNdf;
 use crate::pipeline::{Options, Outcome, Pipeline};
@@ -39,8 +39,10 @@ pub fn score(fit: Value, ndf: &EmpiricalNdf, baseline: Option<&BaselineEntry>) -
     let fitted = model_of_fit(&fit)?;
     // The fit's own region (objective.md), for the baseline's model too: the same bins for both.
     let max_theta = super::quality::max_theta_of_fit(&fit);
-    let q = quality(ndf, &fitted, max_theta)?;
+    let rule = super::quality::tail_rule_of_fit(&fit).to_string();
+    let q = quality_in(ndf, &fitted, max_theta, &rule)?;
     // A baseline model this version cannot evaluate falls back to its stored quality (basis "stored").
-    let same_bins = baseline.and_then(|b| b.fit_json()).and_then(|f| model_of_fit(&f).ok()).and_then(|m| quality(ndf, &m, max_theta).ok());
+    let same_bins =
+        baseline.and_then(|b| b.fit_json()).and_then(|f| model_of_fit(&f).ok()).and_then(|m| quality_in(ndf, &m, max_theta, &rule).ok());
     Ok(JobOutput { fit, quality: Some(q), baseline_on_same_bins: same_bins })
 }

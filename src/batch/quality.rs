@@ -37,9 +37,32 @@ pub struct Quality {
 /// Score `model` against `ndf` on the fit region of polar angles up to `max_theta` (radians; `pi/2`: the
 /// hemisphere). Errors only when the region holds no samples.
 pub fn quality(ndf: &EmpiricalNdf, model: &dyn Ndf, max_theta: f64) -> Result<Quality> {
+    quality_in(ndf, model, max_theta, "none")
+}
+
+/// [`quality`] on the region the fit's tail rule (`quality.tail.rule` of its JSON) left: `core` keeps the
+/// bins whose centre lies within [`crate::fit::tail::CORE_RADIUS`] of the whitened Lambert disk,
+/// `unresolved` drops the bins where most normals are unresolved (objective.md); any other rule keeps
+/// every bin.
+pub fn quality_in(ndf: &EmpiricalNdf, model: &dyn Ndf, max_theta: f64, tail_rule: &str) -> Result<Quality> {
     let cos_max = max_theta.min(std::f64::consts::FRAC_PI_2).cos();
+    let r2 = crate::fit::tail::CORE_RADIUS * crate::fit::tail::CORE_RADIUS;
+    let kept = |k: usize, b: &crate::ndf::NdfBin| match tail_rule {
+        "core" => {
+            let p = ndf.frame.to_lambert(-b.m.x / b.m.z, -b.m.y / b.m.z);
+            p[0] * p[0] + p[1] * p[1] <= r2
+        }
+        "unresolved" => ndf.unresolved.get(k).is_none_or(|&u| 2 * u <= b.count),
+        _ => true,
+    };
     // Bins without projected area carry no data and no model mass (objective.md).
-    let region: Vec<&crate::ndf::NdfBin> = ndf.bins.iter().filter(|b| b.proj_solid_angle > 0.0 && b.m.z >= cos_max * b.m.norm()).collect();
+    let region: Vec<&crate::ndf::NdfBin> = ndf
+        .bins
+        .iter()
+        .enumerate()
+        .filter(|&(k, b)| b.proj_solid_angle > 0.0 && b.m.z >= cos_max * b.m.norm() && kept(k, b))
+        .map(|(_, b)| b)
+        .collect();
     let n: u64 = region.iter().map(|b| b.count).sum();
     if n == 0 {
         return Err(Error::new(crate::ErrorKind::BadData, "the empirical NDF holds no samples in the fit region"));
@@ -75,6 +98,11 @@ pub fn quality(ndf: &EmpiricalNdf, model: &dyn Ndf, max_theta: f64) -> Result<Qu
     // Rounding can leave a deviance of a perfect model a few ulps below zero.
     let dev = dev.max(0.0);
     Ok(Quality { deviance: dev, kl: dev / (2.0 * nf), ndf_delta: (dw / dsum).sqrt(), n_samples: n, n_bins })
+}
+
+/// The tail rule a fit JSON's region was cut by (`quality.tail.rule`; `none` when absent).
+pub fn tail_rule_of_fit(fit: &Value) -> &str {
+    fit.pointer("/quality/tail/rule").and_then(Value::as_str).unwrap_or("none")
 }
 
 /// The fit region a fit JSON was fitted on: `quality.max_theta_deg` in radians (the hemisphere for a fit

@@ -34,9 +34,10 @@ pub struct FitArgs {
     /// The objective's numerical aperture NA (0-1]: sets --max-theta to asin(NA); both given must agree.
     #[arg(long, allow_hyphen_values = true)]
     pub na: Option<f64>,
-    /// The tail: `all` (default) keeps every bin within --max-theta; `unresolved` leaves out the bins
-    /// where most normals are not resolved by the sampling (data_formats/objective.md).
-    #[arg(long, default_value = "all")]
+    /// The tail: `core` (default) keeps the whitened core when the sampling leaves an unresolved tail;
+    /// `unresolved` leaves out only the bins where most normals are not resolved by the sampling; `all`
+    /// keeps every bin within --max-theta (data_formats/objective.md).
+    #[arg(long, default_value = "core")]
     pub tail: String,
     /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` = the defaults). Sets the
     /// subsampling stride (on top of --subsample; the kept points are all that is read, and the form is
@@ -54,14 +55,9 @@ impl FitArgs {
         let solver = self.solver.parse::<Solver>().map_err(|e| bad("--solver", e))?;
         let extra_starts = check::extra_starts(self.extra_starts, Spelling::Flag)?;
         let max_theta = check::aperture_deg(self.max_theta, self.na, Spelling::Flag)?;
-        let cut_unresolved = match self.tail.as_str() {
-            "unresolved" => true,
-            "all" => false,
-            other => return Err(ndfit::Error::invalid(format!("--tail {other:?}: use unresolved or all"))),
-        };
+        let tail = self.tail.parse::<ndfit::fit::tail::TailRule>().map_err(|e| bad("--tail", e))?;
         let ndf = self.ndf.options().map_err(|e| ndfit::Error::invalid(e.to_string()))?;
-        let fit =
-            FitOptions { objective, solver, extra_starts, max_theta: max_theta.to_radians(), cut_unresolved, ..FitOptions::default() };
+        let fit = FitOptions { objective, solver, extra_starts, max_theta: max_theta.to_radians(), tail, ..FitOptions::default() };
         Ok(Options { read: self.scan.read_options(), preprocess: self.scan.preprocess(), preset: self.preset, ndf, model, fit })
     }
 }

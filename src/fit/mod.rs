@@ -67,9 +67,9 @@ pub struct FitOptions {
     /// Largest polar angle (radians) of the bins the objective uses; the model is normalized over them
     /// (objective.md). Default [`objective::DEFAULT_MAX_THETA_DEG`].
     pub max_theta: f64,
-    /// Leave the bins where most normals are unresolved by the sampling out of the region ([`tail`],
-    /// objective.md). Default false: measured, it helps narrow and anisotropic caps but not skewed ones.
-    pub cut_unresolved: bool,
+    /// The tail rule ([`tail`], objective.md): by default the whitened core when the sampling leaves an
+    /// unresolved tail ([`tail::TailRule::Core`]).
+    pub tail: tail::TailRule,
 }
 
 impl Default for FitOptions {
@@ -80,7 +80,7 @@ impl Default for FitOptions {
             tolerances: Tolerances::default(),
             extra_starts: 0,
             max_theta: objective::DEFAULT_MAX_THETA_DEG.to_radians(),
-            cut_unresolved: false,
+            tail: tail::TailRule::Core,
         }
     }
 }
@@ -115,7 +115,7 @@ struct Session {
 
 impl Session {
     fn new(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<Session> {
-        let data = FitData::with_tail(ndf, opts.objective, opts.max_theta, opts.cut_unresolved)?;
+        let data = FitData::with_tail(ndf, opts.objective, opts.max_theta, opts.tail)?;
         let summary = start::summarize(&data);
         let coarse = if data.bins.len() >= COARSE_PASS_MIN_BINS { data.coarsened(ndf, 50) } else { None };
         Ok(Session { data, coarse, summary })
@@ -257,7 +257,12 @@ fn fit_aniso(s: &Session, id: ModelId, iso: Option<&Fitted>, opts: &FitOptions) 
 /// Fit the ellipsoid from the GTR2aniso optimum with zero skew, with the mean normal's skew, and the
 /// requested extra skews.
 fn fit_ellipsoid(s: &Session, aniso: &Fitted, opts: &FitOptions) -> Result<Fitted> {
-    let p = public(aniso);
+    // A GTR2aniso optimum outside the model's domain (a lobe whose peak lies outside the region, which the
+    // centred model can only flatten) starts nothing: the closed-form start from the slopes does.
+    let mut p = public(aniso);
+    if Model::from_params(aniso.id, &p).is_err() {
+        p = start::closed_form(ModelId::GgxAniso, &s.summary);
+    }
     let (ax, ay, tz) = (p[0], p[1], p[2]);
     let (tx, ty) = start::skew_start(&s.summary, tz);
     let mut starts = vec![vec![ax, ay, 0.0, 0.0, tz]];

@@ -106,12 +106,12 @@ impl FitData {
     /// within `max_theta` (radians; `>= pi/2` keeps the hemisphere) of n. Fails on an NDF with no counts
     /// in that region.
     pub fn new(ndf: &EmpiricalNdf, objective: Objective, max_theta: f64) -> Result<FitData> {
-        FitData::with_tail(ndf, objective, max_theta, false)
+        FitData::with_tail(ndf, objective, max_theta, super::tail::TailRule::All)
     }
 
-    /// [`FitData::new`] with, when `cut_unresolved`, the tail cut of [`super::tail`]: the bins where most
-    /// normals are unresolved by the sampling also leave the region.
-    pub fn with_tail(ndf: &EmpiricalNdf, objective: Objective, max_theta: f64, cut_unresolved: bool) -> Result<FitData> {
+    /// [`FitData::new`] with the tail cut of `rule` ([`super::tail`]): the bins it leaves out also leave
+    /// the region.
+    pub fn with_tail(ndf: &EmpiricalNdf, objective: Objective, max_theta: f64, rule: super::tail::TailRule) -> Result<FitData> {
         if !(max_theta > 0.0) {
             return Err(Error::invalid(format!("max_theta must be positive, got {max_theta}")));
         }
@@ -126,9 +126,9 @@ impl FitData {
         // Past pi/2 there are no bins (the horizon bounds them): the hemisphere.
         let max_theta = max_theta.min(std::f64::consts::FRAC_PI_2);
         let cos_max = max_theta.cos();
-        let tail = super::tail::tail_cut(ndf, cos_max, cut_unresolved);
+        let tail = super::tail::tail_cut(ndf, cos_max, rule);
         let cut = tail.bins_excluded > 0;
-        let keep: Vec<bool> = (0..ndf.bins.len()).map(|k| !(cut && super::tail::is_unresolved(ndf, k))).collect();
+        let keep: Vec<bool> = (0..ndf.bins.len()).map(|k| !(cut && tail.excludes(ndf, k))).collect();
         let inside = |(k, b): &(usize, &crate::ndf::NdfBin)| keep[*k] && b.m.z >= cos_max * b.m.norm();
         let usable = |(_, b): &(usize, &crate::ndf::NdfBin)| usable(b);
         let n: f64 = ndf.bins.iter().enumerate().filter(usable).filter(inside).map(|(_, b)| b.count as f64).sum();
@@ -174,7 +174,7 @@ impl FitData {
         let cut = self.tail.bins_excluded > 0;
         for (k, (b, &cell)) in ndf.bins.iter().zip(&ndf.bin_cells).enumerate() {
             let ok = b.proj_solid_angle > 0.0 && b.proj_solid_angle.is_finite() && b.m.z > 0.0 && b.m.iter().all(|v| v.is_finite());
-            if !ok || b.m.z < cos_max * b.m.norm() || (cut && super::tail::is_unresolved(ndf, k)) {
+            if !ok || b.m.z < cos_max * b.m.norm() || (cut && self.tail.excludes(ndf, k)) {
                 continue;
             }
             let (ix, iy) = (cell as usize % n, cell as usize / n);
