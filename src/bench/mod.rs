@@ -17,6 +17,7 @@ pub mod numpy;
 pub mod pipeline;
 pub mod plot;
 pub mod presets;
+pub mod process;
 pub mod report;
 pub mod scene;
 pub mod sweep;
