@@ -11,6 +11,7 @@
 
 pub mod accuracy;
 pub mod analysis;
+pub mod floors;
 pub mod knobs;
 pub mod mem;
 pub mod numpy;
