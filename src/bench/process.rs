@@ -58,6 +58,18 @@ pub struct Sample {
     pub cpu_s: Option<f64>,
     /// Peak resident set of the child (bytes); `None` where `wait4` is unavailable.
     pub peak_rss: Option<u64>,
+    /// The measuring process's own peak resident set when it spawned the child (bytes). Linux carries the
+    /// spawning process's high-water mark into the child's `ru_maxrss` across `exec`, so a child peak at
+    /// or below this figure only says "at most this much".
+    #[serde(default)]
+    pub rss_floor: Option<u64>,
+}
+
+impl Sample {
+    /// The child's peak resident set when it is a real figure (above [`Sample::rss_floor`]).
+    pub fn peak_above_floor(&self) -> Option<u64> {
+        self.peak_rss.filter(|&p| self.rss_floor.is_none_or(|f| p > f))
+    }
 }
 
 /// Spawn `cmd`, wait for it, and return its wall time, CPU time and peak memory. A non-zero exit is an
@@ -70,6 +82,9 @@ pub fn run_once(cmd: &Cmd) -> Result<Sample> {
         None => c.stdout(Stdio::null()),
         Some(p) => c.stdout(Stdio::from(std::fs::File::create(p).map_err(|e| Error::io(e).with_path(p))?)),
     };
+    // Lower this process's high-water mark to its current resident set first: the child inherits it.
+    super::mem::reset_peak();
+    let rss_floor = super::mem::peak_rss();
     let start = Instant::now();
     let mut child = c.spawn().map_err(|e| Error::new(ErrorKind::Io, format!("{}: cannot start `{}`: {e}", cmd.label, cmd.display())))?;
     // Drain stderr on a thread so a chatty child cannot block on a full pipe while we wait for it.
@@ -88,7 +103,7 @@ pub fn run_once(cmd: &Cmd) -> Result<Sample> {
         let last = stderr.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("").trim();
         return Err(Error::new(ErrorKind::Io, format!("{}: `{}` failed ({code}): {last}", cmd.label, cmd.display())));
     }
-    Ok(Sample { wall_s, cpu_s, peak_rss })
+    Ok(Sample { wall_s, cpu_s, peak_rss, rss_floor })
 }
 
 /// Reap `child` with `wait4(2)` for its resource usage: (success, status text, CPU s, peak RSS bytes).
@@ -149,6 +164,8 @@ pub struct Measured {
     pub median_peak_rss: Option<u64>,
     /// Largest peak resident set over the runs (bytes).
     pub max_peak_rss: Option<u64>,
+    /// Largest [`Sample::rss_floor`] over the runs: peaks at or below it are upper bounds only.
+    pub rss_floor: Option<u64>,
     /// Every run, in the order measured.
     pub samples: Vec<Sample>,
 }
@@ -168,6 +185,7 @@ impl Measured {
             median_cpu_ms: cpus.map(|c| median(&c)),
             median_peak_rss: rss.as_ref().map(|r| median(r) as u64),
             max_peak_rss: rss.map(|r| r.iter().copied().fold(0.0, f64::max) as u64),
+            rss_floor: samples.iter().filter_map(|s| s.rss_floor).max(),
             samples,
         }
     }
@@ -232,12 +250,14 @@ pub fn run_pool(cmds: &[Cmd], jobs: usize) -> Result<Sample> {
     let results = results.into_inner().unwrap_or_else(|e| e.into_inner());
     let mut cpu = Some(0.0);
     let mut rss = Some(0u64);
+    let mut floor = Some(0u64);
     for r in results {
         let s = r?;
         cpu = cpu.zip(s.cpu_s).map(|(a, b)| a + b);
         rss = rss.zip(s.peak_rss).map(|(a, b)| a.max(b));
+        floor = floor.zip(s.rss_floor).map(|(a, b)| a.max(b));
     }
-    Ok(Sample { wall_s, cpu_s: cpu, peak_rss: rss })
+    Ok(Sample { wall_s, cpu_s: cpu, peak_rss: rss, rss_floor: floor })
 }
 
 /// A named set of commands run as a pool of `jobs` (one "command" of [`interleave_pools`]).
