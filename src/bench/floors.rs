@@ -247,7 +247,7 @@ pub fn markdown(r: &Report) -> String {
     let load = |l: Option<[f64; 3]>| l.map_or("-".to_string(), |l| format!("{:.2} {:.2} {:.2}", l[0], l[1], l[2]));
     let mut s = format!(
         "{0}^2 float64 X3P, data.bin deflated ({1:.1} MB file, {2:.1} MB of heights); load average {3} at the start, {4} at the end.\n\n\
-         | command | median (ms) | min - max (ms) | CPU (ms) | peak RSS (MB) | runs |\n| --- | --- | --- | --- | --- | --- |\n",
+         | command | median (ms) | min - max (ms) | CPU (ms) | child peak RSS (MB) | runs |\n| --- | --- | --- | --- | --- | --- |\n",
         r.size,
         r.file_bytes as f64 / 1e6,
         r.data_bytes as f64 / 1e6,
@@ -262,7 +262,11 @@ pub fn markdown(r: &Report) -> String {
             m.min_ms,
             m.max_ms,
             m.median_cpu_ms.map_or("-".into(), |c| format!("{c:.0}")),
-            m.median_peak_rss.map_or("-".into(), |b| format!("{:.1}", b as f64 / 1e6)),
+            match (m.median_peak_rss, m.rss_floor) {
+                (Some(p), Some(f)) if p <= f => format!("<= {:.1}", f as f64 / 1e6),
+                (Some(p), _) => format!("{:.1}", p as f64 / 1e6),
+                _ => "-".into(),
+            },
             m.samples.len()
         );
     }
