@@ -20,7 +20,7 @@ use super::entry::{fnv1a64, Entry, ResumeKey, Status};
 use super::job::{Job, JobContext, JobFailure};
 use super::spec::ScanSpec;
 use crate::error::{Error, Result};
-use crate::io::write_atomic;
+use crate::io::atomic::{sync_tree, write_atomic_unsynced};
 
 /// Folder (under the output folder) of the per-scan records.
 pub const RECORDS_DIR: &str = "scans";
@@ -254,9 +254,13 @@ pub fn run(
                 .ok();
         }
     });
+    // Per-scan files are renamed into place unsynced (complete or absent after any crash or kill); one
+    // sync of the output folder makes them durable against power loss before the run reports.
+    let synced = sync_tree(&opts.out_dir);
     if let Some(e) = fatal.into_inner().ok().flatten() {
         return Err(e);
     }
+    synced?;
     let slots = slots.into_inner().map_err(|_| Error::new(crate::ErrorKind::Numerical, "a batch worker panicked"))?;
     let mut briefs = Vec::with_capacity(specs.len());
     for (spec, b) in specs.iter().zip(slots) {
@@ -322,10 +326,12 @@ fn run_one(
     if opts.resume {
         let extras_present = |e: &Entry| e.fit.is_none() || opts.extras.iter().all(|(kind, suffix)| ctx.extra_path(kind, suffix).exists());
         if let Some(entry) = read_record(&rec_path).filter(|e| e.resume.as_ref() == Some(&key) && e.path == spec.key && extras_present(e)) {
-            // The record holds the fit: a per-scan fit file deleted since is written again from it.
+            // The record holds the fit: a per-scan fit file deleted since, or left incomplete by a power
+            // loss before the run's sync, is written again from it.
             if let Some(fit) = &entry.fit {
                 let p = fit_path(&opts.out_dir, spec);
-                if !p.exists() {
+                let complete = std::fs::read(&p).is_ok_and(|b| serde_json::from_slice::<serde::de::IgnoredAny>(&b).is_ok());
+                if !complete {
                     write_fit(&p, fit)?;
                 }
             }
@@ -373,13 +379,13 @@ fn run_one(
     }
     make_parent(&rec_path)?;
     // The record goes last: its presence means the scan's files are complete (what --resume trusts).
-    write_atomic(&rec_path, |w| serde_json::to_writer(&mut *w, &entry).map_err(|e| Error::io(e.into())))?;
+    write_atomic_unsynced(&rec_path, |w| serde_json::to_writer(&mut *w, &entry).map_err(|e| Error::io(e.into())))?;
     Ok(brief_of(entry, false))
 }
 
 fn write_fit(p: &Path, fit: &Value) -> Result<()> {
     make_parent(p)?;
-    write_atomic(p, |w| {
+    write_atomic_unsynced(p, |w| {
         serde_json::to_writer_pretty(&mut *w, fit).map_err(|e| Error::io(e.into()))?;
         w.write_all(b"\n").map_err(Error::io)
     })

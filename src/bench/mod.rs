@@ -11,12 +11,14 @@
 
 pub mod accuracy;
 pub mod analysis;
+pub mod floors;
 pub mod knobs;
 pub mod mem;
 pub mod numpy;
 pub mod pipeline;
 pub mod plot;
 pub mod presets;
+pub mod process;
 pub mod report;
 pub mod scene;
 pub mod sweep;

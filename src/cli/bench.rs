@@ -62,6 +62,17 @@ pub struct Args {
     /// `<!-- bench:NAME -->` markers (`docs/PERFORMANCE.md`; see `ndfit::bench::report`).
     #[arg(long, value_name = "DOC")]
     pub update_doc: Option<PathBuf>,
+    /// Whole processes instead of the sweep: `ndfit fit` and `ndfit batch --jobs 2` on deflated X3P scans
+    /// against the floor of the input (`unzip -p` of the height data alone) and, with --numpy, the numpy
+    /// pool, interleaved, medians and peak RSS (`ndfit::bench::floors`); writes process.json and process.md.
+    #[arg(long)]
+    pub process: bool,
+    /// With --process: scan side (default 1024, quick 256).
+    #[arg(long)]
+    pub process_size: Option<usize>,
+    /// With --process: scans in the batch set (default 64, quick 8).
+    #[arg(long)]
+    pub process_scans: Option<usize>,
     /// Internal: measure one point (JSON) and print its row as JSON (how the isolated sweep runs).
     #[arg(long, hide = true)]
     pub child_point: Option<String>,
@@ -130,6 +141,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     if let Some(csv_in) = &args.from_csv {
         return replot(csv_in, &args.out, args.update_doc.as_deref());
+    }
+    if args.process {
+        return process(&args);
     }
     let started = std::time::Instant::now();
     let load0 = loadavg();
@@ -349,4 +363,30 @@ fn replot(csv_in: &std::path::Path, out: &std::path::Path, doc: Option<&std::pat
 
 fn fmt_opt(v: Option<f64>) -> String {
     v.map_or("-".into(), |v| format!("{v:.4}"))
+}
+
+/// `--process`: whole-process comparisons against the input's floor (`ndfit::bench::floors`).
+fn process(args: &Args) -> anyhow::Result<ExitCode> {
+    use ndfit::bench::floors;
+    let script = args.numpy_script.clone().unwrap_or_else(default_script);
+    let plan = floors::Plan {
+        size: args.process_size.unwrap_or(if args.quick { 256 } else { 1024 }),
+        scans: args.process_scans.unwrap_or(if args.quick { 8 } else { 64 }),
+        repeats: args.repeats.unwrap_or(if args.quick { 3 } else { 11 }),
+        batch_repeats: args.repeats.unwrap_or(if args.quick { 2 } else { 5 }),
+        jobs: 2,
+        python: args.numpy.clone(),
+        numpy_pool: script.with_file_name("numpy_pool.py"),
+        ndfit: std::env::current_exe().context("cannot find the ndfit executable")?,
+    };
+    floors::check(&plan)?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create the output folder", args.out.display()))?;
+    let work = args.work_dir.clone().unwrap_or_else(|| args.out.join("process_scans"));
+    let report = floors::run(&plan, &work, |l| eprintln!("{l}"))?;
+    let md = floors::markdown(&report);
+    ndfit::io::write_bytes_atomic(&args.out.join("process.json"), serde_json::to_string_pretty(&report).context("JSON")?.as_bytes())?;
+    ndfit::io::write_bytes_atomic(&args.out.join("process.md"), md.as_bytes())?;
+    eprint!("{md}");
+    eprintln!("wrote {} and {}", args.out.join("process.json").display(), args.out.join("process.md").display());
+    Ok(ExitCode::SUCCESS)
 }

@@ -91,6 +91,23 @@ pub fn write_atomic<F>(path: &Path, fill: F) -> Result<()>
 where
     F: FnOnce(&mut dyn Write) -> Result<()>,
 {
+    write_atomic_as(path, true, fill)
+}
+
+/// [`write_atomic`] without the `fsync` before the rename: the file is still complete or absent under
+/// its name for every process and after any crash or kill of this one, but only durable against power
+/// loss once the caller has run [`sync_tree`] over its folder (what `ndfit batch` does once per run).
+pub fn write_atomic_unsynced<F>(path: &Path, fill: F) -> Result<()>
+where
+    F: FnOnce(&mut dyn Write) -> Result<()>,
+{
+    write_atomic_as(path, false, fill)
+}
+
+fn write_atomic_as<F>(path: &Path, durable: bool, fill: F) -> Result<()>
+where
+    F: FnOnce(&mut dyn Write) -> Result<()>,
+{
     check_output(path)?;
     let target = resolve(path)?;
     let existing = match std::fs::metadata(&target) {
@@ -125,8 +142,41 @@ where
     let mut w = BufWriter::new(tmp);
     fill(&mut w).map_err(|e| e.with_path(path))?;
     let tmp = w.into_inner().map_err(|e| Error::io(e.into_error()).with_path(path))?;
-    tmp.as_file().sync_all().map_err(|e| Error::io(e).with_path(path))?;
+    if durable {
+        tmp.as_file().sync_all().map_err(|e| Error::io(e).with_path(path))?;
+    }
     tmp.persist(&target).map_err(|e| Error::io(e.error).with_path(path))?;
+    Ok(())
+}
+
+/// Make everything written under `dir` durable: on Linux one `syncfs(2)` of the file system holding it
+/// (files, their data and the renames, in one journal commit); elsewhere an `fsync` of every file and
+/// folder under it.
+pub fn sync_tree(dir: &Path) -> Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let d = std::fs::File::open(dir).map_err(|e| Error::io(e).with_path(dir))?;
+        // SAFETY: the descriptor is open for the duration of the call.
+        if unsafe { libc::syncfs(d.as_raw_fd()) } == 0 {
+            return Ok(());
+        }
+    }
+    sync_each(dir)
+}
+
+fn sync_each(dir: &Path) -> Result<()> {
+    for e in std::fs::read_dir(dir).map_err(|e| Error::io(e).with_path(dir))? {
+        let p = e.map_err(|e| Error::io(e).with_path(dir))?.path();
+        let md = std::fs::symlink_metadata(&p).map_err(|e| Error::io(e).with_path(&p))?;
+        if md.is_dir() {
+            sync_each(&p)?;
+        } else if md.is_file() {
+            std::fs::File::open(&p).and_then(|f| f.sync_all()).map_err(|e| Error::io(e).with_path(&p))?;
+        }
+    }
+    // Folders cannot be opened for syncing on every platform; the files' data is what matters most.
+    let _ = std::fs::File::open(dir).and_then(|f| f.sync_all());
     Ok(())
 }
 

@@ -10,6 +10,7 @@ pub mod atomic;
 pub mod bytes;
 pub mod gsf;
 pub mod image;
+pub(crate) mod inflate;
 pub mod md5;
 pub mod metropro;
 pub mod npy;

@@ -173,9 +173,19 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
         let data_name =
             link.text_at(&["PointDataLink"]).ok_or_else(|| Error::corrupt(format!("{main_name}: DataLink has no PointDataLink")))?;
         let data_path = format!("{prefix}{data_name}");
-        let (raw, crc) = read_entry_exact(&mut zip, bytes, &data_path, n, ztype.size(), nx, ny)?;
-        check_md5(link, "MD5ChecksumPointData", &data_path, &raw)?;
-        z = decode(&raw, ztype, z_inc, z_off, crc).map_err(|e| Error::corrupt(format!("{data_path}: {}", e.message())))?;
+        let md5_want = link
+            .text_at(&["MD5ChecksumPointData"])
+            .and_then(md5_field)
+            .filter(|_| n.saturating_mul(ztype.size()) <= MAX_POINT_MD5)
+            .map(|w| ("MD5ChecksumPointData", w));
+        if let Some(inflated) = crate::io::inflate::read_deflated_points(&mut zip, &data_path, n, ztype, z_inc, z_off, md5_want, (nx, ny))?
+        {
+            z = inflated;
+        } else {
+            let (raw, crc) = read_entry_exact(&mut zip, bytes, &data_path, n, ztype.size(), nx, ny)?;
+            check_md5(link, "MD5ChecksumPointData", &data_path, &raw)?;
+            z = decode(&raw, ztype, z_inc, z_off, crc).map_err(|e| Error::corrupt(format!("{data_path}: {}", e.message())))?;
+        }
         if let Some(valid_name) = link.text_at(&["ValidPointsLink"]) {
             let vpath = format!("{prefix}{valid_name}");
             let vbytes = n.div_ceil(8);
@@ -211,7 +221,7 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
 
 /// The 32 hex digits `text` starts with (after blanks), if any: an MD5 as X3P writers record it
 /// (`HASH`, `HASH *main.xml`, either case).
-fn md5_field(text: &str) -> Option<&str> {
+pub(crate) fn md5_field(text: &str) -> Option<&str> {
     let t = text.trim_start_matches('\u{feff}').split_whitespace().next()?;
     (t.len() == 32 && t.bytes().all(|b| b.is_ascii_hexdigit())).then_some(t)
 }

@@ -83,6 +83,15 @@ fn departure(z: &[f64], nx: usize, ny: usize, i: usize, j: usize) -> Option<(f64
     if k < MIN_NEIGHBOURS {
         return None;
     }
+    if k == 8 {
+        // All eight neighbours (every point the scan tests): the same order statistics from a sorting
+        // network instead of a comparison sort.
+        sort8(&mut nb);
+        let med = 0.5 * (nb[3] + nb[4]);
+        let mut dev = nb.map(|v| (v - med).abs());
+        sort8(&mut dev);
+        return Some((c - med, MAD_NORMAL * (0.5 * (dev[3] + dev[4]))));
+    }
     let nb = &mut nb[..k];
     nb.sort_by(|a, b| a.total_cmp(b));
     let med = if k % 2 == 1 { nb[k / 2] } else { 0.5 * (nb[k / 2 - 1] + nb[k / 2]) };
@@ -94,6 +103,84 @@ fn departure(z: &[f64], nx: usize, ny: usize, i: usize, j: usize) -> Option<(f64
     dev.sort_by(|a, b| a.total_cmp(b));
     let mad = if k % 2 == 1 { dev[k / 2] } else { 0.5 * (dev[k / 2 - 1] + dev[k / 2]) };
     Some((c - med, MAD_NORMAL * mad))
+}
+
+/// The spike test of interior point `(i, j)` ([`departure`] and the threshold, same arithmetic):
+/// `Some(above)` for a spike. The neighbours' spread is only computed when the departure exceeds
+/// `limit`, the threshold's least value.
+#[inline(always)]
+fn interior_spike(z: &[f64], nx: usize, i: usize, j: usize, limit: f64, floor: f64) -> Option<bool> {
+    let c = z[i * nx + j];
+    let (a, b, e) = (&z[(i - 1) * nx + j - 1..][..3], &z[i * nx + j - 1..][..3], &z[(i + 1) * nx + j - 1..][..3]);
+    let mut nb = [a[0], a[1], a[2], b[0], b[2], e[0], e[1], e[2]];
+    if !c.is_finite() || !nb.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    sort8(&mut nb);
+    let med = 0.5 * (nb[3] + nb[4]);
+    let d = c - med;
+    if d.abs() <= limit {
+        return None;
+    }
+    let mut dev = nb.map(|v| (v - med).abs());
+    sort8(&mut dev);
+    let s = MAD_NORMAL * (0.5 * (dev[3] + dev[4]));
+    (d.abs() > SPIKE_THRESHOLD * s.max(floor) && d.abs() > 0.0).then_some(d > 0.0)
+}
+
+/// Exact pre-screen of an interior point: whether at least 5 of its 8 neighbours lie at most `half`
+/// above it and at least 5 at most `half` below it. Then the neighbours' 4th and 5th smallest, and so
+/// their median, lie within `half` of the point, so its departure is at most `half` (plus rounding) and
+/// below the spike threshold (at least `2 half`). Non-finite values compare false; a point passed with
+/// a non-finite neighbour is one the full test skips too (it needs all 8 neighbours).
+#[inline(always)]
+fn near_median(z: &[f64], nx: usize, i: usize, j: usize, half: f64) -> bool {
+    let c = z[i * nx + j];
+    let (hi, lo) = (c + half, c - half);
+    let (mut below, mut above) = (0u32, 0u32);
+    for r in [i - 1, i, i + 1] {
+        let row = &z[r * nx + j - 1..r * nx + j + 2];
+        for (k, &v) in row.iter().enumerate() {
+            if r == i && k == 1 {
+                continue;
+            }
+            below += u32::from(v <= hi);
+            above += u32::from(v >= lo);
+        }
+    }
+    below >= 5 && above >= 5
+}
+
+/// Sort 8 finite values ascending with the optimal 19-comparator network (Knuth, TAOCP vol. 3, 5.3.4).
+#[inline(always)]
+fn sort8(v: &mut [f64; 8]) {
+    const PAIRS: [(usize, usize); 19] = [
+        (0, 2),
+        (1, 3),
+        (4, 6),
+        (5, 7),
+        (0, 4),
+        (1, 5),
+        (2, 6),
+        (3, 7),
+        (0, 1),
+        (2, 3),
+        (4, 5),
+        (6, 7),
+        (2, 4),
+        (3, 5),
+        (1, 4),
+        (3, 6),
+        (1, 2),
+        (3, 4),
+        (5, 6),
+    ];
+    for (a, b) in PAIRS {
+        let (x, y) = (v[a], v[b]);
+        // Plain selects (no NaN handling: the values are finite), so they compile to min/max instructions.
+        v[a] = if y < x { y } else { x };
+        v[b] = if y < x { x } else { y };
+    }
 }
 
 /// Points sampled (strided) for the scan's typical departure, the spread floor.
@@ -136,10 +223,11 @@ pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
                 if c - lo <= limit && hi - c <= limit {
                     continue;
                 }
-                if let Some((d, s)) = departure(z, nx, ny, i, j) {
-                    if d.abs() > SPIKE_THRESHOLD * s.max(floor) && d.abs() > 0.0 {
-                        out.push((i * nx + j, d > 0.0));
-                    }
+                if near_median(z, nx, i, j, 0.5 * limit) {
+                    continue;
+                }
+                if let Some(high) = interior_spike(z, nx, i, j, limit, floor) {
+                    out.push((i * nx + j, high));
                 }
             }
             out
@@ -158,4 +246,106 @@ pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
         ),
         floor,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The 0-1 principle (Knuth 5.3.4, theorem Z): a network sorting all 256 inputs of zeros and ones
+    /// sorts every input. Then random finite values against the comparison sort, value for value.
+    #[test]
+    fn sort8_is_a_sorting_network() {
+        for m in 0u32..256 {
+            let mut v: [f64; 8] = std::array::from_fn(|i| f64::from((m >> i) & 1));
+            sort8(&mut v);
+            assert!(v.windows(2).all(|w| w[0] <= w[1]), "{m:08b}: {v:?}");
+        }
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        for _ in 0..2000 {
+            let mut v: [f64; 8] = std::array::from_fn(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            });
+            let mut want = v;
+            want.sort_by(f64::total_cmp);
+            sort8(&mut v);
+            assert_eq!(v.map(f64::to_bits), want.map(f64::to_bits));
+        }
+    }
+
+    /// The pre-screens only skip work: on a sloped, curved, noisy surface with spikes and holes, the
+    /// masked points are exactly those the full test (departure of every interior point against the
+    /// threshold, no screening) finds with the same floor.
+    #[test]
+    fn screened_spikes_equal_the_brute_force_test() {
+        let (nx, ny) = (97, 83);
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut z = vec![0.0; nx * ny];
+        for i in 0..ny {
+            for j in 0..nx {
+                let (u, v) = (j as f64 * 1e-6, i as f64 * 1e-6);
+                z[i * nx + j] = 0.3 * u - 0.7 * v + 2e3 * (u - 4e-5) * (v - 3e-5) + 4e-9 * rnd();
+            }
+        }
+        for k in (0..nx * ny).step_by(211) {
+            // Spikes from well below to well above 30 neighbour spreads (~2e-5 m on these slopes).
+            let m = 5e-6 * (1 + k % 13) as f64;
+            z[k] += if k % 2 == 0 { m } else { -m };
+        }
+        for k in (0..nx * ny).step_by(389) {
+            z[k] = f64::NAN;
+        }
+        let mut scan = Scan::from_view(ndarray::ArrayView2::from_shape((ny, nx), &z).unwrap(), 1e-6, 1e-6).unwrap();
+        let rep = despike(&mut scan, Despike::Median).unwrap();
+        let mut want = Vec::new();
+        for i in 1..ny - 1 {
+            for j in 1..nx - 1 {
+                if let Some((d, s)) = departure(&z, nx, ny, i, j) {
+                    if d.abs() > SPIKE_THRESHOLD * s.max(rep.floor) && d.abs() > 0.0 {
+                        want.push(i * nx + j);
+                    }
+                }
+            }
+        }
+        let got: Vec<usize> = (0..nx * ny).filter(|&k| scan.z[k].is_nan() && !z[k].is_nan()).collect();
+        assert!(want.len() > 20, "{} spikes found by the full test", want.len());
+        assert_eq!(got, want);
+        assert_eq!(rep.masked, want.len());
+    }
+
+    /// An interior point's departure and spread from the network agree bit for bit with the median and
+    /// MAD computed by sorting (the path points with fewer neighbours take).
+    #[test]
+    fn departure_matches_the_sorted_median_and_mad() {
+        let (nx, ny) = (5, 4);
+        let z: Vec<f64> = (0..nx * ny).map(|k| ((k * 37 % 11) as f64 - 5.0) * 1e-7 + (k as f64).sin() * 3e-8).collect();
+        for i in 1..ny - 1 {
+            for j in 1..nx - 1 {
+                let mut nb: Vec<f64> = Vec::new();
+                for r in [i - 1, i, i + 1] {
+                    for c in [j - 1, j, j + 1] {
+                        if (r, c) != (i, j) {
+                            nb.push(z[r * nx + c]);
+                        }
+                    }
+                }
+                nb.sort_by(f64::total_cmp);
+                let med = 0.5 * (nb[3] + nb[4]);
+                let mut dev: Vec<f64> = nb.iter().map(|v| (v - med).abs()).collect();
+                dev.sort_by(f64::total_cmp);
+                let want = (z[i * nx + j] - med, MAD_NORMAL * (0.5 * (dev[3] + dev[4])));
+                let got = departure(&z, nx, ny, i, j).unwrap();
+                assert_eq!((got.0.to_bits(), got.1.to_bits()), (want.0.to_bits(), want.1.to_bits()), "({i}, {j})");
+            }
+        }
+    }
 }

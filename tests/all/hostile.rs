@@ -378,6 +378,26 @@ fn resume_writes_a_deleted_fit_file_again() {
 }
 
 #[test]
+fn resume_rewrites_a_fit_file_a_power_loss_left_empty_or_cut() {
+    // Batch files are renamed into place unsynced and synced once per run: a power loss before that
+    // sync can leave a fit file empty or cut short beside a complete record. --resume restores it.
+    let d = tempfile::tempdir().unwrap();
+    let scans = d.path().join("scans");
+    std::fs::create_dir(&scans).unwrap();
+    synth(&scans, "a.x3p", 48);
+    let out = run(d.path(), &["batch", "scans", "-o", "out", "--model", "ggx"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let fit = d.path().join("out/fits/a.x3p.fit.json");
+    let first = std::fs::read_to_string(&fit).unwrap();
+    for damaged in [String::new(), first[..first.len() / 2].to_string()] {
+        std::fs::write(&fit, &damaged).unwrap();
+        let out = run(d.path(), &["batch", "scans", "-o", "out", "--model", "ggx", "--resume"]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert_eq!(std::fs::read_to_string(&fit).unwrap(), first, "fit file left {} bytes", damaged.len());
+    }
+}
+
+#[test]
 fn negative_values_reach_batch_scans_from_the_command_line_and_the_manifest() {
     let d = tempfile::tempdir().unwrap();
     // A rough ASCII grid (height units; slopes about 0.3 at --z-scale 1e-9 over --dx 1e-6).

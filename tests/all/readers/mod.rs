@@ -10,3 +10,4 @@ mod peers;
 mod preprocess;
 mod robust;
 mod x3p;
+mod x3p_deflated;

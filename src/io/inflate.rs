@@ -1,0 +1,252 @@
+//! Deflated point data inflated straight into the heights, block by block, with its MD5 checked on a
+//! second thread in the same pass.
+//!
+//! A deflated X3P `data.bin` used to be inflated into a byte buffer, hashed, then decoded into a second
+//! buffer of heights: three passes over the data and two fresh allocations. Here float64 data is inflated
+//! directly into the bytes of the final heights buffer (on a little-endian target they already are the
+//! heights); other types are inflated into a byte buffer and decoded block by block while the block is
+//! in cache. Each finished block is handed, read-only, to a thread computing the MD5 that ISO 5436-2
+//! records for the point data, so the checksum costs no wall time when a core is free. The zip reader
+//! still checks the entry's CRC-32 at its end, which is read to the last byte.
+
+use std::io::Read;
+
+use crate::error::{Error, Result};
+use crate::io::x3p::ZType;
+use crate::scan::heights;
+
+/// Bytes inflated per block: large enough that the per-block hand-off costs nothing, small enough that
+/// the block is still in cache when it is decoded and hashed.
+const BLOCK: usize = 1 << 18;
+
+/// Deflate cannot expand data by more than 1032:1 (RFC 1951 maximum), so an entry that claims more
+/// than this times its compressed size is lying.
+const MAX_DEFLATE_RATIO: u64 = 1032;
+
+/// The heights of X3P point data entry `name` when the zip stores it compressed (`None` when stored:
+/// the caller reads those bytes in place). The entry must declare exactly `n` values of type `t`;
+/// `md5_want` is the point-data MD5 recorded in main.xml, checked when given.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn read_deflated_points<R: Read + std::io::Seek>(
+    zip: &mut zip::ZipArchive<R>,
+    name: &str,
+    n: usize,
+    t: ZType,
+    inc: f64,
+    off: f64,
+    md5_want: Option<(&str, &str)>,
+    (nx, ny): (usize, usize),
+) -> Result<Option<Vec<f64>>> {
+    let need = crate::io::bytes::checked_size(&[n, t.size()], "X3P point data")?;
+    let entry = zip.by_name(name).map_err(|e| Error::corrupt(format!("main.xml links {name}, which the zip does not hold ({e})")))?;
+    if entry.compression() == zip::CompressionMethod::Stored {
+        return Ok(None);
+    }
+    let declared = entry.size();
+    if declared != need as u64 {
+        return Err(Error::corrupt(format!(
+            "{name} holds {declared} bytes but main.xml's {nx} x {ny} points of {} bytes need {need}",
+            t.size()
+        )));
+    }
+    if declared > entry.compressed_size().saturating_mul(MAX_DEFLATE_RATIO) {
+        return Err(Error::corrupt(format!(
+            "{name} claims {declared} bytes from {} compressed bytes, more than deflate can expand",
+            entry.compressed_size()
+        )));
+    }
+    inflate_heights(entry, name, n, t, inc, off, md5_want).map(Some)
+}
+
+/// The point data of a deflated entry `name` holding exactly `n` values of type `t`, as heights in
+/// metres (`off + inc * v`, the identity skipped for exactness; non-finite values as NaN). With
+/// `md5_want` (32 hex digits), the MD5 of the stored bytes must match (`field` names it in the error).
+/// A stream holding fewer or more bytes than `n` values, or failing to inflate, is `corrupt`.
+pub(crate) fn inflate_heights<R: Read>(
+    mut entry: R,
+    name: &str,
+    n: usize,
+    t: ZType,
+    inc: f64,
+    off: f64,
+    md5_want: Option<(&str, &str)>,
+) -> Result<Vec<f64>> {
+    let size = t.size();
+    let need = n.checked_mul(size).ok_or_else(|| Error::corrupt(format!("{name}: point data size overflows")))?;
+    let identity = inc == 1.0 && off == 0.0;
+    let finish = move |v: f64| {
+        let v = if identity { v } else { off + inc * v };
+        if v.is_finite() {
+            v
+        } else {
+            f64::NAN
+        }
+    };
+    let direct = t == ZType::D && cfg!(target_endian = "little");
+    let mut z = heights::with_capacity(n);
+    let mut raw: Vec<u8> = Vec::new();
+    let (bytes, mut dest): (&mut [u8], Option<&mut Vec<f64>>) = if direct {
+        z.resize(n, 0.0);
+        (as_bytes_mut(&mut z), None)
+    } else {
+        raw.resize(need, 0);
+        (&mut raw[..], Some(&mut z))
+    };
+    let md5 = std::thread::scope(|s| -> Result<Option<String>> {
+        let (tx, hasher) = match md5_want {
+            Some(_) => {
+                let (tx, rx) = std::sync::mpsc::sync_channel::<&[u8]>(64);
+                let h = s.spawn(move || {
+                    let mut m = crate::io::md5::Md5::default();
+                    for block in rx {
+                        m.update(block);
+                    }
+                    m.finish().iter().map(|b| format!("{b:02x}")).collect::<String>()
+                });
+                (Some(tx), Some(h))
+            }
+            None => (None, None),
+        };
+        let mut done = 0;
+        let mut sent = true;
+        for chunk in bytes.chunks_mut(BLOCK) {
+            fill_block(&mut entry, chunk, name, done, need)?;
+            done += chunk.len();
+            let chunk: &[u8] = chunk;
+            if let Some(tx) = &tx {
+                // A hasher that has gone away (it cannot, short of a panic) only loses the check.
+                sent &= tx.send(chunk).is_ok();
+            }
+            if let Some(z) = dest.as_deref_mut() {
+                decode_into(z, chunk, t, &finish);
+            }
+        }
+        drop(tx);
+        // The stream must end exactly here: reading past the last value also makes the zip reader check
+        // the entry's CRC-32.
+        let mut probe = [0u8; 1];
+        loop {
+            match entry.read(&mut probe) {
+                Ok(0) => break,
+                Ok(_) => return Err(Error::corrupt(format!("{name}: holds more than the {need} bytes main.xml declares"))),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(Error::corrupt(format!("{name}: cannot decompress the point data ({e})"))),
+            }
+        }
+        match hasher {
+            Some(h) if sent => Ok(h.join().ok()),
+            _ => Ok(None),
+        }
+    })?;
+    if let (Some((field, want)), Some(got)) = (md5_want, md5) {
+        if !got.eq_ignore_ascii_case(want) {
+            return Err(Error::corrupt(format!(
+                "{name}: MD5 is {got} but main.xml's {field} records {want}: the data was changed or damaged"
+            )));
+        }
+    }
+    if direct && (!identity || z.iter().any(|v| !v.is_finite())) {
+        for v in z.iter_mut() {
+            *v = finish(*v);
+        }
+    }
+    Ok(z)
+}
+
+/// Fill `buf` completely from `r`. `done` is the count already read (for the message of a short
+/// stream).
+fn fill_block<R: Read>(r: &mut R, buf: &mut [u8], name: &str, done: usize, need: usize) -> Result<()> {
+    let mut got = 0;
+    while got < buf.len() {
+        match r.read(&mut buf[got..]) {
+            Ok(0) => {
+                return Err(Error::corrupt(format!("{name}: holds {} bytes, {need} expected", done + got)));
+            }
+            Ok(k) => got += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(Error::corrupt(format!("{name}: cannot decompress the point data ({e})"))),
+        }
+    }
+    Ok(())
+}
+
+/// Append the values of `block` (whole values only: blocks are multiples of 8 bytes, the value sizes
+/// divide them) to `z`.
+fn decode_into(z: &mut Vec<f64>, block: &[u8], t: ZType, finish: &impl Fn(f64) -> f64) {
+    match t {
+        ZType::D => z.extend(block.chunks_exact(8).map(|c| finish(f64::from_le_bytes(c.try_into().expect("8 bytes"))))),
+        ZType::F => z.extend(block.chunks_exact(4).map(|c| finish(f32::from_le_bytes(c.try_into().expect("4 bytes")) as f64))),
+        ZType::L => z.extend(block.chunks_exact(4).map(|c| finish(i32::from_le_bytes(c.try_into().expect("4 bytes")) as f64))),
+        ZType::I => z.extend(block.chunks_exact(2).map(|c| finish(i16::from_le_bytes(c.try_into().expect("2 bytes")) as f64))),
+    }
+}
+
+/// The bytes of `z` (native order).
+fn as_bytes_mut(z: &mut [f64]) -> &mut [u8] {
+    let len = std::mem::size_of_val(z);
+    // SAFETY: the byte view covers exactly `z`'s initialised memory and borrows it mutably for its
+    // lifetime; u8 has alignment 1 and every byte pattern is a valid f64, so any write leaves valid values.
+    unsafe { std::slice::from_raw_parts_mut(z.as_mut_ptr().cast::<u8>(), len) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    fn deflate(data: &[u8]) -> Vec<u8> {
+        let mut e = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::default());
+        e.write_all(data).unwrap();
+        e.finish().unwrap()
+    }
+
+    fn run(raw: &[u8], n: usize, t: ZType, inc: f64, off: f64, md5: Option<(&str, &str)>) -> Result<Vec<f64>> {
+        let c = deflate(raw);
+        inflate_heights(flate2::read::DeflateDecoder::new(&c[..]), "bindata/data.bin", n, t, inc, off, md5)
+    }
+
+    /// Values built from a formula and encoded here, decoded by `x3p::decode` (the whole-buffer path)
+    /// and by the block path: the two must agree bit for bit, over several blocks and a partial one.
+    #[test]
+    fn block_path_matches_whole_buffer_decode() {
+        let n = 3 * BLOCK / 8 + 77; // float64: three full blocks and a partial one
+        for (t, inc, off) in
+            [(ZType::D, 1.0, 0.0), (ZType::D, 1e-9, 2.5e-6), (ZType::F, 1.0, 0.0), (ZType::I, 3e-9, -1e-7), (ZType::L, 1e-10, 0.0)]
+        {
+            let mut raw = Vec::new();
+            for k in 0..n {
+                let x = (k as f64 * 0.001).sin() * 1e3;
+                match t {
+                    ZType::D => raw.extend_from_slice(&(if k % 1001 == 5 { f64::INFINITY } else { x * 1e-6 }).to_le_bytes()),
+                    ZType::F => raw.extend_from_slice(&(if k % 999 == 3 { f32::NAN } else { x as f32 * 1e-6 }).to_le_bytes()),
+                    ZType::L => raw.extend_from_slice(&((x * 1e4) as i32).to_le_bytes()),
+                    ZType::I => raw.extend_from_slice(&(x as i16).to_le_bytes()),
+                }
+            }
+            let whole = crate::io::x3p::decode(&raw, t, inc, off, None).unwrap();
+            let md5 = crate::io::md5::md5_hex(&raw);
+            let blocks = run(&raw, n, t, inc, off, Some(("MD5ChecksumPointData", &md5))).unwrap();
+            assert_eq!(whole.len(), blocks.len());
+            assert!(whole.iter().zip(&blocks).all(|(a, b)| a.to_bits() == b.to_bits()), "{t:?}");
+            assert!(blocks.iter().all(|v| !v.is_infinite()));
+            assert!(blocks.iter().any(|v| v.is_nan()) || matches!(t, ZType::I | ZType::L));
+        }
+    }
+
+    #[test]
+    fn a_wrong_md5_short_or_long_stream_is_corrupt() {
+        let raw: Vec<u8> = (0..1000u32).flat_map(|k| (k as f64).to_le_bytes()).collect();
+        let wrong = "0123456789abcdef0123456789abcdef";
+        let e = run(&raw, 1000, ZType::D, 1.0, 0.0, Some(("MD5ChecksumPointData", wrong))).unwrap_err();
+        assert!(e.message().contains("MD5ChecksumPointData") && e.message().contains(wrong), "{e}");
+        let e = run(&raw, 1001, ZType::D, 1.0, 0.0, None).unwrap_err();
+        assert!(e.message().contains("holds 8000 bytes, 8008"), "{e}");
+        let e = run(&raw, 999, ZType::D, 1.0, 0.0, None).unwrap_err();
+        assert!(e.message().contains("more than the 7992 bytes"), "{e}");
+        // A deflate stream cut short fails to inflate or ends early: corrupt either way, never a panic.
+        let c = deflate(&raw);
+        let cut = &c[..c.len() / 2];
+        let e = inflate_heights(flate2::read::DeflateDecoder::new(cut), "d", 1000, ZType::D, 1.0, 0.0, None).unwrap_err();
+        assert_eq!(e.kind(), crate::error::ErrorKind::Corrupt, "{e}");
+    }
+}
