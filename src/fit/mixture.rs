@@ -170,6 +170,55 @@ pub(super) fn fit_mixture_chain(s: &Session, id: ModelId, opts: &FitOptions) -> 
     fit_mixture(s, id, &p, opts)
 }
 
+/// The ladder's exact pruning: a candidate's criterion `F / c_data + p ln N` is at least `p ln N` (a
+/// deviance is never negative), so a mixture whose `p ln N` is not below the best criterion met so far
+/// (the best single lobe's, then any mixture's fitted before it) cannot be chosen (the choice takes a
+/// strictly lower criterion) and need not be fitted. For the best single lobe this reads
+/// `F_single / c_data <= (p - p_single) ln N`. The choice is the same with or without it.
+pub(super) struct Pruning {
+    c_data: f64,
+    n: f64,
+    best_single: f64,
+}
+
+/// `c_data = max(1, dispersion)` of the data ([`super::verdict::data_dispersion`]), or `c_single` when the
+/// NDF has no split.
+fn data_c(ndf: &crate::ndf::EmpiricalNdf, s: &Session, c_single: f64) -> f64 {
+    super::verdict::data_dispersion(ndf, s.data.max_theta).filter(|d| d.is_finite()).map_or(c_single, |d| d.max(1.0))
+}
+
+impl Pruning {
+    /// The bound after the single lobes `singles` (the ladder's `c_single` recomputed as
+    /// [`super::fit_auto`] does).
+    pub fn new(ndf: &crate::ndf::EmpiricalNdf, s: &Session, singles: &[&Fitted]) -> Pruning {
+        let k = s.data.k_nonzero as f64;
+        let c_single = super::qbic::overdispersion(singles.iter().filter_map(|f| {
+            let dof = k - f.id.n_params() as f64 - 1.0;
+            (dof > 0.0).then(|| f.f / dof)
+        }));
+        let c_data = data_c(ndf, s, c_single);
+        // The single lobe the ladder starts from: the first smallest single-lobe QBIC (fit_auto's choice).
+        let n = s.data.n;
+        let mut chosen = 0;
+        for i in 1..singles.len() {
+            if super::qbic::qbic(singles[i].f, c_single, singles[i].id.n_params(), n)
+                < super::qbic::qbic(singles[chosen].f, c_single, singles[chosen].id.n_params(), n)
+            {
+                chosen = i;
+            }
+        }
+        let best_single = singles.get(chosen).map_or(f64::INFINITY, |f| super::qbic::qbic(f.f, c_data, f.id.n_params(), n));
+        Pruning { c_data, n, best_single }
+    }
+
+    /// Whether mixture `id` cannot beat the ladder's choice so far: the best single lobe, or a mixture
+    /// fitted before it that beat that (`fitted`, in the ladder's order).
+    pub fn cannot_win(&self, id: ModelId, fitted: &[Fitted]) -> bool {
+        let best = fitted.iter().map(|f| super::qbic::qbic(f.f, self.c_data, f.id.n_params(), self.n)).fold(self.best_single, f64::min);
+        super::qbic::qbic(0.0, self.c_data, id.n_params(), self.n) >= best
+    }
+}
+
 /// The ladder step of `--model auto`: the best single lobe (chosen among the single lobes by the QBIC
 /// with their own overdispersion, unchanged) against the mixtures, by `F / c_data + p ln N` with the
 /// data's own overdispersion `c_data = max(1, dispersion)` ([`super::verdict::data_dispersion`]): a
@@ -190,7 +239,7 @@ impl Ladder {
     /// The ladder over `fits` (single lobes first, `n_single` of them, the best of which is
     /// `best_single`); `c_single` is the single lobes' overdispersion, used when the NDF has no split.
     pub fn new(ndf: &crate::ndf::EmpiricalNdf, s: &Session, fits: &[Fitted], n_single: usize, best_single: usize, c_single: f64) -> Ladder {
-        let c_data = super::verdict::data_dispersion(ndf, s.data.max_theta).filter(|d| d.is_finite()).map_or(c_single, |d| d.max(1.0));
+        let c_data = data_c(ndf, s, c_single);
         let criterion: Vec<f64> = fits.iter().map(|f| super::qbic::qbic(f.f, c_data, f.id.n_params(), s.data.n)).collect();
         let mut chosen = best_single;
         for i in n_single..fits.len() {
