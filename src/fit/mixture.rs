@@ -249,7 +249,7 @@ impl Ladder {
         }
         let best_mix = (n_single..fits.len()).min_by(|&a, &b| criterion[a].total_cmp(&criterion[b]));
         let summary = match best_mix {
-            None => format!("one lobe: no mixture could be fitted; {} chosen", fits[best_single].id),
+            None => format!("one lobe: no mixture fitted; {} chosen", fits[best_single].id),
             Some(m) => {
                 let d = criterion[m] - criterion[best_single];
                 if chosen == m {

@@ -286,10 +286,11 @@ fn single_lobe_truths_keep_one_lobe() {
 /// mixture was pruned.
 fn same_choice_pruned_or_not(ndf: &ndfit::ndf::EmpiricalNdf, what: &str) -> bool {
     let opts = FitOptions::default();
+    let t0 = std::time::Instant::now();
     let full = ndfit::fit::fit_auto_pruned(ndf, &opts, false).expect("auto");
     let lean = ndfit::fit::fit_auto_pruned(ndf, &opts, true).expect("auto");
     let (sf, sl) = (full.selection.as_ref().expect("selection"), lean.selection.as_ref().expect("selection"));
-    eprintln!("{what}: {} / {}: {:?}", full.model, lean.model, sl.ladder);
+    eprintln!("{what}: {} / {}: {:?} ({:.1} s)", full.model, lean.model, sl.ladder, t0.elapsed().as_secs_f64());
     assert_eq!(full.model, lean.model, "{what}: pruning changed the choice ({:?} / {:?})", sf.ladder, sl.ladder);
     assert_eq!(full.param_vec(), lean.param_vec(), "{what}: pruning changed the chosen parameters");
     // Every candidate that is fitted both ways is the same fit; the pruned ones are the only ones missing.
@@ -315,7 +316,7 @@ fn pruned_ladder_chooses_as_the_full_one_needs_shared() {
     for (i, truth) in truths.iter().enumerate() {
         let large = if truth.id().is_mixture() { 1e5 } else { 12.0 };
         for n in [6.0, 25.0, large] {
-            let ndf = super::fixtures::ndf_of(truth, n, 30 + i as u64);
+            let ndf = super::fixtures::ndf_on(truth, 48, n, 30 + i as u64);
             pruned += same_choice_pruned_or_not(&ndf, &format!("{} N={n}", truth.id())) as usize;
         }
     }
