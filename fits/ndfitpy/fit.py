@@ -174,7 +174,8 @@ def initial_guess(bins: Bins, model: str) -> np.ndarray:
 def _bounds(model: str, x0: np.ndarray):
     lg = _is_log(model)
     wt = _is_weight(model)
-    lb = np.where(lg, LN_ALPHA_MIN, np.where(wt, -LOGIT_MAX, -TILT_MAX))
+    ln_alpha_min = math.log(mixtures.ALPHA_FLOOR) if model in mixtures.PARENT else LN_ALPHA_MIN
+    lb = np.where(lg, ln_alpha_min, np.where(wt, -LOGIT_MAX, -TILT_MAX))
     ub = np.where(lg, LN_ALPHA_MAX, np.where(wt, LOGIT_MAX, TILT_MAX))
     names = models.PARAM_NAMES[model]
     if "theta_z" in names:
@@ -302,10 +303,16 @@ def _run(model, bins, objective, x0_nat, method, stop):
 
 def _tilt_start(bins: Bins, aniso: np.ndarray) -> np.ndarray:
     """Ellipsoid start whose slope-density centre (synthetic.ellipsoid_slope_quadric) matches the data's median
-    slope, from a ggx-aniso solution; a few Newton steps with a finite-difference Jacobian."""
+    slope, from a ggx-aniso solution."""
+    s_target, _, _ = slope_moments(bins)
+    return _tilt_for_centre(aniso, s_target)
+
+
+def _tilt_for_centre(aniso: np.ndarray, s_target: np.ndarray) -> np.ndarray:
+    """The ellipsoid (alphas and theta_z of ``aniso``) whose slope-density centre is ``s_target``: a few Newton steps on
+    the tilts with a finite-difference Jacobian."""
     from .synthetic import ellipsoid_slope_quadric
 
-    s_target, _, _ = slope_moments(bins)
     p = np.array([aniso[0], aniso[1], 0.0, 0.0, aniso[2]])
 
     def centre(t):
@@ -358,6 +365,9 @@ def fit(
         pre = fit(bins, mixtures.PARENT[model], objective, method, stop=stop)
         evaluations += pre.evaluations
         starts.extend(mixtures.starts(model, pre.param_array))
+        starts.extend(
+            mixtures.data_starts(model, pre.param_array, bins, obj.log_expected, lambda a, c: _tilt_for_centre(a, c)[2:4])
+        )
     elif model == "ellipsoid":
         pre = fit(bins, "ggx-aniso", objective, method, stop=stop)
         evaluations += pre.evaluations
@@ -385,6 +395,9 @@ def fit(
             p[2], p[3] = -p[2], -p[3]  # theta_z + pi with negated tilts is the same ellipsoid (canonical.py)
         p[i] = w
     value = obj.objective(objective, model, p, bins)
+    if model in mixtures.PARENT and x0 is None and not value < pre.value - mixtures.PARENT_GAIN_MIN * abs(pre.value):
+        p = mixtures.as_parent(model, pre.param_array)
+        value = obj.objective(objective, model, p, bins)
     return FitResult(
         model=model,
         params=models.params_to_dict(model, p),

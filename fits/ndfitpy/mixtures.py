@@ -109,3 +109,77 @@ def canonical(model: str, p: np.ndarray, ellipsoid_canonical) -> np.ndarray:
         ax1, ay1, ax2, ay2, tz = ay1, ax1, ay2, ax2, tz + 0.5 * math.pi
     tz = 0.0 if tie(ax1, ay1) and tie(ax2, ay2) else _wrap(tz)
     return np.array([ax1, ay1, ax2, ay2, tz, w])
+
+
+#: The models' roughness floor: the Rust library raises every alpha below it (a mirror there), so the mixtures, whose
+#: spikes can otherwise shrink below any bin and hide between the bins' centres, are searched from it up.
+ALPHA_FLOOR = 1e-4
+
+#: A mixture whose deviance is not below its parent's by this share is reported as the parent (as_parent): on data one
+#: lobe describes, a lobe between the bins' centres or of vanishing weight moves the deviance by rounding only, and
+#: reporting the parent makes the optimum unique.
+PARENT_GAIN_MIN = 1e-7
+
+#: The core's weight when ellipsoid+ggx stands for its parent (the isotropic tail cannot copy the ellipsoid).
+PARENT_CORE_WEIGHT = 1.0 - 1e-13
+
+
+def as_parent(model: str, parent: np.ndarray) -> np.ndarray:
+    """The parent written as the mixture: the same lobe twice at weight 1/2, or for ellipsoid+ggx the ellipsoid with
+    all but PARENT_CORE_WEIGHT's remainder."""
+    p = np.asarray(parent, dtype=float)
+    if model == "ellipsoid+ggx":
+        return np.array([*p[:5], math.sqrt(p[0] * p[1]), PARENT_CORE_WEIGHT])
+    return np.array([p[0], p[1], p[0], p[1], p[2], 0.5])
+
+
+def data_starts(model: str, parent: np.ndarray, bins, log_expected, tilt_for_centre):
+    """Starts from where the counts exceed the parent's expectation E (``log_expected(model, params, bins)`` gives the
+    region and ln E): excess x_k = c_k - E_k, in slope space s = -(m_x, m_y) / m_z.
+
+    - ggx2 / beckmann2: a spike at the normal: the positive excess within half the parent's width of s = 0 gives the
+      spike's share, its root-mean-square slope along the parent's two axes its alphas (at least ALPHA_FLOOR); the tail
+      is the parent.
+    - ellipsoid+ggx: up to three excess peaks, each at least two parent widths from the others: the core, half the
+      parent's alphas, is centred (``tilt_for_centre(alphas_and_theta_z, slope)`` gives the tilts) at the excess-weighted
+      mean slope within two widths of the peak, with the excess there as its share; the tail is the parent's width.
+    """
+    p = np.asarray(parent, dtype=float)
+    pm = PARENT[model]
+    b, ln_e = log_expected(pm, p, bins)[:2]
+    x = b.count - np.exp(ln_e)
+    z = np.maximum(b.m[:, 2], 1e-12)
+    s = np.column_stack([-b.m[:, 0] / z, -b.m[:, 1] / z])
+    n = float(b.count.sum())
+    if model in ("ggx2", "beckmann2"):
+        ax, ay, tz = p
+        a = math.sqrt(ax * ay)
+        r = np.hypot(s[:, 0], s[:, 1])
+        sel = (r <= 0.5 * a) & (x > 0)
+        if not np.any(sel):
+            return []
+        wx = x[sel]
+        u = np.array([math.cos(tz), -math.sin(tz)])
+        v = np.array([math.sin(tz), math.cos(tz)])
+        su, sv = s[sel] @ u, s[sel] @ v
+        cx = max(math.sqrt(float(wx @ su**2) / wx.sum()), ALPHA_FLOOR * 1.5)
+        cy = max(math.sqrt(float(wx @ sv**2) / wx.sum()), ALPHA_FLOOR * 1.5)
+        w = min(max(float(wx.sum()) / n, 0.005), 0.5)
+        return [np.array([cx, cy, ax, ay, tz, w])]
+    a = math.sqrt(p[0] * p[1])
+    out = []
+    centres = []
+    order = np.argsort(-x)
+    for k in order:
+        if x[k] <= 0 or len(out) == 3:
+            break
+        if any(np.hypot(*(s[k] - c)) < 2.0 * a for c in centres):
+            continue
+        centres.append(s[k])
+        sel = (np.hypot(s[:, 0] - s[k, 0], s[:, 1] - s[k, 1]) <= 2.0 * a) & (x > 0)
+        wx = x[sel]
+        c = (wx @ s[sel]) / wx.sum()
+        w = min(max(float(wx.sum()) / n, 0.01), 0.5)
+        tx, ty = tilt_for_centre(np.array([0.5 * p[0], 0.5 * p[1], p[4]]), c)
+        out.append(np.array([0.5 * p[0], 0.5 * p[1], tx, ty, p[4], a, w]))
+    return out

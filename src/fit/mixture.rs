@@ -22,7 +22,8 @@ pub fn parent_of(id: ModelId) -> Option<ModelId> {
 /// five times narrower than the one lobe (a specular patch on a rough scan).
 const SPLITS: [(f64, f64, f64); 4] = [(0.7, 3.0, 0.7), (0.9, 2.0, 0.5), (0.85, 5.0, 0.9), (0.2, 1.05, 0.03)];
 
-/// Starting points (contract parameters) of mixture `id` from its parent's fit (contract parameters).
+/// Starting points (contract parameters) of mixture `id` from its parent's fit (contract parameters);
+/// `ellipsoid+ggx` adds [`residual_starts`].
 pub fn starts(id: ModelId, parent: &[f64]) -> Vec<Vec<f64>> {
     SPLITS
         .iter()
@@ -39,13 +40,76 @@ pub fn starts(id: ModelId, parent: &[f64]) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// The parent as a mixture of two copies of itself (weight one half): the same D, so the same objective.
-fn degenerate(id: ModelId, parent: &[f64]) -> Vec<f64> {
+/// The core's weight when an `ellipsoid+ggx` stands for its parent: the isotropic tail cannot copy a
+/// skewed, anisotropic ellipsoid, so the parent is the limit `w -> 1`, taken to where the tail's share
+/// moves the deviance by about `1e-13` relative.
+pub const PARENT_CORE_WEIGHT: f64 = 1.0 - 1e-13;
+
+/// The residual-peak starts of `ellipsoid+ggx`, from the data: the isotropic GGX tail takes the one
+/// ellipsoid's place (its `alpha` the ellipsoid's `sqrt(alpha_x alpha_y)`) and the core, half as wide,
+/// sits on a peak of the counts' excess over the one-lobe fit's expectation `E_k = N W_k D(m_k) / S`
+/// (objective.md), with the share of the normals in excess within `2 alpha` (slope) of it. Two peaks:
+/// the largest excess, and the largest outside the first one's disc; each core points at the
+/// excess-weighted mean direction of its disc. They find a secondary facet direction or an off-centre
+/// specular patch that the splits of the one lobe, all centred on its peak, do not reach. The core's
+/// tilt puts its peak, the third row of `R` (Walter et al. eq. 1-3: `D ~ |S^-1 R m|^-4` peaks at
+/// `R m = z`), on that direction.
+pub fn residual_starts(data: &super::objective::FitData, parent: &[f64]) -> Vec<Vec<f64>> {
+    use crate::models::Ndf;
+    let Ok(model) = crate::models::Model::from_params(ModelId::Ellipsoid, parent) else { return Vec::new() };
+    let d: Vec<f64> = data.bins.iter().map(|b| model.d(b.m)).collect();
+    let norm: f64 = data.bins.iter().zip(&d).map(|(b, d)| d * b.w).sum();
+    if !(norm > 0.0 && norm.is_finite() && data.n > 0.0) {
+        return Vec::new();
+    }
+    let excess: Vec<f64> = data.bins.iter().zip(&d).map(|(b, d)| b.c - data.n * b.w * d / norm).collect();
+    let a = (parent[0] * parent[1]).sqrt();
+    let cos_r = 1.0 / (1.0 + 4.0 * a * a).sqrt();
+    let mut out = Vec::new();
+    let mut taken: Vec<nalgebra::Vector3<f64>> = Vec::new();
+    for _ in 0..2 {
+        let free = |k: &usize| taken.iter().all(|t| data.bins[*k].m.dot(t) < cos_r);
+        let Some(k) = (0..excess.len()).filter(free).max_by(|&a, &b| excess[a].total_cmp(&excess[b])) else { break };
+        if !(excess[k] > 0.0) {
+            break;
+        }
+        let peak = data.bins[k].m;
+        taken.push(peak);
+        let mut near = 0.0;
+        let mut centre = nalgebra::Vector3::zeros();
+        for (b, e) in data.bins.iter().zip(&excess) {
+            if *e > 0.0 && b.m.dot(&peak) >= cos_r {
+                near += e;
+                centre += *e * b.m;
+            }
+        }
+        let dir = centre.try_normalize(0.0).unwrap_or(peak);
+        let w = (near / data.n).clamp(0.01, 0.5);
+        let (sn, cs) = parent[4].sin_cos();
+        let r3 = [cs * dir.x - sn * dir.y, sn * dir.x + cs * dir.y, dir.z];
+        let (tx, ty) = (r3[1].clamp(-1.0, 1.0).asin(), (-r3[0]).atan2(r3[2]));
+        out.push(vec![0.5 * parent[0], 0.5 * parent[1], tx, ty, parent[4], a, w]);
+    }
+    out
+}
+
+/// The parent written as the mixture: two copies of itself at weight one half (`ggx2`, `beckmann2`), or
+/// the ellipsoid core holding all but [`PARENT_CORE_WEIGHT`]'s remainder (`ellipsoid+ggx`). The same D (to
+/// that remainder), so the same objective.
+pub fn degenerate(id: ModelId, parent: &[f64]) -> Vec<f64> {
     match id {
-        ModelId::EllipsoidGgx => vec![parent[0], parent[1], parent[2], parent[3], parent[4], (parent[0] * parent[1]).sqrt(), 0.5],
+        ModelId::EllipsoidGgx => {
+            vec![parent[0], parent[1], parent[2], parent[3], parent[4], (parent[0] * parent[1]).sqrt(), PARENT_CORE_WEIGHT]
+        }
         _ => vec![parent[0], parent[1], parent[0], parent[1], parent[2], 0.5],
     }
 }
+
+/// Least relative deviance a second lobe must remove to be reported: a mixture within it of its parent
+/// is reported as the parent ([`degenerate`]). On data one lobe describes a lobe that sits between the
+/// bins' centres, or holds a vanishing share, changes the deviance by rounding only; reporting the parent
+/// then makes the optimum unique (the Python cross-check applies the same rule).
+pub const PARENT_GAIN_MIN: f64 = 1e-7;
 
 /// LM patience of a mixture start (evaluations are limited to `patience * (p + 1)`): on data one lobe
 /// describes, the mixture's weight and second lobe are nearly free and LM creeps along that flat valley
@@ -60,13 +124,17 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
     let p = public(parent);
     let mut o = *opts;
     o.tolerances.max_iter = o.tolerances.max_iter.min(MIXTURE_PATIENCE);
-    let fit = fit_from(s, id, &starts(id, &p), &o);
-    // A usable fit no worse than the parent stands. Otherwise (every start above the parent, no finite
+    let mut st = starts(id, &p);
+    if id == ModelId::EllipsoidGgx {
+        st.extend(residual_starts(&s.data, &p));
+    }
+    let fit = fit_from(s, id, &st, &o);
+    // A usable fit better than the parent (by PARENT_GAIN_MIN) stands. Otherwise (no start that far below the parent, no finite
     // start, or a lobe run off beyond the alpha range, e.g. a tail widening without bound to take up a flat
     // background) the parent written as a mixture is the result, said so in a warning.
     let valid = |f: &Fitted| crate::models::Model::from_params(id, &public(f)).is_ok();
     if let Ok(fit) = &fit {
-        if fit.f <= parent.f && valid(fit) {
+        if fit.f < parent.f - PARENT_GAIN_MIN * parent.f.abs() && valid(fit) {
             return Ok(fit.clone());
         }
     }
@@ -74,16 +142,17 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
     let mut r = vec![0.0; s.data.bins.len()];
     let f = super::problem::residuals_into(&s.data, id, &x, &mut r);
     let why = match &fit {
-        Ok(g) if valid(g) => format!("every start ended above the one-lobe {} fit", parent.id),
+        Ok(g) if valid(g) => format!("no start ended below the one-lobe {} fit (by {PARENT_GAIN_MIN:e} relative)", parent.id),
         Ok(_) => "the fit ran out of the model's domain (a lobe beyond the alpha range)".to_string(),
         Err(e) => format!("no start gave a usable fit ({})", e.message()),
     };
     let mut warnings = fit.as_ref().map(|g| g.warnings.clone()).unwrap_or_default();
-    warnings.push(format!("{id}: {why}; reported as the {} lobe twice (the data show no second lobe it can fit)", parent.id));
+    let as_what = if id == ModelId::EllipsoidGgx { "the ellipsoid core alone" } else { "two equal lobes" };
+    warnings.push(format!("{id}: {why}; reported as the one-lobe {} fit ({as_what}: the data show no second lobe it can fit)", parent.id));
     let local = super::solve::Local {
         x: x.clone(),
         f,
-        termination: format!("{id}: the one-lobe {} fit as two equal lobes", parent.id),
+        termination: format!("{id}: the one-lobe {} fit ({as_what})", parent.id),
         converged: true,
         evaluations: 0,
     };
@@ -99,6 +168,55 @@ pub(super) fn fit_mixture_chain(s: &Session, id: ModelId, opts: &FitOptions) -> 
     let parent = parent_of(id).expect("a mixture id");
     let p = fit_chain(s, parent, opts)?;
     fit_mixture(s, id, &p, opts)
+}
+
+/// The ladder's exact pruning: a candidate's criterion `F / c_data + p ln N` is at least `p ln N` (a
+/// deviance is never negative), so a mixture whose `p ln N` is not below the best criterion met so far
+/// (the best single lobe's, then any mixture's fitted before it) cannot be chosen (the choice takes a
+/// strictly lower criterion) and need not be fitted. For the best single lobe this reads
+/// `F_single / c_data <= (p - p_single) ln N`. The choice is the same with or without it.
+pub(super) struct Pruning {
+    c_data: f64,
+    n: f64,
+    best_single: f64,
+}
+
+/// `c_data = max(1, dispersion)` of the data ([`super::verdict::data_dispersion`]), or `c_single` when the
+/// NDF has no split.
+fn data_c(ndf: &crate::ndf::EmpiricalNdf, s: &Session, c_single: f64) -> f64 {
+    super::verdict::data_dispersion(ndf, s.data.max_theta).filter(|d| d.is_finite()).map_or(c_single, |d| d.max(1.0))
+}
+
+impl Pruning {
+    /// The bound after the single lobes `singles` (the ladder's `c_single` recomputed as
+    /// [`super::fit_auto`] does).
+    pub fn new(ndf: &crate::ndf::EmpiricalNdf, s: &Session, singles: &[&Fitted]) -> Pruning {
+        let k = s.data.k_nonzero as f64;
+        let c_single = super::qbic::overdispersion(singles.iter().filter_map(|f| {
+            let dof = k - f.id.n_params() as f64 - 1.0;
+            (dof > 0.0).then(|| f.f / dof)
+        }));
+        let c_data = data_c(ndf, s, c_single);
+        // The single lobe the ladder starts from: the first smallest single-lobe QBIC (fit_auto's choice).
+        let n = s.data.n;
+        let mut chosen = 0;
+        for i in 1..singles.len() {
+            if super::qbic::qbic(singles[i].f, c_single, singles[i].id.n_params(), n)
+                < super::qbic::qbic(singles[chosen].f, c_single, singles[chosen].id.n_params(), n)
+            {
+                chosen = i;
+            }
+        }
+        let best_single = singles.get(chosen).map_or(f64::INFINITY, |f| super::qbic::qbic(f.f, c_data, f.id.n_params(), n));
+        Pruning { c_data, n, best_single }
+    }
+
+    /// Whether mixture `id` cannot beat the ladder's choice so far: the best single lobe, or a mixture
+    /// fitted before it that beat that (`fitted`, in the ladder's order).
+    pub fn cannot_win(&self, id: ModelId, fitted: &[Fitted]) -> bool {
+        let best = fitted.iter().map(|f| super::qbic::qbic(f.f, self.c_data, f.id.n_params(), self.n)).fold(self.best_single, f64::min);
+        super::qbic::qbic(0.0, self.c_data, id.n_params(), self.n) >= best
+    }
 }
 
 /// The ladder step of `--model auto`: the best single lobe (chosen among the single lobes by the QBIC
@@ -121,7 +239,7 @@ impl Ladder {
     /// The ladder over `fits` (single lobes first, `n_single` of them, the best of which is
     /// `best_single`); `c_single` is the single lobes' overdispersion, used when the NDF has no split.
     pub fn new(ndf: &crate::ndf::EmpiricalNdf, s: &Session, fits: &[Fitted], n_single: usize, best_single: usize, c_single: f64) -> Ladder {
-        let c_data = super::verdict::data_dispersion(ndf, s.data.max_theta).filter(|d| d.is_finite()).map_or(c_single, |d| d.max(1.0));
+        let c_data = data_c(ndf, s, c_single);
         let criterion: Vec<f64> = fits.iter().map(|f| super::qbic::qbic(f.f, c_data, f.id.n_params(), s.data.n)).collect();
         let mut chosen = best_single;
         for i in n_single..fits.len() {
@@ -131,7 +249,7 @@ impl Ladder {
         }
         let best_mix = (n_single..fits.len()).min_by(|&a, &b| criterion[a].total_cmp(&criterion[b]));
         let summary = match best_mix {
-            None => format!("one lobe: no mixture could be fitted; {} chosen", fits[best_single].id),
+            None => format!("one lobe: no mixture fitted; {} chosen", fits[best_single].id),
             Some(m) => {
                 let d = criterion[m] - criterion[best_single];
                 if chosen == m {

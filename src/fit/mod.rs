@@ -495,6 +495,13 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 /// model is `c` times its Poisson expectation; dividing by `c` (QAIC/QBIC, Burnham and Anderson) keeps
 /// that correlation from buying parameters.
 pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
+    fit_auto_pruned(ndf, opts, true)
+}
+
+/// [`fit_auto`], with the ladder's pruning on or off: with `prune`, a mixture is not fitted when it
+/// cannot win ([`mixture::cannot_win`]); its absence cannot change the choice, only the candidates
+/// listed. Public so a test can hold the two to the same choice.
+pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, prune: bool) -> Result<FitReport> {
     let t0 = Instant::now();
     let s = Session::new(ndf, opts)?;
     // A candidate that cannot be fitted is left out (and said so); only when none is usable is it an error.
@@ -512,6 +519,7 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
     };
     let delta = s.data.k_nonzero == 1;
     let mut mixtures: Vec<Fitted> = Vec::new();
+    let mut pruned: Vec<ModelId> = Vec::new();
     let (ggx, ggx_a, ell, beck, beck_a) = if delta {
         // A delta NDF: every model is at its floor; the simplest wins below (no mixture is fitted).
         let d = |id| Some(delta_fit(&s, id));
@@ -525,9 +533,15 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
         };
         let beck = keep(fit_iso(&s, ModelId::Beckmann, opts));
         let beck_a = keep(fit_aniso(&s, ModelId::BeckmannAniso, beck.as_ref(), opts));
-        // The ladder's second rung: each mixture from the single lobe it extends.
+        // The ladder's second rung: each mixture from the single lobe it extends, unless it cannot win.
+        let singles: Vec<&Fitted> = [&ggx, &beck, &ggx_a, &beck_a, &ell].into_iter().flatten().collect();
+        let bound = prune.then(|| mixture::Pruning::new(ndf, &s, &singles));
         for (id, parent) in [(ModelId::Ggx2, &ggx_a), (ModelId::Beckmann2, &beck_a), (ModelId::EllipsoidGgx, &ell)] {
             if let Some(p) = parent {
+                if bound.as_ref().is_some_and(|b| b.cannot_win(id, &mixtures)) {
+                    pruned.push(id);
+                    continue;
+                }
                 mixtures.extend(keep(mixture::fit_mixture(&s, id, p, opts)));
             }
         }
@@ -598,7 +612,12 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
         overdispersion: c,
         candidates,
         data_overdispersion: Some(ladder.c_data),
-        ladder: Some(ladder.summary.clone()),
+        ladder: Some(if pruned.is_empty() {
+            ladder.summary.clone()
+        } else {
+            let ids: Vec<String> = pruned.iter().map(|m| m.to_string()).collect();
+            format!("{}; not fitted, as they cannot win (F / c_data <= added parameters x ln N): {}", ladder.summary, ids.join(", "))
+        }),
     });
     rep.timings.fit_ms = t0.elapsed().as_secs_f64() * 1e3;
     Ok(rep)
