@@ -1,7 +1,7 @@
 //! X3P (ISO 25178-72) writer: float64 Z, incremental X/Y axes, NaN for invalid points.
 //!
-//! The container holds `main.xml` (deflated), `bindata/data.bin` (stored, so readers can use it in
-//! place) and `md5checksum.hex`, with the MD5 sums the standard requires. Numbers are written in
+//! The container holds `main.xml` (deflated), `bindata/data.bin` (stored and 8-byte aligned, so readers
+//! can use it in place) and `md5checksum.hex`, with the MD5 sums the standard requires. Numbers are written in
 //! Rust's shortest round-trip form, so spacing and offsets read back bit-identical.
 
 use std::io::Write;
@@ -39,11 +39,14 @@ pub fn x3p_bytes(hf: &Heightfield) -> Result<Vec<u8>> {
         let large = data.len() as u64 >= u32::MAX as u64;
         let deflated = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated).large_file(false);
         let stored = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored).large_file(large);
+        // The point data starts on an 8-byte boundary of the file (padding in the entry's extra field),
+        // so a reader can map it and use the float64 values in place.
+        let aligned = stored.with_alignment(8);
         let zerr = |e: zip::result::ZipError| Error::invalid(format!("cannot build the X3P zip ({e})"));
         zw.start_file("main.xml", deflated).map_err(zerr)?;
         zw.write_all(main.as_bytes())?;
         zw.add_directory("bindata/", stored).map_err(zerr)?;
-        zw.start_file("bindata/data.bin", stored).map_err(zerr)?;
+        zw.start_file("bindata/data.bin", aligned).map_err(zerr)?;
         zw.write_all(&data)?;
         zw.start_file("md5checksum.hex", deflated).map_err(zerr)?;
         zw.write_all(format!("{main_md5} *main.xml\n").as_bytes())?;

@@ -11,6 +11,8 @@
 
 use rayon::prelude::*;
 
+use crate::ndf::bands::{bands_of, Band, BandSource};
+use crate::ndf::HeightRows;
 use crate::scan::Scan;
 
 /// Departure from the neighbours' median, in units of their spread, beyond which a point is a spike.
@@ -46,8 +48,8 @@ pub struct DespikeReport {
 }
 
 /// Per point: `Some((departure, spread))` when the point is valid with enough valid neighbours.
-fn departure(z: &[f64], nx: usize, ny: usize, i: usize, j: usize) -> Option<(f64, f64)> {
-    let c = z[i * nx + j];
+fn departure(z: &Band<'_, f64>, nx: usize, ny: usize, i: usize, j: usize) -> Option<(f64, f64)> {
+    let c = z.row(i)[j];
     if !c.is_finite() {
         return None;
     }
@@ -62,7 +64,7 @@ fn departure(z: &[f64], nx: usize, ny: usize, i: usize, j: usize) -> Option<(f64
             if ii < 0 || jj < 0 || ii >= ny as i64 || jj >= nx as i64 {
                 continue;
             }
-            let v = z[ii as usize * nx + jj as usize];
+            let v = z.row(ii as usize)[jj as usize];
             if v.is_finite() {
                 nb[k] = v;
                 k += 1;
@@ -90,44 +92,74 @@ const FLOOR_SAMPLE: usize = 1 << 16;
 
 /// Mask the spikes of `hf` (module documentation). Returns the report; `Despike::None` does nothing.
 pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
-    if how == Despike::None || hf.nx < 3 || hf.ny < 3 {
+    let (spikes, report) = find_spikes(&*hf, how, hf.meta.height_quantum)?;
+    for k in spikes {
+        hf.z[k] = f64::NAN;
+    }
+    Some(report)
+}
+
+/// The spikes of the heights `src` ([`despike`]) as sorted flat indices `i * nx + j`, with the report,
+/// without writing the heights: the heights are read in bands of rows (each with the rows around it),
+/// so they can be a mapped file or residuals computed band by band. `quantum`: the height quantum (a
+/// floor of the spread).
+pub fn find_spikes<S: BandSource<T = f64>>(src: &S, how: Despike, quantum: Option<f64>) -> Option<(Vec<usize>, DespikeReport)> {
+    let shape = src.shape();
+    let (nx, ny) = (shape.nx, shape.ny);
+    if how == Despike::None || nx < 3 || ny < 3 {
         return None;
     }
-    let (nx, ny) = (hf.nx, hf.ny);
-    let z: &[f64] = &hf.z;
+    let bands: Vec<std::ops::Range<usize>> = bands_of(0..ny, src.band_rows()).collect();
     // The floor: the median departure (Gaussian-consistent) over a strided sample of the scan (its
     // relative standard error is about 1 / sqrt(2^16): the threshold moves by under 1%), and the quantum.
     let stride = ((nx * ny) / FLOOR_SAMPLE).max(1);
-    let mut all: Vec<f64> = (0..nx * ny).step_by(stride).filter_map(|k| departure(z, nx, ny, k / nx, k % nx)).map(|d| d.0.abs()).collect();
+    let mut all: Vec<f64> = bands
+        .par_iter()
+        .flat_map_iter(|b| {
+            let mut buf = Vec::new();
+            let z = src.band(b.start.saturating_sub(1), (b.end + 1).min(ny), &mut buf);
+            let first = (b.start * nx).next_multiple_of(stride);
+            (first..b.end * nx)
+                .step_by(stride)
+                .filter_map(|k| departure(&z, nx, ny, k / nx, k % nx))
+                .map(|d| d.0.abs())
+                .collect::<Vec<f64>>()
+        })
+        .collect();
     let typical = if all.is_empty() {
         0.0
     } else {
         let mid = all.len() / 2;
         MAD_NORMAL * *all.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
     };
-    let floor = typical.max(hf.meta.height_quantum.unwrap_or(0.0));
+    let floor = typical.max(quantum.unwrap_or(0.0));
     let limit = SPIKE_THRESHOLD * floor;
     // Exact pre-screen: the median lies between the neighbours' extremes, so a point within `limit` of
     // both cannot depart by more than the threshold (which is at least `limit`).
-    let spikes: Vec<(usize, bool)> = (1..ny - 1)
-        .into_par_iter()
-        .flat_map_iter(|i| {
+    let spikes: Vec<(usize, bool)> = bands
+        .par_iter()
+        .flat_map_iter(|b| {
             let mut out = Vec::new();
-            for j in 1..nx - 1 {
-                let c = z[i * nx + j];
-                let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-                for r in [i - 1, i, i + 1] {
-                    for v in &z[r * nx + j - 1..r * nx + j + 2] {
-                        lo = lo.min(*v);
-                        hi = hi.max(*v);
+            let mut buf = Vec::new();
+            let z = src.band(b.start.saturating_sub(1), (b.end + 1).min(ny), &mut buf);
+            for i in b.start.max(1)..b.end.min(ny - 1) {
+                let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
+                for j in 1..nx - 1 {
+                    let c = r1[j];
+                    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+                    for r in [r0, r1, r2] {
+                        for v in &r[j - 1..j + 2] {
+                            lo = lo.min(*v);
+                            hi = hi.max(*v);
+                        }
                     }
-                }
-                if c - lo <= limit && hi - c <= limit {
-                    continue;
-                }
-                if let Some((d, s)) = departure(z, nx, ny, i, j) {
-                    if d.abs() > SPIKE_THRESHOLD * s.max(floor) && d.abs() > 0.0 {
-                        out.push((i * nx + j, d > 0.0));
+                    if c - lo <= limit && hi - c <= limit {
+                        continue;
+                    }
+                    if let Some((d, s)) = departure(&z, nx, ny, i, j) {
+                        if d.abs() > SPIKE_THRESHOLD * s.max(floor) && d.abs() > 0.0 {
+                            out.push((i * nx + j, d > 0.0));
+                        }
                     }
                 }
             }
@@ -135,10 +167,7 @@ pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
         })
         .collect();
     let high = spikes.iter().filter(|s| s.1).count();
-    for &(k, _) in &spikes {
-        hf.z[k] = f64::NAN;
-    }
-    Some(DespikeReport {
+    let report = DespikeReport {
         method: "median".into(),
         masked: spikes.len(),
         masked_high: high,
@@ -146,5 +175,6 @@ pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
             "a height more than {SPIKE_THRESHOLD} times the spread of its 8 neighbours (1.4826 MAD, at least {floor:.3e} m) from their median"
         ),
         floor,
-    })
+    };
+    Some((spikes.into_iter().map(|s| s.0).collect(), report))
 }
