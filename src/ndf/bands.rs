@@ -13,7 +13,7 @@
 //! process's resident memory does not grow with the scan (a page read again is faulted back in from the
 //! unchanged file).
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
 use super::HeightRows;
 use crate::scan::Scan;
@@ -21,9 +21,22 @@ use crate::scan::Scan;
 /// Bytes of heights a band aims at: a few bands per thread stay in the L2 cache.
 pub const BAND_BYTES: usize = 1 << 20;
 
-/// Rows per band for rows of `nx` values of `bytes` bytes each (at least 4).
+/// Rows per band for rows of `nx` values of `bytes` bytes each (at least 4), or the rows set by
+/// [`set_band_rows`].
 pub fn band_rows(nx: usize, bytes: usize) -> usize {
-    (BAND_BYTES / (nx.max(1) * bytes.max(1))).max(4)
+    match BAND_ROWS.load(Ordering::Relaxed) {
+        0 => (BAND_BYTES / (nx.max(1) * bytes.max(1))).max(4),
+        r => r,
+    }
+}
+
+/// Rows per band set for this process (0: from [`BAND_BYTES`]).
+static BAND_ROWS: AtomicUsize = AtomicUsize::new(0);
+
+/// Set the rows per band for this process (`None`: from [`BAND_BYTES`]); tests use a row or two to
+/// put band edges everywhere. Only speed and memory change with it, never a result.
+pub fn set_band_rows(rows: Option<usize>) {
+    BAND_ROWS.store(rows.map_or(0, |r| r.max(1)), Ordering::Relaxed);
 }
 
 /// Mapped scans above this many bytes of heights release each band's pages after use (0: never set,
@@ -47,6 +60,10 @@ pub fn set_release_threshold(bytes: Option<u64>) {
     RELEASE_BYTES.store(bytes.map_or(0, |b| b.max(1)), Ordering::Relaxed);
 }
 
+/// Bytes around a band that are released with it ([`BandSource::band`] of a tiled scan): a page-cache
+/// folio mapped by a fault can reach this far.
+const FAULT_AROUND: usize = 2 << 20;
+
 /// The grid a [`BandSource`] covers.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GridShape {
@@ -67,15 +84,15 @@ pub struct Band<'b, T> {
     z: &'b [T],
     lo: usize,
     shape: GridShape,
-    /// Release the pages of `z` when dropped (a tiled, mapped scan).
-    release: bool,
+    /// Release these bytes (start address, length) when dropped (a tiled, mapped scan).
+    release: Option<(usize, usize)>,
 }
 
 impl<'b, T> Band<'b, T> {
     /// Rows `lo..lo + z.len() / nx` of the grid `shape`, held in `z`.
     pub fn new(z: &'b [T], lo: usize, shape: GridShape) -> Self {
         debug_assert_eq!(z.len() % shape.nx.max(1), 0);
-        Band { z, lo, shape, release: false }
+        Band { z, lo, shape, release: None }
     }
 
     /// The first row held.
@@ -96,8 +113,8 @@ impl<'b, T> Band<'b, T> {
 
 impl<T> Drop for Band<'_, T> {
     fn drop(&mut self) {
-        if self.release {
-            crate::scan::heights::release_pages(self.z.as_ptr().cast(), std::mem::size_of_val(self.z));
+        if let Some((start, len)) = self.release {
+            crate::scan::heights::release_pages(start as *const u8, len);
         }
     }
 }
@@ -153,7 +170,15 @@ impl BandSource for Scan<'_> {
     #[inline]
     fn band<'b>(&'b self, lo: usize, hi: usize, _buf: &'b mut Vec<f64>) -> Band<'b, f64> {
         let mut b = Band::new(&self.z[lo * self.nx..hi * self.nx], lo, self.shape());
-        b.release = self.z.is_mapped() && (self.z.len() as u64).saturating_mul(8) > release_threshold();
+        if self.z.is_mapped() && (self.z.len() as u64).saturating_mul(8) > release_threshold() {
+            // The kernel maps pages around a faulting one (fault-around, and whole large folios of the
+            // page cache, up to 2 MiB): release that much beyond the band on either side too, within
+            // the heights, or those pages would stay mapped.
+            let all = self.z.as_ptr() as usize..self.z.as_ptr() as usize + self.z.len() * 8;
+            let start = (b.z.as_ptr() as usize).saturating_sub(FAULT_AROUND).max(all.start);
+            let end = (b.z.as_ptr() as usize + b.z.len() * 8 + FAULT_AROUND).min(all.end);
+            b.release = Some((start, end - start));
+        }
         b
     }
 }
