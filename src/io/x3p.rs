@@ -209,12 +209,18 @@ fn read_x3p_in(bytes: &[u8], map: Option<&std::sync::Arc<memmap2::Mmap>>) -> Res
         let data_name =
             link.text_at(&["PointDataLink"]).ok_or_else(|| Error::corrupt(format!("{main_name}: DataLink has no PointDataLink")))?;
         let data_path = format!("{prefix}{data_name}");
+        // Only a stored float64 entry can be read in place (nothing allocated per point); every other
+        // read is checked against the budget before anything is inflated or decoded.
+        let stored = zip.by_name(&data_path).is_ok_and(|e| e.compression() == zip::CompressionMethod::Stored);
+        let candidate =
+            map.is_some() && stored && ztype == ZType::D && z_inc == 1.0 && z_off == 0.0 && link.text_at(&["ValidPointsLink"]).is_none();
+        if !candidate {
+            budget()?;
+        }
         let (raw, crc) = read_entry_exact(&mut zip, bytes, &data_path, n, ztype.size(), nx, ny)?;
         check_md5(link, "MD5ChecksumPointData", &data_path, &raw)?;
         let in_place = match (map, &raw, crc) {
-            (Some(map), std::borrow::Cow::Borrowed(r), Some(crc))
-                if ztype == ZType::D && z_inc == 1.0 && z_off == 0.0 && link.text_at(&["ValidPointsLink"]).is_none() =>
-            {
+            (Some(map), std::borrow::Cow::Borrowed(r), Some(crc)) if candidate => {
                 mapped_heights(map, r, n, crc).map_err(|e| Error::corrupt(format!("{data_path}: {}", e.message())))?
             }
             _ => None,
