@@ -6,8 +6,10 @@
 
 pub mod despike;
 pub mod form;
+pub mod prepared;
 
 pub use despike::{Despike, DespikeReport};
+pub use prepared::{prepare, Prepared};
 
 use crate::error::{Error, Result};
 use crate::scan::{Heightfield, Scan};
@@ -84,31 +86,10 @@ impl Default for Preprocess {
     }
 }
 
-/// Apply `pre` to `hf`: crop, subsample, then remove the form. Never fills an invalid point.
+/// Apply `pre` to `hf`: crop, subsample, then remove the form. Never fills an invalid point. The
+/// residual heights are a new buffer; [`prepare`] keeps the form and the mask apart instead.
 pub fn apply<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Scan<'a>> {
-    let mut hf = hf;
-    if let Some(c) = pre.crop {
-        hf = crop(&hf, c)?;
-    }
-    if pre.subsample != 1 {
-        hf = subsample(&hf, pre.subsample)?;
-    }
-    if pre.form != FormRemoval::None && hf.meta.height_quantum.is_none() {
-        // The lattice is found on the heights as stored: a form removal shifts every height off `k q`.
-        hf.meta.height_quantum = crate::ndf::quantum::height_quantum(&hf);
-    }
-    let z = match pre.form {
-        FormRemoval::None => {
-            hf.meta.despike = despike::despike(&mut hf, pre.despike);
-            return Ok(hf);
-        }
-        FormRemoval::Plane => form::remove_polynomial(&hf, 1)?,
-        FormRemoval::Polynomial(k) => form::remove_polynomial(&hf, k)?,
-        FormRemoval::Cylinder => form::remove_cylinder(&hf)?.residual,
-    };
-    hf.z = z.into();
-    hf.meta.despike = despike::despike(&mut hf, pre.despike);
-    Ok(hf)
+    Ok(prepare(hf, pre)?.into_scan())
 }
 
 /// The window `c` of `hf` (origin moved so every kept point keeps its position).

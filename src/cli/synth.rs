@@ -72,6 +72,10 @@ pub struct Args {
     /// Planes: one facet `SX,SY[,WEIGHT]` (slope grad h and relative width); repeat for strips.
     #[arg(long, allow_hyphen_values = true)]
     plane: Vec<String>,
+    /// Write the surface repeated N x N times (--nx by --ny is one tile; a spectral surface is periodic,
+    /// so the copies join seamlessly), streamed row by row: scans larger than memory, for the tiled read.
+    #[arg(long, default_value_t = 1)]
+    repeat: usize,
 }
 
 fn parse_plane(s: &str) -> anyhow::Result<PlaneFacet> {
@@ -132,10 +136,23 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     };
     let truth_path = a.truth.clone().unwrap_or_else(|| a.output.with_extension("truth.json"));
     truth.input = Some(serde_json::json!({
-        "path": a.output.display().to_string(), "format": "x3p", "nx": hf.nx, "ny": hf.ny, "dx": hf.dx, "dy": hf.dy,
+        "path": a.output.display().to_string(), "format": "x3p", "nx": hf.nx * a.repeat.max(1), "ny": hf.ny * a.repeat.max(1), "dx": hf.dx, "dy": hf.dy,
     }));
-    ndfit::io::write_x3p(&a.output, &hf)?;
+    if a.repeat > 1 {
+        // A periodic tile repeated: the scan is written row by row, never held whole.
+        ndfit::io::x3p_write::write_x3p_repeated(&a.output, &hf, a.repeat, a.repeat)?;
+    } else {
+        ndfit::io::write_x3p(&a.output, &hf)?;
+    }
     ndfit::io::write_bytes_atomic(&truth_path, truth.to_json().as_bytes())?;
-    eprintln!("ndfit synth: {} ({} x {}, {} invalid) and {}", a.output.display(), hf.nx, hf.ny, hf.invalid_count(), truth_path.display());
+    let k = a.repeat.max(1);
+    eprintln!(
+        "ndfit synth: {} ({} x {}, {} invalid) and {}",
+        a.output.display(),
+        hf.nx * k,
+        hf.ny * k,
+        hf.invalid_count() * k * k,
+        truth_path.display()
+    );
     Ok(ExitCode::SUCCESS)
 }

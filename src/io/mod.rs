@@ -245,6 +245,7 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
         None => {
             let mut whole = match (&file, format) {
                 (FileBytes::Mapped(map), f) if f == Format::Npy => npy::read_npy_mapped(map, opts)?,
+                (FileBytes::Mapped(map), f) if f == Format::X3p => x3p::read_x3p_mapped(map)?,
                 _ => read_bytes(format, bytes, opts)?,
             };
             whole.meta.file_grid = Some([whole.nx, whole.ny]);
@@ -286,7 +287,9 @@ impl FileBytes {
         // `populate` (MAP_POPULATE) maps every page in the one mmap call: no 4 KiB fault per page
         // while decoding (a `madvise(MADV_SEQUENTIAL)` afterwards would come too late to matter).
         let mut options = memmap2::MmapOptions::new();
-        if populate {
+        // A scan read as tiles (larger than the tiling threshold) is faulted in band by band instead,
+        // and its pages released after use (`crate::ndf::bands`).
+        if populate && len <= crate::ndf::bands::release_threshold() {
             options.populate();
         }
         let map = unsafe { options.map(&file)? };

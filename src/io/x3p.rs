@@ -24,7 +24,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::checked_size;
 use crate::io::xml::{self, Element};
 use crate::scan::heights;
-use crate::scan::{Heightfield, ScanMeta};
+use crate::scan::{Heightfield, Heights, ScanMeta};
 
 /// The registry entry of the `x3p` format ([`crate::io::Reader`]).
 pub const READER: crate::io::Reader =
@@ -85,6 +85,42 @@ impl ZType {
 
 /// Read an X3P file held in memory.
 pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
+    read_x3p_in(bytes, None)
+}
+
+/// Read an X3P file from its memory map. Float64 point data in a stored (uncompressed) entry, with no
+/// `Offset`/`Increment` and no validity bits, 8-byte aligned in the file (as [`crate::io::write_x3p`]
+/// writes it), and free of infinities, is read in place: the scan's heights are the mapped bytes
+/// ([`Heights::is_mapped`]), after one pass that checks the CRC-32. Every other file is decoded as
+/// [`read_x3p`] decodes it.
+pub fn read_x3p_mapped(map: &std::sync::Arc<memmap2::Mmap>) -> Result<Heightfield> {
+    read_x3p_in(map, Some(map))
+}
+
+/// The zero-copy case of [`read_x3p_mapped`] for the point data `raw` (a slice of `map`): the heights,
+/// or `None` when the data must be decoded.
+fn mapped_heights(map: &std::sync::Arc<memmap2::Mmap>, raw: &[u8], n: usize, crc: u32) -> Result<Option<Heights<'static>>> {
+    let offset = (raw.as_ptr() as usize).wrapping_sub(map.as_ptr() as usize);
+    let Some(z) = Heights::mapped(map.clone(), offset, n) else { return Ok(None) };
+    let release = (raw.len() as u64) > crate::ndf::bands::release_threshold();
+    // One pass, 1 MiB at a time: the CRC-32 and the infinity check (an infinity needs the decoding
+    // copy, which masks it); the pages of a scan read as tiles are released after each block.
+    let mut hasher = crc32fast::Hasher::new();
+    let mut infinite = false;
+    for (block, vals) in raw.chunks(1 << 20).zip(z.chunks(1 << 17)) {
+        hasher.update(block);
+        infinite |= vals.iter().any(|v| v.is_infinite());
+        if release {
+            crate::scan::heights::release_pages(block.as_ptr(), block.len());
+        }
+    }
+    if hasher.finalize() != crc {
+        return Err(Error::corrupt("CRC-32 mismatch, the point data are corrupt"));
+    }
+    Ok((!infinite).then_some(z))
+}
+
+fn read_x3p_in(bytes: &[u8], map: Option<&std::sync::Arc<memmap2::Mmap>>) -> Result<Heightfield> {
     let mut zip =
         zip::ZipArchive::new(std::io::Cursor::new(bytes)).map_err(|e| Error::corrupt(format!("not a readable X3P zip container ({e})")))?;
 
@@ -166,13 +202,21 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
         return Err(Error::new(ErrorKind::Unsupported, format!("{main_name}: SizeZ = {nz}; only single-layer surfaces are read")));
     }
     let n = checked_size(&[nx, ny], "X3P matrix")?;
-    crate::budget::check_points(nx, ny, &format!("{main_name}: MatrixDimension"))?;
+    let budget = || crate::budget::check_points(nx, ny, &format!("{main_name}: MatrixDimension"));
 
-    let mut z: Vec<f64>;
+    let mut z: Heights<'static>;
     if let Some(link) = r3.child("DataLink") {
         let data_name =
             link.text_at(&["PointDataLink"]).ok_or_else(|| Error::corrupt(format!("{main_name}: DataLink has no PointDataLink")))?;
         let data_path = format!("{prefix}{data_name}");
+        // Only a stored float64 entry can be read in place (nothing allocated per point); every other
+        // read is checked against the budget before anything is inflated or decoded.
+        let stored = zip.by_name(&data_path).is_ok_and(|e| e.compression() == zip::CompressionMethod::Stored);
+        let candidate =
+            map.is_some() && stored && ztype == ZType::D && z_inc == 1.0 && z_off == 0.0 && link.text_at(&["ValidPointsLink"]).is_none();
+        if !candidate {
+            budget()?;
+        }
         let md5_want = link
             .text_at(&["MD5ChecksumPointData"])
             .and_then(md5_field)
@@ -180,11 +224,20 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
             .map(|w| ("MD5ChecksumPointData", w));
         if let Some(inflated) = crate::io::inflate::read_deflated_points(&mut zip, &data_path, n, ztype, z_inc, z_off, md5_want, (nx, ny))?
         {
-            z = inflated;
+            z = inflated.into();
         } else {
             let (raw, crc) = read_entry_exact(&mut zip, bytes, &data_path, n, ztype.size(), nx, ny)?;
             check_md5(link, "MD5ChecksumPointData", &data_path, &raw)?;
-            z = decode(&raw, ztype, z_inc, z_off, crc).map_err(|e| Error::corrupt(format!("{data_path}: {}", e.message())))?;
+            let in_place = match (map, &raw, crc) {
+                (Some(map), std::borrow::Cow::Borrowed(r), Some(crc)) if candidate => {
+                    mapped_heights(map, r, n, crc).map_err(|e| Error::corrupt(format!("{data_path}: {}", e.message())))?
+                }
+                _ => None,
+            };
+            z = match in_place {
+                Some(z) => z,
+                None => decode(&raw, ztype, z_inc, z_off, crc).map_err(|e| Error::corrupt(format!("{data_path}: {}", e.message())))?.into(),
+            };
         }
         if let Some(valid_name) = link.text_at(&["ValidPointsLink"]) {
             let vpath = format!("{prefix}{valid_name}");
@@ -197,7 +250,8 @@ pub fn read_x3p(bytes: &[u8]) -> Result<Heightfield> {
             apply_valid_bits(&mut z, &valid);
         }
     } else if let Some(list) = r3.child("DataList") {
-        z = parse_data_list(list, n, ztype, z_inc, z_off, &main_name)?;
+        budget()?;
+        z = parse_data_list(list, n, ztype, z_inc, z_off, &main_name)?.into();
     } else {
         return Err(Error::corrupt(format!("{main_name}: Record3 has neither DataLink nor DataList")));
     }

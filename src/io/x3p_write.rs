@@ -1,7 +1,7 @@
 //! X3P (ISO 25178-72) writer: float64 Z, incremental X/Y axes, NaN for invalid points.
 //!
-//! The container holds `main.xml` (deflated), `bindata/data.bin` (stored, so readers can use it in
-//! place) and `md5checksum.hex`, with the MD5 sums the standard requires. Numbers are written in
+//! The container holds `main.xml` (deflated), `bindata/data.bin` (stored and 8-byte aligned, so readers
+//! can use it in place) and `md5checksum.hex`, with the MD5 sums the standard requires. Numbers are written in
 //! Rust's shortest round-trip form, so spacing and offsets read back bit-identical.
 
 use std::io::Write;
@@ -39,17 +39,77 @@ pub fn x3p_bytes(hf: &Heightfield) -> Result<Vec<u8>> {
         let large = data.len() as u64 >= u32::MAX as u64;
         let deflated = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated).large_file(false);
         let stored = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored).large_file(large);
+        // The point data starts on an 8-byte boundary of the file (padding in the entry's extra field),
+        // so a reader can map it and use the float64 values in place.
+        let aligned = stored.with_alignment(8);
         let zerr = |e: zip::result::ZipError| Error::invalid(format!("cannot build the X3P zip ({e})"));
         zw.start_file("main.xml", deflated).map_err(zerr)?;
         zw.write_all(main.as_bytes())?;
         zw.add_directory("bindata/", stored).map_err(zerr)?;
-        zw.start_file("bindata/data.bin", stored).map_err(zerr)?;
+        zw.start_file("bindata/data.bin", aligned).map_err(zerr)?;
         zw.write_all(&data)?;
         zw.start_file("md5checksum.hex", deflated).map_err(zerr)?;
         zw.write_all(format!("{main_md5} *main.xml\n").as_bytes())?;
         zw.finish().map_err(zerr)?;
     }
     Ok(out.into_inner())
+}
+
+/// Write `tile` repeated `kx` times along x and `ky` times along y as one X3P file at `path`, streamed
+/// row by row: the whole grid is never in memory, so scans larger than memory can be made (to test the
+/// tiled read). A periodic tile (the spectral surfaces of [`crate::synth`]) repeats seamlessly. The file
+/// is written to a sibling temporary file and renamed into place when complete.
+pub fn write_x3p_repeated(path: &Path, tile: &Heightfield, kx: usize, ky: usize) -> Result<()> {
+    let (nx, ny) = (tile.nx.checked_mul(kx), tile.ny.checked_mul(ky));
+    let (Some(nx), Some(ny)) = (nx, ny) else { return Err(Error::invalid("repeated grid size overflows")) };
+    if kx == 0 || ky == 0 || tile.z.len() != tile.nx * tile.ny {
+        return Err(Error::invalid("nothing to repeat"));
+    }
+    let row = |i: usize, out: &mut Vec<u8>| {
+        out.clear();
+        for _ in 0..kx {
+            for h in tile.row(i % tile.ny) {
+                out.extend_from_slice(&h.to_le_bytes());
+            }
+        }
+    };
+    let mut buf = Vec::with_capacity(nx * 8);
+    let mut md5 = crate::io::md5::Md5::default();
+    for i in 0..ny {
+        row(i, &mut buf);
+        md5.update(&buf);
+    }
+    let data_md5: String = md5.finish().iter().map(|b| format!("{b:02x}")).collect();
+    let big = Heightfield { nx, ny, z: Vec::new().into(), ..tile.clone() };
+    let main = main_xml(&big, &data_md5);
+    let main_md5 = md5_hex(main.as_bytes());
+    let tmp = path.with_extension("x3p.partial");
+    let mut write = || -> Result<()> {
+        let file = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&tmp)?);
+        let mut zw = zip::ZipWriter::new(file);
+        let deflated = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated).large_file(false);
+        let stored = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored).large_file(true);
+        let zerr = |e: zip::result::ZipError| Error::invalid(format!("cannot build the X3P zip ({e})"));
+        zw.start_file("main.xml", deflated).map_err(zerr)?;
+        zw.write_all(main.as_bytes())?;
+        zw.add_directory("bindata/", stored).map_err(zerr)?;
+        zw.start_file("bindata/data.bin", stored.with_alignment(8)).map_err(zerr)?;
+        for i in 0..ny {
+            row(i, &mut buf);
+            zw.write_all(&buf)?;
+        }
+        zw.start_file("md5checksum.hex", deflated).map_err(zerr)?;
+        zw.write_all(format!("{main_md5} *main.xml\n").as_bytes())?;
+        zw.finish().map_err(zerr)?.flush()?;
+        Ok(())
+    };
+    match write() {
+        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| Error::io(e).with_path(path)),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e.with_path(path))
+        }
+    }
 }
 
 fn num(v: f64) -> String {

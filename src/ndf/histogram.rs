@@ -3,8 +3,9 @@
 
 use rayon::prelude::*;
 
+use super::bands::bands_of;
 use super::frame::LAMBERT_RADIUS;
-use super::{BinGrid, HeightRows, NormalScheme, SlopeFrame};
+use super::{BandSource, BinGrid, NormalScheme, SlopeFrame};
 
 /// Per-task accumulator: counts per cell and slope moments about the frame centre.
 ///
@@ -210,8 +211,8 @@ fn dispersion_block(i: usize, rows: usize) -> usize {
 }
 
 /// The parallel pass: rows split into a few contiguous chunks per thread, one histogram per chunk.
-pub(super) fn histogram<H: HeightRows>(
-    hf: &H,
+pub(super) fn histogram<S: BandSource>(
+    src: &S,
     scheme: NormalScheme,
     frame: &SlopeFrame,
     grid: &BinGrid,
@@ -223,29 +224,36 @@ pub(super) fn histogram<H: HeightRows>(
     let starts: Vec<usize> = rows.clone().step_by(len).collect();
     let end = rows.end;
     let rows = &rows;
+    let (ny, step) = (src.shape().ny, src.band_rows());
     starts
         .into_par_iter()
         .map(|start| {
             let mut acc = Acc::new(cells);
             let mut blk = Block::new();
-            for i in start..(start + len).min(end) {
-                // The dispersion split: samples of odd row blocks are also counted apart (flushed and
-                // folded where the parity changes, so no block of samples mixes the two).
-                let odd = dispersion_block(i - rows.start, rows.len()) % 2 == 1;
-                if odd != acc.odd_pending {
-                    blk.flush(frame, grid, &mut acc);
-                    acc.fold();
-                    acc.odd_pending = odd;
-                }
-                let valid = scheme.row_slopes(hf, i, 1, |sx, sy| {
-                    blk.sx[blk.n] = sx;
-                    blk.sy[blk.n] = sy;
-                    blk.n += 1;
-                    if blk.n == BLOCK {
+            let mut buf = Vec::new();
+            for b in bands_of(start..(start + len).min(end), step) {
+                let (lo, _) = scheme.stencil_rows(b.start, ny);
+                let (_, hi) = scheme.stencil_rows(b.end - 1, ny);
+                let hf = &src.band(lo, hi, &mut buf);
+                for i in b {
+                    // The dispersion split: samples of odd row blocks are also counted apart (flushed and
+                    // folded where the parity changes, so no block of samples mixes the two).
+                    let odd = dispersion_block(i - rows.start, rows.len()) % 2 == 1;
+                    if odd != acc.odd_pending {
                         blk.flush(frame, grid, &mut acc);
+                        acc.fold();
+                        acc.odd_pending = odd;
                     }
-                });
-                acc.n += valid;
+                    let valid = scheme.row_slopes(hf, i, 1, |sx, sy| {
+                        blk.sx[blk.n] = sx;
+                        blk.sy[blk.n] = sy;
+                        blk.n += 1;
+                        if blk.n == BLOCK {
+                            blk.flush(frame, grid, &mut acc);
+                        }
+                    });
+                    acc.n += valid;
+                }
             }
             blk.flush(frame, grid, &mut acc);
             acc.fold();

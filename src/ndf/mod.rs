@@ -24,6 +24,7 @@
 //! the midpoint rule `E_k = N D(m_k) W_k` of `data_formats/objective.md` exact for any `D` that is linear
 //! over the cell in Lambert coordinates (second-order error).
 
+pub mod bands;
 mod cells;
 pub mod frame;
 pub mod grid;
@@ -37,6 +38,7 @@ pub mod precision;
 pub mod quantum;
 pub mod resolution;
 
+pub use bands::{Band, BandSource, GridShape};
 pub use frame::SlopeFrame;
 pub use grid::{BinGrid, QuadOrder, RimShape};
 use nalgebra::Vector3;
@@ -169,8 +171,14 @@ impl NdfOptions {
 /// Errors: [`ErrorKind::BadData`] when no stencil is valid (all points masked, or the grid is smaller
 /// than one stencil).
 pub fn empirical_ndf(hf: &Scan, opts: &NdfOptions) -> Result<EmpiricalNdf> {
-    let mut ndf = ndf_of(hf, opts, || hf.invalid_count())?;
-    resolution::assess(hf, &mut ndf);
+    empirical_ndf_of(hf, opts, || hf.invalid_count())
+}
+
+/// [`empirical_ndf`] of heights read in row bands ([`BandSource`]): the same NDF, bit for bit, as of
+/// the scan the bands make up. `invalid` counts the invalid points (for the error message only).
+pub fn empirical_ndf_of<S: BandSource<T = f64>>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize) -> Result<EmpiricalNdf> {
+    let mut ndf = ndf_of(src, opts, invalid)?;
+    resolution::assess(src, &mut ndf);
     Ok(ndf)
 }
 
@@ -211,7 +219,9 @@ pub fn empirical_ndf_with(hf: &Scan, opts: &NdfOptions, precision: Precision) ->
     }
 }
 
-fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize) -> Result<EmpiricalNdf> {
+fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize) -> Result<EmpiricalNdf> {
+    let outline = src.outline();
+    let hf = &outline;
     let scheme = opts.scheme;
     let rows = scheme.rows(hf);
     let stencils = rows.len() as u64 * scheme.per_row(hf) as u64;
@@ -231,14 +241,14 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
     // The frame and the height lattice are independent passes over the data: side by side.
     let ((mut sample, visited, frame), lattice) = rayon::join(
         || {
-            let (mut sample, visited) = if need_sample { subsample(hf, scheme, FRAME_SUBSAMPLE) } else { (Vec::new(), 0) };
+            let (mut sample, visited) = if need_sample { subsample(src, scheme, FRAME_SUBSAMPLE) } else { (Vec::new(), 0) };
             let frame = match opts.frame {
                 Some(f) => f,
                 None => SlopeFrame::robust(&mut sample),
             };
             (sample, visited, frame)
         },
-        || hf.known_quantum().and_then(quantum::Lattice::known).or_else(|| quantum::lattice(hf)),
+        || hf.known_quantum().and_then(quantum::Lattice::known).or_else(|| quantum::lattice(src)),
     );
     if need_sample && sample.is_empty() {
         return Err(no_valid());
@@ -249,7 +259,7 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
     let mut cells = BinGrid::new(opts.cells_for(n_est)).n;
     if let Some(q) = quantization.as_mut() {
         if sample.is_empty() {
-            sample = subsample(hf, scheme, FRAME_SUBSAMPLE).0;
+            sample = subsample(src, scheme, FRAME_SUBSAMPLE).0;
         }
         let (offset, rigidity) = quantum::phase(&sample, q.slope_step);
         q.rigidity = rigidity;
@@ -275,7 +285,7 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
     }
     let grid = BinGrid::new(cells);
 
-    let acc = histogram(hf, scheme, &frame, &grid, rows);
+    let acc = histogram(src, scheme, &frame, &grid, rows);
     if acc.n == 0 {
         return Err(no_valid());
     }
@@ -326,7 +336,10 @@ fn ndf_of<H: HeightRows>(hf: &H, opts: &NdfOptions, invalid: impl Fn() -> usize)
 
 /// A strided subsample of about `target` valid slopes (all of them for small scans), and the number of
 /// stencils visited to get them.
-fn subsample<H: HeightRows>(hf: &H, scheme: NormalScheme, target: usize) -> (Vec<[f64; 2]>, u64) {
+fn subsample<S: BandSource>(src: &S, scheme: NormalScheme, target: usize) -> (Vec<[f64; 2]>, u64) {
+    let outline = src.outline();
+    let hf = &outline;
+    let mut buf = Vec::new();
     let rows = scheme.rows(hf);
     let total = rows.len() * scheme.per_row(hf);
     let stride = ((total as f64 / target as f64).sqrt().floor() as usize).max(1);
@@ -335,14 +348,21 @@ fn subsample<H: HeightRows>(hf: &H, scheme: NormalScheme, target: usize) -> (Vec
     let per_row = scheme.per_row(hf) as u64;
     let per_visit = if scheme == NormalScheme::Triangles { 2 } else { 1 };
     for i in rows.step_by(stride) {
-        scheme.row_slopes(hf, i, stride, |sx, sy| out.push([sx, sy]));
+        let (lo, hi) = scheme.stencil_rows(i, hf.ny());
+        scheme.row_slopes(&src.band(lo, hi, &mut buf), i, stride, |sx, sy| out.push([sx, sy]));
         visited += (per_row / per_visit).div_ceil(stride as u64) * per_visit;
     }
     if out.is_empty() && stride > 1 {
         // Sparse valid data can fall between the strided rows: take every stencil instead (none of the
         // visited ones was valid, so this collects only the few valid ones there are).
-        for i in scheme.rows(hf) {
-            scheme.row_slopes(hf, i, 1, |sx, sy| out.push([sx, sy]));
+        let step = src.band_rows();
+        for b in bands::bands_of(scheme.rows(hf), step) {
+            let (lo, _) = scheme.stencil_rows(b.start, hf.ny());
+            let (_, hi) = scheme.stencil_rows(b.end - 1, hf.ny());
+            let band = src.band(lo, hi, &mut buf);
+            for i in b {
+                scheme.row_slopes(&band, i, 1, |sx, sy| out.push([sx, sy]));
+            }
         }
         visited = total as u64;
     }

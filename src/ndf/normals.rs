@@ -85,6 +85,14 @@ impl NormalScheme {
         }
     }
 
+    /// The rows `lo..hi` the stencils of row `i` (one of [`NormalScheme::rows`]) read, within `0..ny`.
+    pub fn stencil_rows(self, i: usize, ny: usize) -> (usize, usize) {
+        match self {
+            NormalScheme::Central => (i.saturating_sub(1), (i + 2).min(ny)),
+            NormalScheme::Triangles => (i, (i + 2).min(ny)),
+        }
+    }
+
     /// Number of stencils (valid or not) in one row.
     pub fn per_row(self, hf: &impl HeightRows) -> usize {
         match self {

@@ -9,7 +9,7 @@
 //! heights").
 
 use super::normals::{HeightRows, NormalScheme};
-use super::SlopeFrame;
+use super::{BandSource, SlopeFrame};
 
 /// Height differences examined to find the quantum (a strided subsample of adjacent pairs).
 const QUANTUM_SAMPLE: usize = 1 << 16;
@@ -95,8 +95,8 @@ impl HeightQuantum {
 /// `None` when the heights are not on a lattice, when
 /// too few differences are nonzero to tell (fewer than 100), or when the lattice is immaterial
 /// ([`MATERIAL_STEP`]).
-pub fn detect<H: HeightRows>(hf: &H, scheme: NormalScheme, frame: &SlopeFrame) -> Option<HeightQuantum> {
-    assess(lattice(hf)?, hf, scheme, frame)
+pub fn detect<S: BandSource>(hf: &S, scheme: NormalScheme, frame: &SlopeFrame) -> Option<HeightQuantum> {
+    assess(lattice(hf)?, &hf.outline(), scheme, frame)
 }
 
 /// A height step `q` and the fraction of the examined differences on its lattice.
@@ -114,7 +114,7 @@ impl Lattice {
 }
 
 /// The height quantum of the raw heights, if they are on a lattice (the data half of [`detect`]).
-pub fn height_quantum<H: HeightRows>(hf: &H) -> Option<f64> {
+pub fn height_quantum<S: BandSource>(hf: &S) -> Option<f64> {
     lattice(hf).map(|l| l.q)
 }
 
@@ -140,8 +140,10 @@ pub(crate) fn phase(sample: &[[f64; 2]], step: [f64; 2]) -> ([f64; 2], [f64; 2])
 }
 
 /// The data half of [`detect`] (no frame needed, so it can run beside the frame's estimation).
-pub(crate) fn lattice<H: HeightRows>(hf: &H) -> Option<Lattice> {
-    let (nx, ny) = (hf.nx(), hf.ny());
+pub(crate) fn lattice<S: BandSource>(src: &S) -> Option<Lattice> {
+    let shape = src.shape();
+    let (nx, ny) = (shape.nx, shape.ny);
+    let mut buf = Vec::new();
     if nx < 2 || ny < 1 {
         return None;
     }
@@ -149,7 +151,8 @@ pub(crate) fn lattice<H: HeightRows>(hf: &H) -> Option<Lattice> {
     let row_stride = ((ny * per_row) / QUANTUM_SAMPLE).max(1).min(ny);
     let mut d: Vec<f64> = Vec::with_capacity(QUANTUM_SAMPLE.min(ny * per_row) + nx);
     for i in (0..ny).step_by(row_stride) {
-        let r = hf.row(i);
+        let band = src.band(i, i + 1, &mut buf);
+        let r = band.row(i);
         for j in 0..per_row {
             let v = r[j + 1].into() - r[j].into();
             if v.is_finite() {

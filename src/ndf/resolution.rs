@@ -11,7 +11,8 @@
 
 use rayon::prelude::*;
 
-use super::{HeightRows, SlopeFrame};
+use super::bands::bands_of;
+use super::{Band, BandSource, HeightRows, SlopeFrame};
 
 /// Largest relative slope error (whitened, against `max(|s'|, 1)`) of a resolved normal. A relative
 /// error `eps` of the slopes that grows as `|s'|^4` (the rim of a bump, `h ~ sqrt(d)`) changes the
@@ -44,29 +45,36 @@ fn unresolved_at<H: HeightRows>(hf: &H, frame: &SlopeFrame, i: usize, j: usize, 
 /// measures the surface, not a truncation error, and the NDF is by definition that of the pixel footprint.
 pub const MAX_UNRESOLVED_SHARE: f64 = 0.25;
 
-/// Visit every central-difference sample of `hf` (rows in parallel), folding `f(acc, i, j, sx, sy)`.
-fn fold_samples<H: HeightRows, A: Send>(
-    hf: &H,
+/// Visit every central-difference sample of `src` (bands of rows in parallel), folding
+/// `f(acc, band, i, j, sx, sy)`; the band holds rows `i - 2 ..= i + 2` (within the grid).
+fn fold_samples<S: BandSource, A: Send>(
+    src: &S,
     zero: impl Fn() -> A + Sync + Send,
-    f: impl Fn(&mut A, usize, usize, f64, f64) + Sync + Send,
+    f: impl Fn(&mut A, &Band<'_, S::T>, usize, usize, f64, f64) + Sync + Send,
     merge: impl Fn(A, A) -> A + Sync + Send,
 ) -> A {
-    let (nx, ny) = (hf.nx(), hf.ny());
+    let shape = src.shape();
+    let (nx, ny) = (shape.nx, shape.ny);
     if nx < 3 || ny < 3 {
         return zero();
     }
-    let (dx, dy) = (hf.dx(), hf.dy());
-    (1..ny - 1)
+    let (dx, dy) = (shape.dx, shape.dy);
+    let bands: Vec<std::ops::Range<usize>> = bands_of(1..ny - 1, src.band_rows()).collect();
+    bands
         .into_par_iter()
-        .fold(&zero, |mut acc, i| {
-            let (rd, rc, ru) = (hf.row(i - 1), hf.row(i), hf.row(i + 1));
-            for j in 1..nx - 1 {
-                let (c, l, r, d, u): (f64, f64, f64, f64, f64) =
-                    (rc[j].into(), rc[j - 1].into(), rc[j + 1].into(), rd[j].into(), ru[j].into());
-                if !(c.is_finite() && l.is_finite() && r.is_finite() && d.is_finite() && u.is_finite()) {
-                    continue;
+        .fold(&zero, |mut acc, b| {
+            let mut buf = Vec::new();
+            let band = src.band(b.start.saturating_sub(2), (b.end + 2).min(ny), &mut buf);
+            for i in b {
+                let (rd, rc, ru) = (band.row(i - 1), band.row(i), band.row(i + 1));
+                for j in 1..nx - 1 {
+                    let (c, l, r, d, u): (f64, f64, f64, f64, f64) =
+                        (rc[j].into(), rc[j - 1].into(), rc[j + 1].into(), rd[j].into(), ru[j].into());
+                    if !(c.is_finite() && l.is_finite() && r.is_finite() && d.is_finite() && u.is_finite()) {
+                        continue;
+                    }
+                    f(&mut acc, &band, i, j, (r - l) / (2.0 * dx), (u - d) / (2.0 * dy));
                 }
-                f(&mut acc, i, j, (r - l) / (2.0 * dx), (u - d) / (2.0 * dy));
             }
             acc
         })
@@ -77,15 +85,15 @@ fn fold_samples<H: HeightRows, A: Send>(
 /// [`super::EmpiricalNdf::unresolved`] for an NDF of central differences counted from `hf` (other
 /// schemes are left unassessed). Two passes: the share first (no binning), then the bins of the
 /// unresolved normals only.
-pub fn assess<H: HeightRows>(hf: &H, ndf: &mut super::EmpiricalNdf) {
+pub fn assess<S: BandSource>(src: &S, ndf: &mut super::EmpiricalNdf) {
     if ndf.scheme != super::NormalScheme::Central || ndf.grid.n == 0 {
         return;
     }
     let (frame, tol) = (ndf.frame, ndf.resolution_tolerance);
     let (all, bad) = fold_samples(
-        hf,
+        src,
         || (0u64, 0u64),
-        |a, i, j, sx, sy| {
+        |a, hf, i, j, sx, sy| {
             a.0 += 1;
             a.1 += unresolved_at(hf, &frame, i, j, sx, sy, tol) as u64;
         },
@@ -99,9 +107,9 @@ pub fn assess<H: HeightRows>(hf: &H, ndf: &mut super::EmpiricalNdf) {
     }
     let grid = ndf.grid;
     let cells = fold_samples(
-        hf,
+        src,
         || vec![0u64; grid.cells()],
-        |c, i, j, sx, sy| {
+        |c, hf, i, j, sx, sy| {
             if unresolved_at(hf, &frame, i, j, sx, sy, tol) {
                 c[grid.cell_of(frame.to_lambert(sx, sy))] += 1;
             }

@@ -18,7 +18,7 @@ use crate::fit::{FitOptions, FitReport, InputInfo};
 use crate::io::ReadOptions;
 use crate::models::ModelChoice;
 use crate::ndf::{EmpiricalNdf, NdfOptions};
-use crate::preprocess::Preprocess;
+use crate::preprocess::{Prepared, Preprocess};
 use crate::scan::{Heightfield, Scan};
 pub use preset::Preset;
 
@@ -65,10 +65,15 @@ impl Options {
     /// The NDF options for `scan` (preprocessed): [`Options::ndf`], or the preset's, whose capped grid
     /// may need the scan's valid count; an explicit `cells_across` wins over the preset's.
     pub fn ndf_options(&self, scan: &Scan) -> NdfOptions {
+        self.ndf_options_with(|| scan.valid_count() as u64)
+    }
+
+    /// [`Options::ndf_options`] for a scan of `valid()` valid points (called only when the preset needs it).
+    fn ndf_options_with(&self, valid: impl FnOnce() -> u64) -> NdfOptions {
         match self.preset {
             None => self.ndf.clone(),
             Some(p) => {
-                let po = p.ndf_options(if p.needs_sample_count() { scan.valid_count() as u64 } else { 0 });
+                let po = p.ndf_options(if p.needs_sample_count() { valid() } else { 0 });
                 NdfOptions { cells_across: self.ndf.cells_across.or(po.cells_across), ..po }
             }
         }
@@ -117,8 +122,8 @@ impl Pipeline {
     /// error names `path`.
     pub fn run_path(&self, path: &Path) -> Result<Outcome> {
         let t0 = Instant::now();
-        let scan = read_preprocessed(path, &self.options.read, &self.options.preprocess())?;
-        let ndf_opts = self.options.ndf_options(&scan);
+        let scan = read_prepared(path, &self.options.read, &self.options.preprocess())?;
+        let ndf_opts = self.ndf_options_of(&scan);
         let read_ms = ms(t0);
         self.finish(scan, ndf_opts, path, read_ms)
     }
@@ -128,8 +133,8 @@ impl Pipeline {
     pub fn run(&self, scan: Scan<'_>, label: &str) -> Result<Outcome> {
         let path = Path::new(label);
         let t0 = Instant::now();
-        let scan = crate::preprocess::apply(scan, &self.options.preprocess()).map_err(|e| e.with_path(path))?;
-        let ndf_opts = self.options.ndf_options(&scan);
+        let scan = crate::preprocess::prepare(scan, &self.options.preprocess()).map_err(|e| e.with_path(path))?;
+        let ndf_opts = self.ndf_options_of(&scan);
         let read_ms = ms(t0);
         self.finish(scan, ndf_opts, path, read_ms)
     }
@@ -137,23 +142,29 @@ impl Pipeline {
     /// Read `path`, preprocess and build the NDF only (`ndfit ndf`); the scan is described by the
     /// returned [`InputInfo`]. Errors name `path`.
     pub fn ndf_path(&self, path: &Path) -> Result<(InputInfo, EmpiricalNdf)> {
-        let scan = read_preprocessed(path, &self.options.read, &self.options.preprocess())?;
-        let ndf = ndf(&scan, &self.options.ndf_options(&scan)).map_err(|e| e.with_path(path))?;
-        Ok((InputInfo::new(path, &scan), ndf))
+        let scan = read_prepared(path, &self.options.read, &self.options.preprocess())?;
+        let ndf = ndf_prepared(&scan, &self.ndf_options_of(&scan)).map_err(|e| e.with_path(path))?;
+        Ok((scan.input_info(path), ndf))
     }
 
     /// Preprocess a scan in memory and build its NDF only.
     pub fn ndf(&self, scan: Scan<'_>) -> Result<EmpiricalNdf> {
-        let scan = crate::preprocess::apply(scan, &self.options.preprocess())?;
-        ndf(&scan, &self.options.ndf_options(&scan))
+        let scan = crate::preprocess::prepare(scan, &self.options.preprocess())?;
+        ndf_prepared(&scan, &self.ndf_options_of(&scan))
     }
 
-    fn finish(&self, scan: Scan<'_>, ndf_opts: NdfOptions, path: &Path, read_ms: f64) -> Result<Outcome> {
+    fn ndf_options_of(&self, scan: &Prepared) -> NdfOptions {
+        self.options.ndf_options_with(|| (scan.raw().nx * scan.raw().ny - scan.invalid_count()) as u64)
+    }
+
+    fn finish(&self, scan: Prepared<'_>, ndf_opts: NdfOptions, path: &Path, read_ms: f64) -> Result<Outcome> {
         let t1 = Instant::now();
-        let ndf = ndf(&scan, &ndf_opts).map_err(|e| e.with_path(path))?;
+        let ndf = ndf_prepared(&scan, &ndf_opts).map_err(|e| e.with_path(path))?;
         let ndf_ms = ms(t1);
+        let input = scan.input_info(path);
+        drop(scan);
         let mut report = fit(&ndf, self.options.model, &self.options.fit_options()).map_err(|e| e.with_path(path))?;
-        report.input = Some(InputInfo::new(path, &scan));
+        report.input = Some(input);
         report.timings.read_ms = Some(read_ms);
         report.timings.ndf_ms = Some(ndf_ms);
         Ok(Outcome { ndf, fit: report })
@@ -183,6 +194,26 @@ pub fn read_preprocessed(path: &Path, opts: &ReadOptions, pre: &Preprocess) -> R
     }
     let hf = crate::io::read_scan(path, opts)?;
     crate::preprocess::apply(hf, pre).map_err(|e| e.with_path(path))
+}
+
+/// Stage 1 without the residual heights: read `path` and fit its form and spikes
+/// ([`crate::preprocess::prepare`]); the heights stay as read (a stored file stays mapped). Errors name
+/// `path`.
+pub fn read_prepared(path: &Path, opts: &ReadOptions, pre: &Preprocess) -> Result<Prepared<'static>> {
+    crate::io::atomic::protect_input(path);
+    if pre.crop.is_none() && pre.subsample > 1 {
+        let hf = crate::io::read_scan_subsampled(path, opts, pre.subsample)?;
+        let rest = Preprocess { subsample: 1, ..pre.clone() };
+        return crate::preprocess::prepare(hf, &rest).map_err(|e| e.with_path(path));
+    }
+    let hf = crate::io::read_scan(path, opts)?;
+    crate::preprocess::prepare(hf, pre).map_err(|e| e.with_path(path))
+}
+
+/// Stage 2 for a [`Prepared`] scan: its empirical NDF, read band by band (the same bins, bit for bit, as
+/// [`ndf`] of [`Prepared::into_scan`]).
+pub fn ndf_prepared(scan: &Prepared, opts: &NdfOptions) -> Result<EmpiricalNdf> {
+    crate::ndf::empirical_ndf_of(scan, opts, || scan.invalid_count())
 }
 
 /// Stage 2: the empirical NDF of a preprocessed scan ([`crate::ndf::empirical_ndf`]).

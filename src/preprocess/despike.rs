@@ -11,6 +11,8 @@
 
 use rayon::prelude::*;
 
+use crate::ndf::bands::{bands_of, Band, BandSource};
+use crate::ndf::HeightRows;
 use crate::scan::Scan;
 
 /// Departure from the neighbours' median, in units of their spread, beyond which a point is a spike.
@@ -57,8 +59,8 @@ pub struct DespikeReport {
 }
 
 /// Per point: `Some((departure, spread))` when the point is valid with enough valid neighbours.
-fn departure(z: &[f64], nx: usize, ny: usize, i: usize, j: usize) -> Option<(f64, f64)> {
-    let c = z[i * nx + j];
+fn departure(z: &Band<'_, f64>, nx: usize, ny: usize, i: usize, j: usize) -> Option<(f64, f64)> {
+    let c = z.row(i)[j];
     if !c.is_finite() {
         return None;
     }
@@ -73,7 +75,7 @@ fn departure(z: &[f64], nx: usize, ny: usize, i: usize, j: usize) -> Option<(f64
             if ii < 0 || jj < 0 || ii >= ny as i64 || jj >= nx as i64 {
                 continue;
             }
-            let v = z[ii as usize * nx + jj as usize];
+            let v = z.row(ii as usize)[jj as usize];
             if v.is_finite() {
                 nb[k] = v;
                 k += 1;
@@ -105,13 +107,14 @@ fn departure(z: &[f64], nx: usize, ny: usize, i: usize, j: usize) -> Option<(f64
     Some((c - med, MAD_NORMAL * mad))
 }
 
-/// The spike test of interior point `(i, j)` ([`departure`] and the threshold, same arithmetic):
+/// The spike test of the interior point `j` of the middle row of `rows` ([`departure`] and the threshold,
+/// same arithmetic):
 /// `Some(above)` for a spike. The neighbours' spread is only computed when the departure exceeds
 /// `limit`, the threshold's least value.
 #[inline(always)]
-fn interior_spike(z: &[f64], nx: usize, i: usize, j: usize, limit: f64, floor: f64) -> Option<bool> {
-    let c = z[i * nx + j];
-    let (a, b, e) = (&z[(i - 1) * nx + j - 1..][..3], &z[i * nx + j - 1..][..3], &z[(i + 1) * nx + j - 1..][..3]);
+fn interior_spike(rows: [&[f64]; 3], j: usize, limit: f64, floor: f64) -> Option<bool> {
+    let c = rows[1][j];
+    let (a, b, e) = (&rows[0][j - 1..j + 2], &rows[1][j - 1..j + 2], &rows[2][j - 1..j + 2]);
     let mut nb = [a[0], a[1], a[2], b[0], b[2], e[0], e[1], e[2]];
     if !c.is_finite() || !nb.iter().all(|v| v.is_finite()) {
         return None;
@@ -128,20 +131,19 @@ fn interior_spike(z: &[f64], nx: usize, i: usize, j: usize, limit: f64, floor: f
     (d.abs() > SPIKE_THRESHOLD * s.max(floor) && d.abs() > 0.0).then_some(d > 0.0)
 }
 
-/// Exact pre-screen of an interior point: whether at least 5 of its 8 neighbours lie at most `half`
+/// Exact pre-screen of the interior point `j` of the middle row of `rows`: whether at least 5 of its 8 neighbours lie at most `half`
 /// above it and at least 5 at most `half` below it. Then the neighbours' 4th and 5th smallest, and so
 /// their median, lie within `half` of the point, so its departure is at most `half` (plus rounding) and
 /// below the spike threshold (at least `2 half`). Non-finite values compare false; a point passed with
 /// a non-finite neighbour is one the full test skips too (it needs all 8 neighbours).
 #[inline(always)]
-fn near_median(z: &[f64], nx: usize, i: usize, j: usize, half: f64) -> bool {
-    let c = z[i * nx + j];
+fn near_median(rows: [&[f64]; 3], j: usize, half: f64) -> bool {
+    let c = rows[1][j];
     let (hi, lo) = (c + half, c - half);
     let (mut below, mut above) = (0u32, 0u32);
-    for r in [i - 1, i, i + 1] {
-        let row = &z[r * nx + j - 1..r * nx + j + 2];
-        for (k, &v) in row.iter().enumerate() {
-            if r == i && k == 1 {
+    for (r, row) in rows.iter().enumerate() {
+        for (k, &v) in row[j - 1..j + 2].iter().enumerate() {
+            if r == 1 && k == 1 {
                 continue;
             }
             below += u32::from(v <= hi);
@@ -188,56 +190,83 @@ const FLOOR_SAMPLE: usize = 1 << 16;
 
 /// Mask the spikes of `hf` (module documentation). Returns the report; `Despike::None` does nothing.
 pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
-    if how == Despike::None || hf.nx < 3 || hf.ny < 3 {
+    let (spikes, report) = find_spikes(&*hf, how, hf.meta.height_quantum)?;
+    for k in spikes {
+        hf.z[k] = f64::NAN;
+    }
+    Some(report)
+}
+
+/// The spikes of the heights `src` ([`despike`]) as sorted flat indices `i * nx + j`, with the report,
+/// without writing the heights: the heights are read in bands of rows (each with the rows around it),
+/// so they can be a mapped file or residuals computed band by band. `quantum`: the height quantum (a
+/// floor of the spread).
+pub fn find_spikes<S: BandSource<T = f64>>(src: &S, how: Despike, quantum: Option<f64>) -> Option<(Vec<usize>, DespikeReport)> {
+    let shape = src.shape();
+    let (nx, ny) = (shape.nx, shape.ny);
+    if how == Despike::None || nx < 3 || ny < 3 {
         return None;
     }
-    let (nx, ny) = (hf.nx, hf.ny);
-    let z: &[f64] = &hf.z;
+    let bands: Vec<std::ops::Range<usize>> = bands_of(0..ny, src.band_rows()).collect();
     // The floor: the median departure (Gaussian-consistent) over a strided sample of the scan (its
     // relative standard error is about 1 / sqrt(2^16): the threshold moves by under 1%), and the quantum.
     let stride = ((nx * ny) / FLOOR_SAMPLE).max(1);
-    let mut all: Vec<f64> = (0..nx * ny).step_by(stride).filter_map(|k| departure(z, nx, ny, k / nx, k % nx)).map(|d| d.0.abs()).collect();
+    let mut all: Vec<f64> = bands
+        .par_iter()
+        .flat_map_iter(|b| {
+            let mut buf = Vec::new();
+            let z = src.band(b.start.saturating_sub(1), (b.end + 1).min(ny), &mut buf);
+            let first = (b.start * nx).next_multiple_of(stride);
+            (first..b.end * nx)
+                .step_by(stride)
+                .filter_map(|k| departure(&z, nx, ny, k / nx, k % nx))
+                .map(|d| d.0.abs())
+                .collect::<Vec<f64>>()
+        })
+        .collect();
     let typical = if all.is_empty() {
         0.0
     } else {
         let mid = all.len() / 2;
         MAD_NORMAL * *all.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
     };
-    let floor = typical.max(hf.meta.height_quantum.unwrap_or(0.0));
+    let floor = typical.max(quantum.unwrap_or(0.0));
     let limit = SPIKE_THRESHOLD * floor;
     // Exact pre-screen: the median lies between the neighbours' extremes, so a point within `limit` of
     // both cannot depart by more than the threshold (which is at least `limit`).
-    let spikes: Vec<(usize, bool)> = (1..ny - 1)
-        .into_par_iter()
-        .flat_map_iter(|i| {
+    let spikes: Vec<(usize, bool)> = bands
+        .par_iter()
+        .flat_map_iter(|b| {
             let mut out = Vec::new();
-            for j in 1..nx - 1 {
-                let c = z[i * nx + j];
-                let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-                for r in [i - 1, i, i + 1] {
-                    for v in &z[r * nx + j - 1..r * nx + j + 2] {
-                        lo = lo.min(*v);
-                        hi = hi.max(*v);
+            let mut buf = Vec::new();
+            let z = src.band(b.start.saturating_sub(1), (b.end + 1).min(ny), &mut buf);
+            for i in b.start.max(1)..b.end.min(ny - 1) {
+                let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
+                for j in 1..nx - 1 {
+                    let c = r1[j];
+                    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+                    for r in [r0, r1, r2] {
+                        for v in &r[j - 1..j + 2] {
+                            lo = lo.min(*v);
+                            hi = hi.max(*v);
+                        }
                     }
-                }
-                if c - lo <= limit && hi - c <= limit {
-                    continue;
-                }
-                if near_median(z, nx, i, j, 0.5 * limit) {
-                    continue;
-                }
-                if let Some(high) = interior_spike(z, nx, i, j, limit, floor) {
-                    out.push((i * nx + j, high));
+                    if c - lo <= limit && hi - c <= limit {
+                        continue;
+                    }
+                    if near_median([r0, r1, r2], j, 0.5 * limit) {
+                        continue;
+                    }
+                    if let Some(high) = interior_spike([r0, r1, r2], j, limit, floor) {
+                        out.push((i * nx + j, high));
+                    }
                 }
             }
             out
         })
         .collect();
     let high = spikes.iter().filter(|s| s.1).count();
-    for &(k, _) in &spikes {
-        hf.z[k] = f64::NAN;
-    }
-    Some(DespikeReport {
+    let report = DespikeReport {
         method: "median".into(),
         masked: spikes.len(),
         masked_high: high,
@@ -245,12 +274,19 @@ pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
             "a height more than {SPIKE_THRESHOLD} times the spread of its 8 neighbours (1.4826 MAD, at least {floor:.3e} m) from their median"
         ),
         floor,
-    })
+    };
+    Some((spikes.into_iter().map(|s| s.0).collect(), report))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ndf::bands::GridShape;
+
+    /// The whole grid `z` as one band.
+    fn whole(z: &[f64], nx: usize, ny: usize) -> Band<'_, f64> {
+        Band::new(z, 0, GridShape { nx, ny, dx: 1e-6, dy: 1e-6, quantum: None })
+    }
 
     /// The 0-1 principle (Knuth 5.3.4, theorem Z): a network sorting all 256 inputs of zeros and ones
     /// sorts every input. Then random finite values against the comparison sort, value for value.
@@ -309,7 +345,7 @@ mod tests {
         let mut want = Vec::new();
         for i in 1..ny - 1 {
             for j in 1..nx - 1 {
-                if let Some((d, s)) = departure(&z, nx, ny, i, j) {
+                if let Some((d, s)) = departure(&whole(&z, nx, ny), nx, ny, i, j) {
                     if d.abs() > SPIKE_THRESHOLD * s.max(rep.floor) && d.abs() > 0.0 {
                         want.push(i * nx + j);
                     }
@@ -343,7 +379,7 @@ mod tests {
                 let mut dev: Vec<f64> = nb.iter().map(|v| (v - med).abs()).collect();
                 dev.sort_by(f64::total_cmp);
                 let want = (z[i * nx + j] - med, MAD_NORMAL * (0.5 * (dev[3] + dev[4])));
-                let got = departure(&z, nx, ny, i, j).unwrap();
+                let got = departure(&whole(&z, nx, ny), nx, ny, i, j).unwrap();
                 assert_eq!((got.0.to_bits(), got.1.to_bits()), (want.0.to_bits(), want.1.to_bits()), "({i}, {j})");
             }
         }

@@ -10,6 +10,8 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
+use crate::ndf::bands::{BandSource, GridShape};
+use crate::ndf::HeightRows;
 use crate::scan::Scan;
 
 /// Legendre polynomials P_0..P_3 at `u`.
@@ -51,31 +53,100 @@ const MAX_TERMS: usize = 10;
 ///
 /// Three passes over the heights, each split over the rayon threads by blocks of `ROWS_PER_TASK`
 /// rows: the count and mean of the valid heights, the normal equations (fixed-size, upper triangle),
-/// and the residuals.
+/// and the residuals ([`fit_polynomial`], then [`FormModel::residual`]).
 pub fn remove_polynomial(hf: &Scan, order: usize) -> Result<Vec<f64>> {
-    polynomial_residual(hf, order, true)
+    Ok(fit_polynomial(hf, order)?.residual(hf))
 }
 
-/// [`remove_polynomial`]; `plane_path`: take [`plane_residual`] for the plane (off only to test it
-/// against the general term loop).
-fn polynomial_residual(hf: &Scan, order: usize, plane_path: bool) -> Result<Vec<f64>> {
+/// A fitted polynomial form: what [`remove_polynomial`] subtracts, applied row by row
+/// ([`FormModel::residual_row`]) so that the residual heights can be made one band at a time (the
+/// form folded into each band's slopes, [`crate::preprocess::Prepared`]) with the same arithmetic, bit
+/// for bit, as the whole-grid residual.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FormModel {
+    /// The mean of the valid heights, subtracted first.
+    mean: f64,
+    kind: FormKind,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum FormKind {
+    /// `c0 + c1 u + c2 v` ([`plane_residual`]'s fit), `u` per column.
+    Plane { c: [f64; 3], u: Vec<f64>, ny: usize },
+    /// `sum_k coef_k P_p(u) P_q(v)` over the terms `(p, q)`.
+    Poly { coef: Vec<f64>, t: Vec<(usize, usize)>, lu: Vec<[f64; 4]>, lv: Vec<[f64; 4]> },
+}
+
+impl FormModel {
+    /// Row `i` of the residual: `out[j] = (h[j] - mean) - form(i, j)` (NaN stays NaN), appended.
+    #[inline]
+    pub fn residual_row(&self, i: usize, h: &[f64], out: &mut Vec<f64>) {
+        let mean = self.mean;
+        match &self.kind {
+            FormKind::Plane { c, u, ny } => {
+                let base = c[0] + c[2] * scaled(i, *ny);
+                out.extend(h.iter().zip(u).map(|(&h, &x)| (h - mean) - (base + c[1] * x)));
+            }
+            FormKind::Poly { coef, t, lu, lv } => {
+                out.extend(h.iter().enumerate().map(|(j, &h)| {
+                    let mut f = 0.0;
+                    for (k, &(p, q)) in t.iter().enumerate() {
+                        f += coef[k] * lu[j][p] * lv[i][q];
+                    }
+                    (h - mean) - f
+                }));
+            }
+        }
+    }
+
+    /// The residual heights of the whole grid `hf` (the form's own grid).
+    pub fn residual<S: BandSource<T = f64>>(&self, hf: &S) -> Vec<f64> {
+        let GridShape { nx, ny, .. } = hf.shape();
+        let mut out = vec![0.0; nx * ny];
+        let step = hf.band_rows();
+        out.par_chunks_mut((nx * step).max(1)).enumerate().for_each(|(b, o)| {
+            let lo = b * step;
+            let hi = (lo + step).min(ny);
+            let mut buf = Vec::new();
+            let band = hf.band(lo, hi, &mut buf);
+            let mut row = Vec::with_capacity(nx);
+            for (i, o) in (lo..hi).zip(o.chunks_mut(nx.max(1))) {
+                row.clear();
+                self.residual_row(i, band.row(i), &mut row);
+                o.copy_from_slice(&row);
+            }
+        });
+        out
+    }
+}
+
+/// Fit the least-squares polynomial of total degree `order` (0..=3) to the valid heights of `hf` (see
+/// [`remove_polynomial`]); the heights are read in bands of rows and never copied.
+pub fn fit_polynomial<S: BandSource<T = f64>>(hf: &S, order: usize) -> Result<FormModel> {
+    polynomial_fit(hf, order, true)
+}
+
+/// [`fit_polynomial`]; `plane_path`: take [`plane_fit`] for the plane (off only to test it against
+/// the general term loop).
+fn polynomial_fit<S: BandSource<T = f64>>(src: &S, order: usize, plane_path: bool) -> Result<FormModel> {
     if order > 3 {
         return Err(Error::invalid(format!("polynomial form order {order} is above 3")));
     }
+    let shape = src.shape();
+    let (nx, ny) = (shape.nx, shape.ny);
     // An axis with one sample cannot carry a slope along it; drop those terms rather than solve a
     // singular system.
     let all = terms(order);
-    let t: Vec<(usize, usize)> = all.into_iter().filter(|&(p, q)| (p == 0 || hf.nx > 1) && (q == 0 || hf.ny > 1)).collect();
+    let t: Vec<(usize, usize)> = all.into_iter().filter(|&(p, q)| (p == 0 || nx > 1) && (q == 0 || ny > 1)).collect();
     let m = t.len();
-    let nx = hf.nx;
-    let blocks = |rows: std::ops::Range<usize>| rows.step_by(ROWS_PER_TASK).collect::<Vec<usize>>();
-    let starts = blocks(0..hf.ny);
-    let rows_of = |i0: usize| i0..(i0 + ROWS_PER_TASK).min(hf.ny);
+    let starts: Vec<usize> = (0..ny).step_by(ROWS_PER_TASK).collect();
+    let rows_of = |i0: usize| i0..(i0 + ROWS_PER_TASK).min(ny);
     let sums: Vec<(usize, f64)> = starts
         .par_iter()
         .map(|&i0| {
-            let z = &hf.z[i0 * nx..rows_of(i0).end * nx];
-            z.iter().filter(|h| !h.is_nan()).fold((0usize, 0.0), |(c, s), h| (c + 1, s + h))
+            let mut buf = Vec::new();
+            let band = src.band(i0, rows_of(i0).end, &mut buf);
+            band.values().iter().filter(|h| !h.is_nan()).fold((0usize, 0.0), |(c, s), h| (c + 1, s + h))
         })
         .collect();
     let valid: usize = sums.iter().map(|p| p.0).sum();
@@ -84,18 +155,20 @@ fn polynomial_residual(hf: &Scan, order: usize, plane_path: bool) -> Result<Vec<
     }
     let mean = sums.iter().map(|p| p.1).sum::<f64>() / valid as f64;
     if plane_path && t == [(0, 0), (1, 0), (0, 1)] {
-        return plane_residual(hf, mean);
+        return plane_fit(src, mean);
     }
-    let lu: Vec<[f64; 4]> = (0..hf.nx).map(|j| legendre(scaled(j, hf.nx))).collect();
-    let lv: Vec<[f64; 4]> = (0..hf.ny).map(|i| legendre(scaled(i, hf.ny))).collect();
+    let lu: Vec<[f64; 4]> = (0..nx).map(|j| legendre(scaled(j, nx))).collect();
+    let lv: Vec<[f64; 4]> = (0..ny).map(|i| legendre(scaled(i, ny))).collect();
     let partial: Vec<([[f64; MAX_TERMS]; MAX_TERMS], [f64; MAX_TERMS])> = starts
         .par_iter()
         .map(|&i0| {
             let mut ata = [[0.0; MAX_TERMS]; MAX_TERMS];
             let mut atb = [0.0; MAX_TERMS];
             let mut row = [0.0; MAX_TERMS];
+            let mut buf = Vec::new();
+            let band = src.band(i0, rows_of(i0).end, &mut buf);
             for i in rows_of(i0) {
-                for (j, &h) in hf.row(i).iter().enumerate() {
+                for (j, &h) in band.row(i).iter().enumerate() {
                     if h.is_nan() {
                         continue;
                     }
@@ -134,29 +207,19 @@ fn polynomial_residual(hf: &Scan, order: usize, plane_path: bool) -> Result<Vec<
     let svd = ata.svd(true, true);
     let smax = svd.singular_values.max();
     let coef = svd.solve(&atb, smax * 1e-12).map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
-    let mut out = vec![0.0; hf.z.len()];
-    out.par_chunks_mut(nx.max(1)).enumerate().for_each(|(i, o)| {
-        for (j, (o, &h)) in o.iter_mut().zip(hf.row(i)).enumerate() {
-            let mut f = 0.0;
-            for (k, &(p, q)) in t.iter().enumerate() {
-                f += coef[k] * lu[j][p] * lv[i][q];
-            }
-            // NaN stays NaN (h - mean is NaN).
-            *o = (h - mean) - f;
-        }
-    });
-    Ok(out)
+    Ok(FormModel { mean, kind: FormKind::Poly { coef: coef.iter().copied().collect(), t, lu, lv } })
 }
 
-/// The plane case of [`remove_polynomial`] (basis `1, u, v`, both axes longer than one sample), the
-/// default preprocessing of every command: the same fit and residuals, with per-row sums in place of the
-/// general term loop, so that both passes run in vector lanes (NaN points masked by a select).
+/// The plane case of [`fit_polynomial`] (basis `1, u, v`, both axes longer than one sample), the
+/// default preprocessing of every command: the same fit, with per-row sums in place of the general
+/// term loop, so that the pass runs in vector lanes (NaN points masked by a select).
 ///
 /// Normal equations: a row `i` at `v_i` contributes `n, sum u, sum u^2, sum r, sum u r` over its valid
 /// points (`r = h - mean`), and the `v` entries are those times `v_i` or `v_i^2`.
-fn plane_residual(hf: &Scan, mean: f64) -> Result<Vec<f64>> {
+fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64) -> Result<FormModel> {
     const L: usize = 4;
-    let (nx, ny) = (hf.nx, hf.ny);
+    let shape = src.shape();
+    let (nx, ny) = (shape.nx, shape.ny);
     let u: Vec<f64> = (0..nx).map(|j| scaled(j, nx)).collect();
     let starts: Vec<usize> = (0..ny).step_by(ROWS_PER_TASK).collect();
     // [n, su, suu, sv, suv, svv, sr, sur, svr] per block, summed in block order below.
@@ -164,10 +227,13 @@ fn plane_residual(hf: &Scan, mean: f64) -> Result<Vec<f64>> {
         .par_iter()
         .map(|&i0| {
             let mut acc = [0.0; 9];
-            for i in i0..(i0 + ROWS_PER_TASK).min(ny) {
+            let mut buf = Vec::new();
+            let i1 = (i0 + ROWS_PER_TASK).min(ny);
+            let band = src.band(i0, i1, &mut buf);
+            for i in i0..i1 {
                 let v = scaled(i, ny);
                 let mut lanes = [[0.0f64; L]; 5];
-                let row = hf.row(i);
+                let row = band.row(i);
                 let (hc, uc) = (row.chunks_exact(L), u.chunks_exact(L));
                 let (hr, ur) = (hc.remainder(), uc.remainder());
                 let mut add = |h: &[f64], uu: &[f64]| {
@@ -208,15 +274,7 @@ fn plane_residual(hf: &Scan, mean: f64) -> Result<Vec<f64>> {
     let svd = ata.svd(true, true);
     let smax = svd.singular_values.max();
     let c = svd.solve(&atb, smax * 1e-12).map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
-    let mut out = vec![0.0; hf.z.len()];
-    out.par_chunks_mut(nx.max(1)).enumerate().for_each(|(i, o)| {
-        let base = c[0] + c[2] * scaled(i, ny);
-        for ((o, &h), &x) in o.iter_mut().zip(hf.row(i)).zip(&u) {
-            // NaN stays NaN (h - mean is NaN).
-            *o = (h - mean) - (base + c[1] * x);
-        }
-    });
-    Ok(out)
+    Ok(FormModel { mean, kind: FormKind::Plane { c: [c[0], c[1], c[2]], u, ny } })
 }
 
 /// Residuals after removing the least-squares plane (order 1).
@@ -418,8 +476,8 @@ mod tests {
                 }
             }
             let hf = Heightfield::new(nx, ny, 1e-6, 1e-6, z).expect("grid");
-            let fast = polynomial_residual(&hf, 1, true).expect("plane path");
-            let general = polynomial_residual(&hf, 1, false).expect("general path");
+            let fast = polynomial_fit(&hf, 1, true).expect("plane path").residual(&hf);
+            let general = polynomial_fit(&hf, 1, false).expect("general path").residual(&hf);
             for (k, (a, b)) in fast.iter().zip(&general).enumerate() {
                 if b.is_nan() {
                     assert!(a.is_nan(), "{nx}x{ny} point {k}: hole must stay NaN");

@@ -188,6 +188,30 @@ fn advise_huge(start: usize, bytes: usize) {
     }
 }
 
+/// Give the pages of `[start, start + bytes)` of a read-only file mapping back to the page cache
+/// (`MADV_DONTNEED`): the process's resident memory drops, and a later read faults the same bytes back
+/// in from the unchanged file. Called only on ranges of [`Heights`] that are mapped ([`Heights::is_mapped`]);
+/// the range is widened to whole pages (the mapping starts on a page and ends on one).
+#[cfg(target_os = "linux")]
+pub(crate) fn release_pages(start: *const u8, bytes: usize) {
+    if bytes == 0 {
+        return;
+    }
+    // SAFETY: sysconf has no preconditions.
+    let Ok(page) = usize::try_from(unsafe { libc::sysconf(libc::_SC_PAGESIZE) }) else { return };
+    if page == 0 || !page.is_power_of_two() {
+        return;
+    }
+    let lo = (start as usize) & !(page - 1);
+    let hi = (start as usize + bytes).next_multiple_of(page);
+    // SAFETY: advice on whole pages of a read-only, file-backed mapping that stays mapped: the
+    // contents read afterwards are the file's, unchanged (nothing writes the file or the mapping).
+    let _ = unsafe { libc::madvise(lo as *mut libc::c_void, hi - lo, libc::MADV_DONTNEED) };
+}
+
+#[cfg(not(target_os = "linux"))]
+pub(crate) fn release_pages(_start: *const u8, _bytes: usize) {}
+
 #[cfg(not(target_os = "linux"))]
 fn advise_huge(_start: usize, _bytes: usize) {}
 

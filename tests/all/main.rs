@@ -17,3 +17,4 @@ mod readers;
 mod scale;
 mod synth;
 mod tails;
+mod zerocopy;

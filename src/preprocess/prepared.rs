@@ -1,0 +1,152 @@
+//! A preprocessed scan whose heights are never copied: the heights as read (owned, or a view of the
+//! memory-mapped file), the fitted form, and the despiking mask, kept apart.
+//!
+//! [`crate::preprocess::apply`] subtracts the form from every height and writes NaN over spikes, which
+//! costs a second buffer the size of the scan (and its page zeroing). A [`Prepared`] scan instead hands
+//! its heights out in row bands ([`BandSource`]): each band's residual rows are computed into a small
+//! buffer with [`FormModel::residual_row`], the arithmetic of the whole-grid removal, and the masked
+//! points set to NaN there. Every pass after reading (despiking, the frame, the height lattice, the
+//! histogram, the resolution test) reads bands, so it sees exactly the heights `apply` would have made,
+//! bit for bit, and the working memory is a few bands per thread. Removing the form from the heights
+//! band by band is the same as folding it into the slopes: each central difference is taken of the
+//! residual rows, in cache, just before it is binned. A cylinder form is removed into a residual buffer
+//! as before (its fit holds every point anyway).
+
+use crate::error::Result;
+use crate::ndf::bands::{Band, BandSource, GridShape};
+use crate::ndf::HeightRows;
+use crate::scan::{Scan, ScanMeta};
+
+use super::form::FormModel;
+use super::{despike, FormRemoval, Preprocess};
+
+/// A preprocessed scan: the heights as read, the form to subtract and the points to mask (see the
+/// [module documentation](self)).
+#[derive(Debug, Clone)]
+pub struct Prepared<'a> {
+    /// The heights after crop and subsampling, before form removal (a mapped file stays mapped).
+    raw: Scan<'a>,
+    /// The fitted form, subtracted band by band (`None`: the heights are used as they are).
+    form: Option<FormModel>,
+    /// Flat indices `i * nx + j` of the points despiking masked, sorted.
+    masked: Vec<usize>,
+}
+
+/// Crop, subsample, fit the form and find the spikes of `hf` as [`super::apply`] does, without making
+/// the residual heights.
+pub fn prepare<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Prepared<'a>> {
+    let mut hf = hf;
+    if let Some(c) = pre.crop {
+        hf = super::crop(&hf, c)?;
+    }
+    if pre.subsample != 1 {
+        hf = super::subsample(&hf, pre.subsample)?;
+    }
+    if pre.form != FormRemoval::None && hf.meta.height_quantum.is_none() {
+        // The lattice is found on the heights as stored: a form removal shifts every height off `k q`.
+        hf.meta.height_quantum = crate::ndf::quantum::height_quantum(&hf);
+    }
+    let form = match pre.form {
+        FormRemoval::None => None,
+        FormRemoval::Plane => Some(super::form::fit_polynomial(&hf, 1)?),
+        FormRemoval::Polynomial(k) => Some(super::form::fit_polynomial(&hf, k)?),
+        FormRemoval::Cylinder => {
+            hf.z = super::form::remove_cylinder(&hf)?.residual.into();
+            None
+        }
+    };
+    let mut p = Prepared { raw: hf, form, masked: Vec::new() };
+    if let Some((masked, report)) = despike::find_spikes(&p, pre.despike, p.raw.meta.height_quantum) {
+        p.masked = masked;
+        p.raw.meta.despike = Some(report);
+    }
+    Ok(p)
+}
+
+impl<'a> Prepared<'a> {
+    /// The metadata of the scan (with the height quantum and the despiking report).
+    pub fn meta(&self) -> &ScanMeta {
+        &self.raw.meta
+    }
+
+    /// The heights as read (before form removal and masking).
+    pub fn raw(&self) -> &Scan<'a> {
+        &self.raw
+    }
+
+    /// Flat indices of the masked spikes, sorted.
+    pub fn masked(&self) -> &[usize] {
+        &self.masked
+    }
+
+    /// Number of invalid points after masking (NaN as read, plus the masked spikes).
+    pub fn invalid_count(&self) -> usize {
+        let step = self.raw.band_rows();
+        let ny = self.raw.ny;
+        let mut buf = Vec::new();
+        let nan: usize = crate::ndf::bands::bands_of(0..ny, step)
+            .map(|b| self.raw.band(b.start, b.end, &mut buf).values().iter().filter(|h| h.is_nan()).count())
+            .sum();
+        nan + self.masked.len()
+    }
+
+    /// The scan [`super::apply`] makes: the residual heights with the spikes masked. Heights used as
+    /// read with nothing masked stay as they are (a mapped file stays mapped).
+    pub fn into_scan(self) -> Scan<'a> {
+        let Prepared { mut raw, form, masked } = self;
+        if let Some(form) = form {
+            raw.z = form.residual(&raw).into();
+        }
+        for k in masked {
+            raw.z[k] = f64::NAN;
+        }
+        raw
+    }
+}
+
+impl BandSource for Prepared<'_> {
+    type T = f64;
+    fn shape(&self) -> GridShape {
+        self.raw.shape()
+    }
+    fn band<'b>(&'b self, lo: usize, hi: usize, buf: &'b mut Vec<f64>) -> Band<'b, f64> {
+        let nx = self.raw.nx;
+        let m = self.masked.partition_point(|&k| k < lo * nx)..self.masked.partition_point(|&k| k < hi * nx);
+        if self.form.is_none() && m.is_empty() {
+            return self.raw.band(lo, hi, buf);
+        }
+        buf.clear();
+        buf.reserve(nx * (hi - lo));
+        {
+            let mut rbuf = Vec::new();
+            let raw = self.raw.band(lo, hi, &mut rbuf);
+            match &self.form {
+                Some(f) => (lo..hi).for_each(|i| f.residual_row(i, raw.row(i), buf)),
+                None => buf.extend_from_slice(raw.values()),
+            }
+        }
+        for &k in &self.masked[m] {
+            buf[k - lo * nx] = f64::NAN;
+        }
+        Band::new(buf, lo, self.shape())
+    }
+}
+
+impl Prepared<'_> {
+    /// The fit report's description of this scan read from `path` (as [`crate::fit::InputInfo::new`]
+    /// gives for the scan [`Prepared::into_scan`] makes).
+    pub fn input_info(&self, path: &std::path::Path) -> crate::fit::InputInfo {
+        let hf = &self.raw;
+        crate::fit::InputInfo {
+            path: path.display().to_string(),
+            format: hf.meta.format.clone(),
+            nx: hf.nx,
+            ny: hf.ny,
+            dx: hf.dx,
+            dy: hf.dy,
+            invalid: self.invalid_count(),
+            file_grid: hf.meta.file_grid.filter(|g| *g != [hf.nx, hf.ny]),
+            despike: hf.meta.despike.clone(),
+        }
+    }
+}
