@@ -499,8 +499,8 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
 }
 
 /// [`fit_auto`], with the ladder's pruning on or off: with `prune`, a mixture is not fitted when it
-/// cannot win ([`mixture::cannot_win`]); its absence cannot change the choice, only the candidates
-/// listed. Public so a test can hold the two to the same choice.
+/// cannot win (its deviance cannot fall below 0, so `p ln N` alone already exceeds the best criterion, data_formats/objective.md);
+/// its absence cannot change the choice, only the candidates listed. Public so a test can hold the two to the same choice.
 pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, prune: bool) -> Result<FitReport> {
     let t0 = Instant::now();
     let s = Session::new(ndf, opts)?;
