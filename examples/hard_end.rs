@@ -15,7 +15,7 @@ use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{Model, ModelId};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
 use ndfit::preprocess::despike::{despike, Despike};
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings};
+use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
 use ndfit::Heightfield;
 
 /// The ellipsoid fit, or the error's message.
@@ -25,19 +25,10 @@ fn fit(hf: &Heightfield, opts: &FitOptions) -> Result<Model, String> {
 }
 
 fn main() {
-    let cases = [
-        [0.35, 0.05, 0.16, 0.0, 0.3],
-        [0.2, 0.02, 0.0, 0.4, 0.0],
-        [0.5, 0.05, -0.4, 0.1, 1.0],
-        [0.1, 0.02, 0.2, 0.2, -0.7],
-        [0.05, 0.05, 0.4, 0.0, 0.0],
-        [0.02, 0.02, 0.3, -0.3, 0.0],
-        [0.2, 0.2, 0.0, 0.0, 0.0],
-    ];
     let n: usize = std::env::var("N").ok().map(|s| s.parse().expect("N")).unwrap_or(1024);
     println!("| truth (ax, ay, tx, ty, tz), {n}^2 | default (--tail core) | --tail all | --tail unresolved | spikes, despiked (not) vs clean fit | NA 45: max_theta 45 / 40 |");
     println!("| --- | --- | --- | --- | --- | --- |");
-    for p in cases {
+    for p in HARD_END_SET {
         let ep =
             EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
         let (hf, truth) = ellipsoid_surface(&SynthSettings { nx: n, ny: n, seed: 7, ..SynthSettings::default() }, &ep).expect("synth");

@@ -12,7 +12,7 @@ use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions};
 use ndfit::synth::ellipsoid::EllipsoidGeometry;
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings};
+use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
 
 /// The NDF `ndf` with its counts replaced by those of `slopes` (same bins, frame and `W`).
 fn recount(ndf: &EmpiricalNdf, slopes: &[[f64; 2]]) -> EmpiricalNdf {
@@ -33,17 +33,8 @@ fn recount(ndf: &EmpiricalNdf, slopes: &[[f64; 2]]) -> EmpiricalNdf {
 }
 
 fn main() {
-    let cases = [
-        [0.35, 0.05, 0.16, 0.0, 0.3],
-        [0.2, 0.02, 0.0, 0.4, 0.0],
-        [0.5, 0.05, -0.4, 0.1, 1.0],
-        [0.1, 0.02, 0.2, 0.2, -0.7],
-        [0.05, 0.05, 0.4, 0.0, 0.0],
-        [0.02, 0.02, 0.3, -0.3, 0.0],
-        [0.2, 0.2, 0.0, 0.0, 0.0],
-    ];
     let n = 1024;
-    for p in cases {
+    for p in HARD_END_SET {
         let ep =
             EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
         let s = SynthSettings { nx: n, ny: n, seed: 7, ..SynthSettings::default() };

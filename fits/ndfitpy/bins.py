@@ -41,7 +41,10 @@ class Bins:
 
     def used(self) -> "Bins":
         """The bins with W_k > 0 (data_formats/objective.md leaves the others out)."""
-        keep = self.proj_solid_angle > 0.0
+        return self.subset(self.proj_solid_angle > 0.0)
+
+    def subset(self, keep) -> "Bins":
+        """The bins selected by the boolean mask ``keep``; ``n_total`` stays the whole NDF's count."""
         return Bins(
             m=self.m[keep],
             count=self.count[keep],

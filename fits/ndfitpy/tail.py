@@ -39,15 +39,7 @@ def cut_unresolved(bins: Bins) -> tuple:
         return bins, TailInfo("none (rough at the sampling step)", share, 0, 0.0)
     out = 2.0 * u > c
     keep = ~out
-    cut = Bins(
-        m=bins.m[keep],
-        count=c[keep],
-        proj_solid_angle=bins.proj_solid_angle[keep],
-        d=None if bins.d is None else bins.d[keep],
-        solid_angle=None if bins.solid_angle is None else bins.solid_angle[keep],
-        path=bins.path,
-        n_total=bins.n_samples,
-    )
+    cut = bins.subset(keep)
     return cut, TailInfo("unresolved", share, int(out.sum()), float(c[out].sum()))
 
 
@@ -88,13 +80,5 @@ def cut_core(bins: Bins, frame: dict, max_theta_deg: float = 70.0) -> tuple:
         return bins, TailInfo("none (tail resolved)", share, 0, 0.0)
     out = ~(whitened_lambert_radius(m, frame) <= CORE_RADIUS)
     keep = ~out
-    cut = Bins(
-        m=bins.m[keep],
-        count=c[keep],
-        proj_solid_angle=bins.proj_solid_angle[keep],
-        d=None if bins.d is None else bins.d[keep],
-        solid_angle=None if bins.solid_angle is None else bins.solid_angle[keep],
-        path=bins.path,
-        n_total=bins.n_samples,
-    )
+    cut = bins.subset(keep)
     return cut, TailInfo("core", share, int((out & inside).sum()), float(c[out & inside].sum()))

@@ -33,7 +33,7 @@ pub struct Plan {
     pub ndfit: PathBuf,
 }
 
-/// One whole-process comparison: the measured commands and the ratios the issue asks for.
+/// One whole-process comparison: the measured commands and their ratios to the input's floor and to the numpy pool.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Report {
     /// `ndfit.bench.process/1`.

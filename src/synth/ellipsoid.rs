@@ -19,6 +19,18 @@ use crate::error::{Error, Result};
 use crate::models::{Ellipsoid, Model};
 use crate::scan::Heightfield;
 
+/// The hard-end truths `[alpha_x, alpha_y, theta_x, theta_y, theta_z]` of docs/ACCURACY.md: anisotropy to
+/// 10:1, alpha down to 0.02, skew to 0.4 rad, and a round cap whose tail the sampling resolves (last).
+pub const HARD_END_SET: [[f64; 5]; 7] = [
+    [0.35, 0.05, 0.16, 0.0, 0.3],
+    [0.2, 0.02, 0.0, 0.4, 0.0],
+    [0.5, 0.05, -0.4, 0.1, 1.0],
+    [0.1, 0.02, 0.2, 0.2, -0.7],
+    [0.05, 0.05, 0.4, 0.0, 0.0],
+    [0.02, 0.02, 0.3, -0.3, 0.0],
+    [0.2, 0.2, 0.0, 0.0, 0.0],
+];
+
 /// Parameters of the ellipsoid surface (contract names, Walter et al. eq. 2-3).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EllipsoidParams {
