@@ -299,7 +299,9 @@ pub struct CylinderFit {
 /// a linear tilt along it): `z = c0 + g s + sigma sqrt(R^2 - (t - tc)^2)`, with `t` across and `s`
 /// along the axis. The azimuth and a starting radius come from the Hessian of a quadratic fit (the
 /// axis is the direction of least curvature); `c0, g, tc, R` are then refined by damped Gauss-Newton
-/// on the vertical residuals.
+/// on the vertical residuals. This is not the `levenberg-marquardt` crate: that needs the whole
+/// N x 5 Jacobian in memory (40 bytes per point) and stops at the first undefined residual, while
+/// here the normal equations accumulate in a 5x5 and steps that leave the footprint are rejected.
 pub fn remove_cylinder(hf: &Scan) -> Result<CylinderFit> {
     let pts: Vec<(f64, f64, f64)> = (0..hf.ny)
         .flat_map(|i| (0..hf.nx).map(move |j| (i, j)))
