@@ -8,6 +8,7 @@ mod cli;
 mod export;
 mod facade;
 mod fit;
+mod fused_resolution;
 mod hostile;
 mod models;
 mod ndf;
