@@ -18,4 +18,5 @@ mod readers;
 mod scale;
 mod synth;
 mod tails;
+mod tiled_info;
 mod zerocopy;
