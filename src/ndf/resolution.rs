@@ -270,7 +270,7 @@ impl RowTest {
 /// [`super::EmpiricalNdf::unresolved`] for an NDF of central differences counted from `hf` (other
 /// schemes are left unassessed). Two passes: the share first (no binning), then the bins of the
 /// unresolved normals only. The NDF's own pass runs the same test fused with its histogram
-/// ([`RowTest`]); this form is the reference it is tested against.
+/// (`RowTest`); this form is the reference it is tested against.
 pub fn assess<S: BandSource>(src: &S, ndf: &mut super::EmpiricalNdf) {
     if ndf.scheme != super::NormalScheme::Central || ndf.grid.n == 0 {
         return;
