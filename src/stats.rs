@@ -6,7 +6,9 @@
 //!   eq. 61-62), so no invalid point is ever filled in. Called `Sdq_central` in the peer readings.
 
 use crate::error::Result;
-use crate::preprocess::form::remove_plane;
+use crate::ndf::bands::{bands_of, BandSource, GridShape};
+use crate::ndf::HeightRows;
+use crate::preprocess::form::{fit_polynomial, remove_plane};
 use crate::scan::Heightfield;
 
 /// Statistics reported by `ndfit info`.
@@ -69,4 +71,57 @@ pub fn sdq_central(z: &[f64], nx: usize, ny: usize, dx: f64, dy: f64) -> (f64, u
     } else {
         ((acc / n as f64).sqrt(), n)
     }
+}
+
+/// [`surface_stats`] of heights read in row bands ([`BandSource`], e.g. a [`crate::preprocess::Prepared`]
+/// scan whose heights stay memory-mapped): the same numbers, bit for bit (the same sums in the same
+/// order, the plane fitted by the same [`crate::preprocess::form::fit_polynomial`]), with working memory
+/// of a few bands, so that `ndfit info` on a tiled scan never holds the heights or their residual.
+pub fn surface_stats_of<S: BandSource<T = f64>>(src: &S) -> Result<SurfaceStats> {
+    let GridShape { nx, ny, dx, dy, .. } = src.shape();
+    let step = src.band_rows();
+    let mut buf = Vec::new();
+    let (mut valid, mut lo, mut hi, mut sum) = (0usize, f64::INFINITY, f64::NEG_INFINITY, 0.0);
+    for b in bands_of(0..ny, step) {
+        for &h in src.band(b.start, b.end, &mut buf).values().iter().filter(|h| !h.is_nan()) {
+            valid += 1;
+            lo = lo.min(h);
+            hi = hi.max(h);
+            sum += h;
+        }
+    }
+    let form = fit_polynomial(src, 1)?;
+    // The residual of each band with one row more on either side (the central differences' neighbours).
+    let (mut sq, mut acc, mut n) = (0.0, 0.0, 0usize);
+    let mut r = Vec::new();
+    for b in bands_of(0..ny, step) {
+        let (rlo, rhi) = (b.start.saturating_sub(1), (b.end + 1).min(ny));
+        let band = src.band(rlo, rhi, &mut buf);
+        r.clear();
+        (rlo..rhi).for_each(|i| form.residual_row(i, band.row(i), &mut r));
+        let row = |i: usize| &r[(i - rlo) * nx..(i - rlo + 1) * nx];
+        for i in b {
+            for h in row(i).iter().filter(|h| !h.is_nan()) {
+                sq += h * h;
+            }
+            if i == 0 || i + 1 >= ny {
+                continue;
+            }
+            let (zd, zc, zu) = (row(i - 1), row(i), row(i + 1));
+            for j in 1..nx.saturating_sub(1) {
+                let (l, r) = (zc[j - 1], zc[j + 1]);
+                let (d, u) = (zd[j], zu[j]);
+                if l.is_nan() || r.is_nan() || d.is_nan() || u.is_nan() {
+                    continue;
+                }
+                let gx = (r - l) / (2.0 * dx);
+                let gy = (u - d) / (2.0 * dy);
+                acc += gx * gx + gy * gy;
+                n += 1;
+            }
+        }
+    }
+    let (sdq, sdq_points) = if n == 0 { (f64::NAN, 0) } else { ((acc / n as f64).sqrt(), n) };
+    let sq = (sq / valid as f64).sqrt();
+    Ok(SurfaceStats { valid, invalid: nx * ny - valid, z_min: lo, z_max: hi, z_mean: sum / valid as f64, sq, sdq, sdq_points })
 }

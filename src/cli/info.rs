@@ -2,7 +2,7 @@
 
 use std::process::ExitCode;
 
-use ndfit::stats::surface_stats;
+use ndfit::stats::{surface_stats, surface_stats_of};
 
 use super::scan_args::ScanArgs;
 
@@ -23,17 +23,28 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     // Sq and Sdq are taken after the requested form removal (the plane by default).
     let pre = args.scan.preprocess();
     let pre_form = pre.form;
-    let shaped =
-        ndfit::preprocess::apply(raw.clone(), &ndfit::preprocess::Preprocess { form: ndfit::preprocess::FormRemoval::None, ..pre.clone() })
-            .map_err(|e| e.with_path(&args.scan.scan))?;
-    // Sq removes the least-squares plane itself; other forms are removed first.
-    let leveled = match pre_form {
-        ndfit::preprocess::FormRemoval::Plane | ndfit::preprocess::FormRemoval::None => shaped.clone(),
-        _ => ndfit::preprocess::apply(shaped.clone(), &ndfit::preprocess::Preprocess { crop: None, subsample: 1, ..pre })
-            .map_err(|e| e.with_path(&args.scan.scan))?,
+    let path = &args.scan.scan;
+    let shape_only = ndfit::preprocess::Preprocess { form: ndfit::preprocess::FormRemoval::None, ..pre.clone() };
+    let (prepared, materialized);
+    let (shaped, range, st) = match pre_form {
+        // Sq removes the least-squares plane itself: the statistics are read band by band from the
+        // heights as read (a mapped or tiled scan is never copied), the same numbers as in memory.
+        ndfit::preprocess::FormRemoval::Plane | ndfit::preprocess::FormRemoval::None => {
+            prepared = ndfit::preprocess::prepare(raw, &shape_only).map_err(|e| e.with_path(path))?;
+            let st = surface_stats_of(&prepared).map_err(|e| e.with_path(path))?;
+            (prepared.raw(), st, st)
+        }
+        // Other forms are removed first (into memory).
+        _ => {
+            materialized = ndfit::preprocess::apply(raw, &shape_only).map_err(|e| e.with_path(path))?;
+            let leveled =
+                ndfit::preprocess::apply(materialized.clone(), &ndfit::preprocess::Preprocess { crop: None, subsample: 1, ..pre })
+                    .map_err(|e| e.with_path(path))?;
+            let range = surface_stats(&materialized).map_err(|e| e.with_path(path))?;
+            let st = surface_stats(&leveled).map_err(|e| e.with_path(path))?;
+            (&materialized, range, st)
+        }
     };
-    let range = surface_stats(&shaped).map_err(|e| e.with_path(&args.scan.scan))?;
-    let st = surface_stats(&leveled).map_err(|e| e.with_path(&args.scan.scan))?;
     let m = &shaped.meta;
     if args.json {
         let v = serde_json::json!({

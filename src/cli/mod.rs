@@ -18,6 +18,7 @@ mod fit;
 mod fit_args;
 mod info;
 mod ndf;
+mod progress;
 mod scale;
 mod scan_args;
 mod synth;
@@ -126,6 +127,7 @@ pub fn main() -> ExitCode {
         Err(e) => return usage_error(e),
     };
     ndfit::budget::set_max_memory(cli.max_memory);
+    progress::install();
     let result = match cli.command {
         Command::Demo(a) => demo::run(a),
         Command::Info(a) => info::run(a),
@@ -139,6 +141,7 @@ pub fn main() -> ExitCode {
         Command::Bench(a) => bench::run(a),
         Command::Scale(a) => scale::run(a),
     };
+    progress::finish();
     match result {
         Ok(code) => code,
         Err(err) if err.downcast_ref::<StdoutClosed>().is_some() => ExitCode::SUCCESS,

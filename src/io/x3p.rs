@@ -112,6 +112,7 @@ fn mapped_heights(map: &std::sync::Arc<memmap2::Mmap>, raw: &[u8], n: usize, crc
         infinite |= vals.iter().any(|v| v.is_infinite());
         if release {
             crate::scan::heights::release_pages(block.as_ptr(), block.len());
+            crate::ndf::bands::report_tiled_progress(block.len() as u64);
         }
     }
     if hasher.finalize() != crc {

@@ -14,6 +14,7 @@
 //! unchanged file).
 
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::OnceLock;
 
 use super::HeightRows;
 use crate::scan::Scan;
@@ -58,6 +59,22 @@ pub fn release_threshold() -> u64 {
 /// never a result.
 pub fn set_release_threshold(bytes: Option<u64>) {
     RELEASE_BYTES.store(bytes.map_or(0, |b| b.max(1)), Ordering::Relaxed);
+}
+
+/// Called with the bytes of heights of every band of a tiled scan when it is done (a progress bar).
+static TILED_PROGRESS: OnceLock<Box<dyn Fn(u64) + Send + Sync>> = OnceLock::new();
+
+/// Report the progress of passes over tiled scans to `f` (the bytes of heights of each band read, as
+/// they are done; several passes read every band). Set once per process (later calls are ignored).
+pub fn set_tiled_progress(f: impl Fn(u64) + Send + Sync + 'static) {
+    let _ = TILED_PROGRESS.set(Box::new(f));
+}
+
+/// Report `bytes` of a tiled scan's heights read (to [`set_tiled_progress`]'s function, if any).
+pub(crate) fn report_tiled_progress(bytes: u64) {
+    if let Some(f) = TILED_PROGRESS.get() {
+        f(bytes);
+    }
 }
 
 /// Bytes around a band that are released with it ([`BandSource::band`] of a tiled scan): a page-cache
@@ -115,6 +132,7 @@ impl<T> Drop for Band<'_, T> {
     fn drop(&mut self) {
         if let Some((start, len)) = self.release {
             crate::scan::heights::release_pages(start as *const u8, len);
+            report_tiled_progress(std::mem::size_of_val(self.z) as u64);
         }
     }
 }

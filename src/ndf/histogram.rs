@@ -5,6 +5,7 @@ use rayon::prelude::*;
 
 use super::bands::bands_of;
 use super::frame::LAMBERT_RADIUS;
+use super::resolution::{RowTest, Tally};
 use super::{BandSource, BinGrid, NormalScheme, SlopeFrame};
 
 /// Per-task accumulator: counts per cell and slope moments about the frame centre.
@@ -27,6 +28,8 @@ pub(super) struct Acc {
     pub(super) n: u64,
     pub(super) m1: [f64; 2],
     pub(super) m2: [f64; 3],
+    /// The resolution test's tallies, when it runs in this pass.
+    pub(super) res: Tally,
 }
 
 /// Most cells for which counting uses 4 interleaved counters per cell (4 MiB of u32 per task at the
@@ -46,6 +49,7 @@ impl Acc {
             n: 0,
             m1: [0.0; 2],
             m2: [0.0; 3],
+            res: Tally::default(),
         }
     }
 
@@ -82,6 +86,7 @@ impl Acc {
         for k in 0..3 {
             self.m2[k] += o.m2[k];
         }
+        self.res = std::mem::take(&mut self.res).merge(o.res);
         self
     }
 }
@@ -93,17 +98,19 @@ const BLOCK: usize = 256;
 /// Independent partial sums of the slope moments in a block (a multiple of the widest vector, 4 f64).
 const LANES: usize = 8;
 
-struct Block {
-    n: usize,
-    sx: [f64; BLOCK],
-    sy: [f64; BLOCK],
+pub(super) struct Block {
+    pub(super) n: usize,
+    pub(super) sx: [f64; BLOCK],
+    pub(super) sy: [f64; BLOCK],
     px: [f64; BLOCK],
     py: [f64; BLOCK],
     cell: [i32; BLOCK],
 }
 
 impl Block {
-    fn new() -> Self {
+    pub(super) const LEN: usize = BLOCK;
+
+    pub(super) fn new() -> Self {
         Block { n: 0, sx: [0.0; BLOCK], sy: [0.0; BLOCK], px: [0.0; BLOCK], py: [0.0; BLOCK], cell: [0; BLOCK] }
     }
 
@@ -130,11 +137,42 @@ impl Block {
         self.flush_body(frame, grid, acc)
     }
 
+    /// Count the block's slopes into `counts` (one counter per cell, as
+    /// `counts[grid.cell_of(frame.to_lambert(sx, sy))] += 1`) and empty the block.
+    pub(super) fn count_into(&mut self, frame: &SlopeFrame, grid: &BinGrid, counts: &mut [u64]) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+                unsafe { self.map_avx2(frame, grid) };
+            } else {
+                self.map_body(frame, grid);
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        self.map_body(frame, grid);
+        for k in 0..self.n {
+            let mut c = self.cell[k] as usize;
+            if !(self.px[k] * self.px[k] + self.py[k] * self.py[k] > 0.0) {
+                c = grid.cell_of(frame.to_lambert(self.sx[k], self.sy[k]));
+            }
+            counts[c] += 1;
+        }
+        self.n = 0;
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn map_avx2(&mut self, frame: &SlopeFrame, grid: &BinGrid) {
+        self.map_body(frame, grid)
+    }
+
+    /// The Lambert points and cells of the block's slopes (into `px`, `py`, `cell`).
     #[inline(always)]
-    fn flush_body(&mut self, frame: &SlopeFrame, grid: &BinGrid, acc: &mut Acc) {
-        let n = self.n;
+    fn map_body(&mut self, frame: &SlopeFrame, grid: &BinGrid) {
         let (cx, cy) = (frame.center[0], frame.center[1]);
         let w = frame.whiten;
+        let n = self.n;
         let (sx, sy) = (&self.sx[..n], &self.sy[..n]);
         let (px, py, cell) = (&mut self.px[..n], &mut self.py[..n], &mut self.cell[..n]);
         let (r, inv_h, last, cols) = (LAMBERT_RADIUS, grid.inv_h(), (grid.n - 1) as f64, grid.n as i32);
@@ -152,6 +190,15 @@ impl Block {
             // SAFETY: ix, iy are finite and in [0, n - 1] with n <= 1023 (clamped just above).
             cell[k] = unsafe { iy.to_int_unchecked::<i32>() * cols + ix.to_int_unchecked::<i32>() };
         }
+    }
+
+    #[inline(always)]
+    fn flush_body(&mut self, frame: &SlopeFrame, grid: &BinGrid, acc: &mut Acc) {
+        self.map_body(frame, grid);
+        let n = self.n;
+        let (sx, sy) = (&self.sx[..n], &self.sy[..n]);
+        let (px, py, cell) = (&self.px[..n], &self.py[..n], &self.cell[..n]);
+        let (cx, cy) = (frame.center[0], frame.center[1]);
         let (shift, mask) = (acc.shift, (1usize << acc.shift) - 1);
         for k in 0..n {
             let mut c = cell[k] as usize;
@@ -210,13 +257,15 @@ fn dispersion_block(i: usize, rows: usize) -> usize {
     i * DISPERSION_BLOCKS / rows.max(1)
 }
 
-/// The parallel pass: rows split into a few contiguous chunks per thread, one histogram per chunk.
+/// The parallel pass: rows split into a few contiguous chunks per thread, one histogram per chunk. With
+/// `res` (central differences only) the resolution test runs on each row too, while its rows are in cache.
 pub(super) fn histogram<S: BandSource>(
     src: &S,
     scheme: NormalScheme,
     frame: &SlopeFrame,
     grid: &BinGrid,
     rows: std::ops::Range<usize>,
+    res: Option<&RowTest>,
 ) -> Acc {
     let cells = grid.cells();
     let chunks = (rayon::current_num_threads() * 2).max(1);
@@ -232,8 +281,10 @@ pub(super) fn histogram<S: BandSource>(
             let mut blk = Block::new();
             let mut buf = Vec::new();
             for b in bands_of(start..(start + len).min(end), step) {
-                let (lo, _) = scheme.stencil_rows(b.start, ny);
-                let (_, hi) = scheme.stencil_rows(b.end - 1, ny);
+                let (lo, hi) = match res {
+                    Some(t) => (t.stencil_rows(b.start).0, t.stencil_rows(b.end - 1).1),
+                    None => (scheme.stencil_rows(b.start, ny).0, scheme.stencil_rows(b.end - 1, ny).1),
+                };
                 let hf = &src.band(lo, hi, &mut buf);
                 for i in b {
                     // The dispersion split: samples of odd row blocks are also counted apart (flushed and
@@ -253,10 +304,16 @@ pub(super) fn histogram<S: BandSource>(
                         }
                     });
                     acc.n += valid;
+                    if let Some(t) = res {
+                        t.row(hf, i, &mut acc.res);
+                    }
                 }
             }
             blk.flush(frame, grid, &mut acc);
             acc.fold();
+            if let Some(t) = res {
+                t.settle(&mut acc.res);
+            }
             acc
         })
         // No identity accumulators (each would allocate and zero the interleaved counters): the chunks

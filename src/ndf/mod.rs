@@ -177,9 +177,7 @@ pub fn empirical_ndf(hf: &Scan, opts: &NdfOptions) -> Result<EmpiricalNdf> {
 /// [`empirical_ndf`] of heights read in row bands ([`BandSource`]): the same NDF, bit for bit, as of
 /// the scan the bands make up. `invalid` counts the invalid points (for the error message only).
 pub fn empirical_ndf_of<S: BandSource<T = f64>>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize) -> Result<EmpiricalNdf> {
-    let mut ndf = ndf_of(src, opts, invalid)?;
-    resolution::assess(src, &mut ndf);
-    Ok(ndf)
+    ndf_of(src, opts, invalid)
 }
 
 /// [`empirical_ndf`] over f32 storage of the heights ([`HeightsF32`], mean removed in f64 first). The
@@ -189,7 +187,6 @@ pub fn empirical_ndf_of<S: BandSource<T = f64>>(src: &S, opts: &NdfOptions, inva
 /// a slope error above [`precision::MAX_ROUNDING_FRACTION`] of the smallest robust slope scale (use f64).
 pub fn empirical_ndf_f32(h: &HeightsF32, opts: &NdfOptions) -> Result<EmpiricalNdf> {
     let mut ndf = ndf_of(h, opts, || h.invalid)?;
-    resolution::assess(h, &mut ndf);
     let bound = h.slope_rounding_bound(opts.scheme);
     let (a, b, c) = (ndf.frame.cov[0][0], ndf.frame.cov[0][1], ndf.frame.cov[1][1]);
     let lmin = (0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt()).max(0.0);
@@ -285,7 +282,9 @@ fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize
     }
     let grid = BinGrid::new(cells);
 
-    let acc = histogram(src, scheme, &frame, &grid, rows);
+    // The resolution test (central differences) runs in the same pass, on the rows in cache.
+    let res = (scheme == NormalScheme::Central && grid.n > 0).then(|| resolution::RowTest::new(frame, grid, src.shape(), stencils));
+    let mut acc = histogram(src, scheme, &frame, &grid, rows, res.as_ref());
     if acc.n == 0 {
         return Err(no_valid());
     }
@@ -313,7 +312,7 @@ fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize
             ),
         ));
     }
-    Ok(EmpiricalNdf {
+    let mut ndf = EmpiricalNdf {
         bins,
         n_samples: acc.n,
         n_skipped: stencils - acc.n,
@@ -331,7 +330,11 @@ fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize
         unresolved_share: None,
         resolution_tolerance: resolution::RESOLUTION_TOLERANCE,
         warnings,
-    })
+    };
+    if let Some(t) = res {
+        t.finish(std::mem::take(&mut acc.res), &mut ndf);
+    }
+    Ok(ndf)
 }
 
 /// A strided subsample of about `target` valid slopes (all of them for small scans), and the number of

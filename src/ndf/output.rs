@@ -19,17 +19,36 @@ pub fn write_csv(path: &Path, ndf: &EmpiricalNdf) -> Result<()> {
 }
 
 /// The CSV of [`write_csv`] into any writer (standard output).
+///
+/// Formatting the shortest round-trip decimals of ten numbers per bin dominates for large grids, so
+/// blocks of rows are formatted in parallel and written in order (the same bytes).
 pub fn write_csv_to<W: std::io::Write + ?Sized>(w: &mut W, ndf: &EmpiricalNdf) -> Result<()> {
+    use rayon::prelude::*;
+    use std::io::Write as _;
+    const ROWS: usize = 2048;
     writeln!(w, "{CSV_HEADER}")?;
-    for (k, b) in ndf.bins.iter().enumerate() {
-        let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
-        // Not assessed (triangle normals): an empty field.
-        let u = ndf.unresolved.get(k).map_or(String::new(), |u| u.to_string());
-        writeln!(
-            w,
-            "{},{},{},{},{},{},{},{},{},{},{u}",
-            b.m.x, b.m.y, b.m.z, b.d, b.stderr, b.count, b.solid_angle, b.proj_solid_angle, sx, sy
-        )?;
+    let blocks: Vec<Vec<u8>> = ndf
+        .bins
+        .par_chunks(ROWS)
+        .enumerate()
+        .map(|(q, chunk)| {
+            let mut out = Vec::with_capacity(chunk.len() * 200);
+            for (k, b) in chunk.iter().enumerate() {
+                let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
+                // Not assessed (triangle normals): an empty field.
+                let u = ndf.unresolved.get(q * ROWS + k).map_or(String::new(), |u| u.to_string());
+                // Writing into a Vec cannot fail.
+                let _ = writeln!(
+                    out,
+                    "{},{},{},{},{},{},{},{},{},{},{u}",
+                    b.m.x, b.m.y, b.m.z, b.d, b.stderr, b.count, b.solid_angle, b.proj_solid_angle, sx, sy
+                );
+            }
+            out
+        })
+        .collect();
+    for b in &blocks {
+        w.write_all(b)?;
     }
     Ok(())
 }

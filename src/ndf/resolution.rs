@@ -9,10 +9,12 @@
 //! how many of its normals are unresolved ([`super::EmpiricalNdf::unresolved`]); the fit leaves out the
 //! bins where they are the majority.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use rayon::prelude::*;
 
 use super::bands::bands_of;
-use super::{Band, BandSource, HeightRows, SlopeFrame};
+use super::{Band, BandSource, BinGrid, HeightRows, SlopeFrame};
 
 /// Largest relative slope error (whitened, against `max(|s'|, 1)`) of a resolved normal. A relative
 /// error `eps` of the slopes that grows as `|s'|^4` (the rim of a bump, `h ~ sqrt(d)`) changes the
@@ -81,10 +83,194 @@ fn fold_samples<S: BandSource, A: Send>(
         .reduce(&zero, merge)
 }
 
+/// The resolution test run row by row inside the histogram's pass ([`super::histogram`]), on the rows
+/// already in cache: the same samples, slopes and decisions as [`assess`], bit for bit, without its two
+/// further passes over the scan. Unresolved normals are binned only while the share can still end at
+/// or below [`MAX_UNRESOLVED_SHARE`] (past that the per-bin counts are dropped anyway).
+pub(super) struct RowTest {
+    frame: SlopeFrame,
+    tol: f64,
+    grid: BinGrid,
+    nx: usize,
+    ny: usize,
+    dx: f64,
+    dy: f64,
+    /// Unresolved samples beyond which the share exceeds [`MAX_UNRESOLVED_SHARE`] whatever the rest.
+    cap: f64,
+    /// Unresolved samples found so far by every task.
+    bad: AtomicU64,
+}
+
+/// Per-task tallies of [`RowTest`].
+#[derive(Default)]
+pub(super) struct Tally {
+    /// Valid central-difference samples.
+    all: u64,
+    /// Unresolved ones among them.
+    bad: u64,
+    /// Unresolved samples per cell (empty until the first is binned).
+    cells: Vec<u64>,
+    /// Per column of a row: bit 0 the stencil is valid, bit 1 the sample is unresolved.
+    code: Vec<u8>,
+    /// Unresolved slopes waiting to be binned (mapped to cells in vectorized blocks).
+    pending: Option<Box<super::histogram::Block>>,
+}
+
+impl Tally {
+    pub(super) fn merge(mut self, o: Tally) -> Tally {
+        self.all += o.all;
+        self.bad += o.bad;
+        if self.cells.len() < o.cells.len() {
+            self.cells.resize(o.cells.len(), 0);
+        }
+        self.cells.iter_mut().zip(&o.cells).for_each(|(a, b)| *a += b);
+        self
+    }
+}
+
+impl RowTest {
+    /// The test for central differences binned on `grid` in `frame`; `stencils` bounds the valid samples.
+    pub(super) fn new(frame: SlopeFrame, grid: BinGrid, shape: super::bands::GridShape, stencils: u64) -> Self {
+        RowTest {
+            frame,
+            tol: RESOLUTION_TOLERANCE,
+            grid,
+            nx: shape.nx,
+            ny: shape.ny,
+            dx: shape.dx,
+            dy: shape.dy,
+            cap: MAX_UNRESOLVED_SHARE * stencils as f64 + 1.0,
+            bad: AtomicU64::new(0),
+        }
+    }
+
+    /// Rows the test of row `i` reads: `i - 2 ..= i + 2` within the grid.
+    pub(super) fn stencil_rows(&self, i: usize) -> (usize, usize) {
+        (i.saturating_sub(2), (i + 3).min(self.ny))
+    }
+
+    /// Test every sample of row `i` (`1 <= i < ny - 1`) of `hf`, which holds rows `i - 2 ..= i + 2`.
+    pub(super) fn row<H: HeightRows>(&self, hf: &H, i: usize, t: &mut Tally) {
+        if self.nx < 3 {
+            return;
+        }
+        t.code.resize(self.nx - 2, 0);
+        #[cfg(target_arch = "x86_64")]
+        let (all, bad) = if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+            unsafe { self.codes_avx2(hf, i, &mut t.code) }
+        } else {
+            self.codes(hf, i, &mut t.code)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let (all, bad) = self.codes(hf, i, &mut t.code);
+        t.all += all;
+        t.bad += bad;
+        if bad == 0 {
+            return;
+        }
+        // Past the cap the share is above the limit whatever the remaining rows hold: stop binning.
+        if self.bad.fetch_add(bad, Ordering::Relaxed) as f64 > self.cap {
+            return;
+        }
+        if t.cells.is_empty() {
+            t.cells = vec![0; self.grid.cells()];
+        }
+        let blk = t.pending.get_or_insert_with(|| Box::new(super::histogram::Block::new()));
+        let (r0, r1, r2) = (hf.row(i - 1), hf.row(i), hf.row(i + 1));
+        let (k2x, k2y) = (2.0 * self.dx, 2.0 * self.dy);
+        for (k, &c) in t.code.iter().enumerate() {
+            if c == 3 {
+                let j = k + 1;
+                let (l, r, d, u): (f64, f64, f64, f64) = (r1[j - 1].into(), r1[j + 1].into(), r0[j].into(), r2[j].into());
+                blk.sx[blk.n] = (r - l) / k2x;
+                blk.sy[blk.n] = (u - d) / k2y;
+                blk.n += 1;
+                if blk.n == super::histogram::Block::LEN {
+                    blk.count_into(&self.frame, &self.grid, &mut t.cells);
+                }
+            }
+        }
+    }
+
+    /// Bin the unresolved slopes still pending in `t` (at the end of a task).
+    pub(super) fn settle(&self, t: &mut Tally) {
+        if let Some(blk) = t.pending.as_mut() {
+            blk.count_into(&self.frame, &self.grid, &mut t.cells);
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn codes_avx2<H: HeightRows>(&self, hf: &H, i: usize, code: &mut [u8]) -> (u64, u64) {
+        self.codes(hf, i, code)
+    }
+
+    /// Fill `code` for row `i` (column `j` at `j - 1`) and return the valid and the unresolved counts.
+    /// Branch-free loops over equal-length slices, so that they vectorize; the arithmetic is
+    /// [`unresolved_at`]'s, operation for operation (no contraction into FMA).
+    #[inline(always)]
+    fn codes<H: HeightRows>(&self, hf: &H, i: usize, code: &mut [u8]) -> (u64, u64) {
+        let nx = self.nx;
+        let m = nx - 2;
+        let code = &mut code[..m];
+        let f = |v: H::T| -> f64 { v.into() };
+        let (r0, r1, r2) = (hf.row(i - 1), hf.row(i), hf.row(i + 1));
+        {
+            let (c, l, r, d, u) = (&r1[1..m + 1], &r1[..m], &r1[2..m + 2], &r0[1..m + 1], &r2[1..m + 1]);
+            for k in 0..m {
+                let valid = f(c[k]).is_finite() & f(l[k]).is_finite() & f(r[k]).is_finite() & f(d[k]).is_finite() & f(u[k]).is_finite();
+                // Unresolved until shown otherwise: the rim of the grid, where the wide stencil leaves it.
+                code[k] = valid as u8 | 2;
+            }
+        }
+        if i >= 2 && i + 2 < self.ny && nx >= 5 {
+            let n = nx - 4;
+            let (rm, rp) = (hf.row(i - 2), hf.row(i + 2));
+            let (l2, l, r, r2x) = (&r1[..n], &r1[1..n + 1], &r1[3..n + 3], &r1[4..n + 4]);
+            let (d, u, d2, u2) = (&r0[2..n + 2], &r2[2..n + 2], &rm[2..n + 2], &rp[2..n + 2]);
+            let out = &mut code[1..n + 1];
+            let (k2x, k2y, k4x, k4y) = (2.0 * self.dx, 2.0 * self.dy, 4.0 * self.dx, 4.0 * self.dy);
+            let (c, w) = (self.frame.center, self.frame.whiten);
+            let tt = self.tol * self.tol;
+            for k in 0..n {
+                let sx = (f(r[k]) - f(l[k])) / k2x;
+                let sy = (f(u[k]) - f(d[k])) / k2y;
+                let ex = ((f(r2x[k]) - f(l2[k])) / k4x - sx) / 3.0;
+                let ey = ((f(u2[k]) - f(d2[k])) / k4y - sy) / 3.0;
+                let (wx, wy) = (w[0][0] * ex + w[0][1] * ey, w[1][0] * ex + w[1][1] * ey);
+                let (cx, cy) = (sx - c[0], sy - c[1]);
+                let (px, py) = (w[0][0] * cx + w[0][1] * cy, w[1][0] * cx + w[1][1] * cy);
+                let r2s = (px * px + py * py).max(1.0);
+                let unresolved = !(wx * wx + wy * wy <= tt * r2s);
+                out[k] = (out[k] & 1) | ((unresolved as u8) << 1);
+            }
+        }
+        let (mut all, mut bad) = (0u64, 0u64);
+        for &c in code.iter() {
+            all += (c & 1) as u64;
+            bad += (c == 3) as u64;
+        }
+        (all, bad)
+    }
+
+    /// Fill the NDF's resolution fields from the merged tallies, as [`assess`] does.
+    pub(super) fn finish(&self, t: Tally, ndf: &mut super::EmpiricalNdf) {
+        let share = t.bad as f64 / t.all.max(1) as f64;
+        ndf.unresolved_share = Some(share);
+        ndf.unresolved = Vec::new();
+        if !(share <= MAX_UNRESOLVED_SHARE) {
+            return;
+        }
+        ndf.unresolved = ndf.bin_cells.iter().map(|&c| t.cells.get(c as usize).copied().unwrap_or(0)).collect();
+    }
+}
+
 /// Fill [`super::EmpiricalNdf::unresolved_share`] and, up to [`MAX_UNRESOLVED_SHARE`],
 /// [`super::EmpiricalNdf::unresolved`] for an NDF of central differences counted from `hf` (other
 /// schemes are left unassessed). Two passes: the share first (no binning), then the bins of the
-/// unresolved normals only.
+/// unresolved normals only. The NDF's own pass runs the same test fused with its histogram
+/// (`RowTest`); this form is the reference it is tested against.
 pub fn assess<S: BandSource>(src: &S, ndf: &mut super::EmpiricalNdf) {
     if ndf.scheme != super::NormalScheme::Central || ndf.grid.n == 0 {
         return;

@@ -79,13 +79,15 @@ impl<'a> Prepared<'a> {
         &self.masked
     }
 
-    /// Number of invalid points after masking (NaN as read, plus the masked spikes).
+    /// Number of invalid points after masking (NaN as read, plus the masked spikes); bands counted on
+    /// every thread.
     pub fn invalid_count(&self) -> usize {
+        use rayon::prelude::*;
         let step = self.raw.band_rows();
-        let ny = self.raw.ny;
-        let mut buf = Vec::new();
-        let nan: usize = crate::ndf::bands::bands_of(0..ny, step)
-            .map(|b| self.raw.band(b.start, b.end, &mut buf).values().iter().filter(|h| h.is_nan()).count())
+        let bands: Vec<std::ops::Range<usize>> = crate::ndf::bands::bands_of(0..self.raw.ny, step).collect();
+        let nan: usize = bands
+            .into_par_iter()
+            .map_init(Vec::new, |buf, b| self.raw.band(b.start, b.end, buf).values().iter().filter(|h| h.is_nan()).count())
             .sum();
         nan + self.masked.len()
     }
