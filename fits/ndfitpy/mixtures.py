@@ -140,9 +140,15 @@ def data_starts(model: str, parent: np.ndarray, bins, log_expected, tilt_for_cen
     - ggx2 / beckmann2: a spike at the normal: the positive excess within half the parent's width of s = 0 gives the
       spike's share, its root-mean-square slope along the parent's two axes its alphas (at least ALPHA_FLOOR); the tail
       is the parent.
+    - ggx2 / beckmann2, ridges: one per parent axis, a lobe at the floor across that axis holding the excess in the band
+      of slopes within half the parent's alpha across it, its width along the axis the excess's root-mean-square slope
+      there; the other lobe is the parent. A quantized or striated scan piles its slopes up on such lines.
     - ellipsoid+ggx: up to three excess peaks, each at least two parent widths from the others: the core, half the
       parent's alphas, is centred (``tilt_for_centre(alphas_and_theta_z, slope)`` gives the tilts) at the excess-weighted
       mean slope within two widths of the peak, with the excess there as its share; the tail is the parent's width.
+    - ellipsoid+ggx, tails: the core is the parent and the (untilted, isotropic) tail takes the excess within half the
+      parent's width of s = 0 (a narrow tail), or beyond two widths (a wide tail, at most a tenth of the normals), its
+      alpha the excess's root-mean-square slope per axis there.
     """
     p = np.asarray(parent, dtype=float)
     pm = PARENT[model]
@@ -154,18 +160,27 @@ def data_starts(model: str, parent: np.ndarray, bins, log_expected, tilt_for_cen
     if model in ("ggx2", "beckmann2"):
         ax, ay, tz = p
         a = math.sqrt(ax * ay)
-        r = np.hypot(s[:, 0], s[:, 1])
-        sel = (r <= 0.5 * a) & (x > 0)
-        if not np.any(sel):
-            return []
-        wx = x[sel]
         u = np.array([math.cos(tz), -math.sin(tz)])
         v = np.array([math.sin(tz), math.cos(tz)])
-        su, sv = s[sel] @ u, s[sel] @ v
-        cx = max(math.sqrt(float(wx @ su**2) / wx.sum()), ALPHA_FLOOR * 1.5)
-        cy = max(math.sqrt(float(wx @ sv**2) / wx.sum()), ALPHA_FLOOR * 1.5)
-        w = min(max(float(wx.sum()) / n, 0.005), 0.5)
-        return [np.array([cx, cy, ax, ay, tz, w])]
+        su, sv = s @ u, s @ v
+        out = []
+        sel = (np.hypot(s[:, 0], s[:, 1]) <= 0.5 * a) & (x > 0)
+        if np.any(sel):
+            wx = x[sel]
+            cx = max(math.sqrt(float(wx @ su[sel] ** 2) / wx.sum()), ALPHA_FLOOR * 1.5)
+            cy = max(math.sqrt(float(wx @ sv[sel] ** 2) / wx.sum()), ALPHA_FLOOR * 1.5)
+            w = min(max(float(wx.sum()) / n, 0.005), 0.5)
+            out.append(np.array([cx, cy, ax, ay, tz, w]))
+        for along, across, a_across, first in ((su, sv, ay, True), (sv, su, ax, False)):
+            band = (np.abs(across) <= 0.5 * a_across) & (x > 0)
+            if not np.any(band):
+                continue
+            held = float(x[band].sum())
+            width = max(math.sqrt(float(x[band] @ along[band] ** 2) / held), 1.5 * ALPHA_FLOOR)
+            wr = min(max(held / n, 0.005), 0.5)
+            lobe = (width, 1.5 * ALPHA_FLOOR) if first else (1.5 * ALPHA_FLOOR, width)
+            out.append(np.array([*lobe, ax, ay, tz, wr]))
+        return out
     a = math.sqrt(p[0] * p[1])
     out = []
     centres = []
@@ -182,4 +197,12 @@ def data_starts(model: str, parent: np.ndarray, bins, log_expected, tilt_for_cen
         w = min(max(float(wx.sum()) / n, 0.01), 0.5)
         tx, ty = tilt_for_centre(np.array([0.5 * p[0], 0.5 * p[1], p[4]]), c)
         out.append(np.array([0.5 * p[0], 0.5 * p[1], tx, ty, p[4], a, w]))
+    r = np.hypot(s[:, 0], s[:, 1])
+    for sel, most in (((r <= 0.5 * a) & (x > 0), 0.5), ((r > 2.0 * a) & (x > 0), 0.1)):
+        if not np.any(sel):
+            continue
+        held = float(x[sel].sum())
+        a2 = max(math.sqrt(0.5 * float(x[sel] @ r[sel] ** 2) / held), 1.5 * ALPHA_FLOOR)
+        share = min(max(held / n, 1e-4), most)
+        out.append(np.array([*p, a2, 1.0 - share]))
     return out
