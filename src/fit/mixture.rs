@@ -154,11 +154,17 @@ pub fn degenerate(id: ModelId, parent: &[f64]) -> Vec<f64> {
     }
 }
 
-/// Least relative deviance a second lobe must remove to be reported: a mixture within it of its parent
-/// is reported as the parent ([`degenerate`]). On data one lobe describes a lobe that sits between the
-/// bins' centres, or holds a vanishing share, changes the deviance by rounding only; reporting the parent
-/// then makes the optimum unique (the Python cross-check applies the same rule).
-pub const PARENT_GAIN_MIN: f64 = 1e-7;
+/// The deviance a second lobe must remove to be reported: its added parameters' price in the ladder,
+/// `(p - p_parent) ln N` ([`price`]; `N` the normals in the region), at the smallest overdispersion the
+/// ladder uses (`c = 1`). A mixture that removes less is reported as its parent ([`degenerate`]): the
+/// deviance does not tell such a lobe from noise, and it is where the mixture's optimum is not unique (a
+/// lobe between the bins' centres, a sub-percent lobe free in its width along the flat valley of its weight,
+/// or one of several equally good sub-percent spikes on the noise of a one-lobe scan). Reporting the
+/// mixture's lower-complexity limit makes the result unique; `auto` never chooses such a mixture over its
+/// parent (its criterion `F / c + p ln N` is above the parent's). The Python cross-check applies the same rule.
+pub fn price(id: ModelId, parent: ModelId, n: f64) -> f64 {
+    (id.n_params() as f64 - parent.n_params() as f64) * n.max(1.0).ln()
+}
 
 /// LM patience of a mixture start (evaluations are limited to `patience * (p + 1)`): on data one lobe
 /// describes, the mixture's weight and second lobe are nearly free and LM creeps along that flat valley
@@ -192,12 +198,12 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
             }
         }
     }
-    // A usable fit better than the parent (by PARENT_GAIN_MIN) stands. Otherwise (no start that far below the parent, no finite
+    // A usable fit better than the parent by its price stands. Otherwise (no start that far below the parent, no finite
     // start, or a lobe run off beyond the alpha range, e.g. a tail widening without bound to take up a flat
     // background) the parent written as a mixture is the result, said so in a warning.
     let valid = |f: &Fitted| crate::models::Model::from_params(id, &public(f)).is_ok();
     if let Ok(fit) = &fit {
-        if fit.f < parent.f - PARENT_GAIN_MIN * parent.f.abs() && valid(fit) {
+        if fit.f < parent.f - price(id, parent.id, s.data.n) && valid(fit) {
             return Ok(fit.clone());
         }
     }
@@ -205,7 +211,12 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
     let mut r = vec![0.0; s.data.bins.len()];
     let f = super::problem::residuals_into(&s.data, id, &x, &mut r);
     let why = match &fit {
-        Ok(g) if valid(g) => format!("no start ended below the one-lobe {} fit (by {PARENT_GAIN_MIN:e} relative)", parent.id),
+        Ok(g) if valid(g) => format!(
+            "no start lowered the deviance of the one-lobe {} fit by the price of the added parameters, (p - p_parent) ln N = {:.1} (best: {:.1})",
+            parent.id,
+            price(id, parent.id, s.data.n),
+            parent.f - g.f
+        ),
         Ok(_) => "the fit ran out of the model's domain (a lobe beyond the alpha range)".to_string(),
         Err(e) => format!("no start gave a usable fit ({})", e.message()),
     };
