@@ -115,10 +115,18 @@ def canonical(model: str, p: np.ndarray, ellipsoid_canonical) -> np.ndarray:
 #: spikes can otherwise shrink below any bin and hide between the bins' centres, are searched from it up.
 ALPHA_FLOOR = 1e-4
 
-#: A mixture whose deviance is not below its parent's by this share is reported as the parent (as_parent): on data one
-#: lobe describes, a lobe between the bins' centres or of vanishing weight moves the deviance by rounding only, and
-#: reporting the parent makes the optimum unique.
-PARENT_GAIN_MIN = 1e-7
+def price(model: str, n: float) -> float:
+    """The deviance a mixture must remove below its parent to be reported: its added parameters' price in the ladder,
+    (p - p_parent) ln N, N the normals in the region, at overdispersion 1. A mixture that removes less is reported as
+    the parent (as_parent): the deviance does not tell its second lobe from noise, and there the optimum is not unique
+    (a lobe between the bins' centres, a sub-percent lobe free in its width, one of several sub-percent spikes on the
+    noise of a one-lobe scan). The Rust fitter applies the same rule."""
+    return ADDED_PARAMS[model] * math.log(max(n, 1.0))
+
+
+#: Parameters each mixture adds to its parent (ggx-aniso and beckmann-aniso have 3, the ellipsoid 5).
+ADDED_PARAMS = {"ggx2": 3, "beckmann2": 3, "ellipsoid+ggx": 2}
+
 
 #: The core's weight when ellipsoid+ggx stands for its parent (the isotropic tail cannot copy the ellipsoid).
 PARENT_CORE_WEIGHT = 1.0 - 1e-13
@@ -140,9 +148,14 @@ def data_starts(model: str, parent: np.ndarray, bins, log_expected, tilt_for_cen
     - ggx2 / beckmann2: a spike at the normal: the positive excess within half the parent's width of s = 0 gives the
       spike's share, its root-mean-square slope along the parent's two axes its alphas (at least ALPHA_FLOOR); the tail
       is the parent.
+    - ggx2 / beckmann2, a wide tail: the parent holds all but the excess beyond two parent widths of s = 0 (at most a
+      tenth of the normals), which a round lobe as wide as that excess's root-mean-square slope per axis takes.
     - ellipsoid+ggx: up to three excess peaks, each at least two parent widths from the others: the core, half the
       parent's alphas, is centred (``tilt_for_centre(alphas_and_theta_z, slope)`` gives the tilts) at the excess-weighted
       mean slope within two widths of the peak, with the excess there as its share; the tail is the parent's width.
+    - ellipsoid+ggx, tails: the core is the parent and the (untilted, isotropic) tail takes the excess within half the
+      parent's width of s = 0 (a narrow tail), or beyond two widths (a wide tail, at most a tenth of the normals), its
+      alpha the excess's root-mean-square slope per axis there.
     """
     p = np.asarray(parent, dtype=float)
     pm = PARENT[model]
@@ -154,18 +167,24 @@ def data_starts(model: str, parent: np.ndarray, bins, log_expected, tilt_for_cen
     if model in ("ggx2", "beckmann2"):
         ax, ay, tz = p
         a = math.sqrt(ax * ay)
-        r = np.hypot(s[:, 0], s[:, 1])
-        sel = (r <= 0.5 * a) & (x > 0)
-        if not np.any(sel):
-            return []
-        wx = x[sel]
         u = np.array([math.cos(tz), -math.sin(tz)])
         v = np.array([math.sin(tz), math.cos(tz)])
-        su, sv = s[sel] @ u, s[sel] @ v
-        cx = max(math.sqrt(float(wx @ su**2) / wx.sum()), ALPHA_FLOOR * 1.5)
-        cy = max(math.sqrt(float(wx @ sv**2) / wx.sum()), ALPHA_FLOOR * 1.5)
-        w = min(max(float(wx.sum()) / n, 0.005), 0.5)
-        return [np.array([cx, cy, ax, ay, tz, w])]
+        su, sv = s @ u, s @ v
+        out = []
+        sel = (np.hypot(s[:, 0], s[:, 1]) <= 0.5 * a) & (x > 0)
+        if np.any(sel):
+            wx = x[sel]
+            cx = max(math.sqrt(float(wx @ su[sel] ** 2) / wx.sum()), ALPHA_FLOOR * 1.5)
+            cy = max(math.sqrt(float(wx @ sv[sel] ** 2) / wx.sum()), ALPHA_FLOOR * 1.5)
+            w = min(max(float(wx.sum()) / n, 0.005), 0.5)
+            out.append(np.array([cx, cy, ax, ay, tz, w]))
+        far = (np.hypot(s[:, 0], s[:, 1]) > 2.0 * a) & (x > 0)
+        if np.any(far):
+            held = float(x[far].sum())
+            r = np.hypot(s[far, 0], s[far, 1])
+            a2 = max(math.sqrt(0.5 * float(x[far] @ r**2) / held), 1.5 * ALPHA_FLOOR)
+            out.append(np.array([ax, ay, a2, a2, tz, 1.0 - min(max(held / n, 1e-4), 0.1)]))
+        return out
     a = math.sqrt(p[0] * p[1])
     out = []
     centres = []
@@ -182,4 +201,40 @@ def data_starts(model: str, parent: np.ndarray, bins, log_expected, tilt_for_cen
         w = min(max(float(wx.sum()) / n, 0.01), 0.5)
         tx, ty = tilt_for_centre(np.array([0.5 * p[0], 0.5 * p[1], p[4]]), c)
         out.append(np.array([0.5 * p[0], 0.5 * p[1], tx, ty, p[4], a, w]))
+    r = np.hypot(s[:, 0], s[:, 1])
+    for sel, most in (((r <= 0.5 * a) & (x > 0), 0.5), ((r > 2.0 * a) & (x > 0), 0.1)):
+        if not np.any(sel):
+            continue
+        held = float(x[sel].sum())
+        a2 = max(math.sqrt(0.5 * float(x[sel] @ r[sel] ** 2) / held), 1.5 * ALPHA_FLOOR)
+        share = min(max(held / n, 1e-4), most)
+        out.append(np.array([*p, a2, 1.0 - share]))
+    return out
+
+
+def ridge_starts(model: str, parent: np.ndarray, bins, log_expected):
+    """The ridges of ggx2 / beckmann2 (arguments as data_starts): one per parent axis, a lobe at the floor across that
+    axis holding the excess in the band of slopes within half the parent's alpha across it, its width along the axis
+    the excess's root-mean-square slope there; the other lobe is the parent. A quantized or striated scan piles its
+    slopes up on such lines, which the splits (scaled copies of the parent) do not reach."""
+    if model not in ("ggx2", "beckmann2"):
+        return []
+    p = np.asarray(parent, dtype=float)
+    b, ln_e = log_expected(PARENT[model], p, bins)[:2]
+    x = b.count - np.exp(ln_e)
+    z = np.maximum(b.m[:, 2], 1e-12)
+    s = np.column_stack([-b.m[:, 0] / z, -b.m[:, 1] / z])
+    n = float(b.count.sum())
+    ax, ay, tz = p
+    su = s @ np.array([math.cos(tz), -math.sin(tz)])
+    sv = s @ np.array([math.sin(tz), math.cos(tz)])
+    out = []
+    for along, across, a_across, first in ((su, sv, ay, True), (sv, su, ax, False)):
+        band = (np.abs(across) <= 0.5 * a_across) & (x > 0)
+        if not np.any(band):
+            continue
+        held = float(x[band].sum())
+        width = max(math.sqrt(float(x[band] @ along[band] ** 2) / held), 1.5 * ALPHA_FLOOR)
+        lobe = (width, 1.5 * ALPHA_FLOOR) if first else (1.5 * ALPHA_FLOOR, width)
+        out.append(np.array([*lobe, ax, ay, tz, min(max(held / n, 0.005), 0.5)]))
     return out

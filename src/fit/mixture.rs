@@ -93,6 +93,55 @@ pub fn residual_starts(data: &super::objective::FitData, parent: &[f64]) -> Vec<
     out
 }
 
+/// The ridge starts of `ggx2` and `beckmann2`, from the data: a lobe at the alpha floor across one of the
+/// parent's axes, holding the normals in excess of the parent's expectation `E_k = N W_k D(m_k) / S`
+/// (objective.md) in the band of slopes within half the parent's alpha of that axis, as wide along it as
+/// the root-mean-square slope of that excess; the second lobe is the parent. On a quantized or striated
+/// scan the slopes pile up on lines of constant slope (one height step per pixel across, none along),
+/// which one lobe spreads over its whole width; the splits, all scaled copies of the parent, do not reach
+/// such a line. One start per axis, the parent's `alpha_x` axis along `(cos theta_z, -sin theta_z)` in the
+/// scan frame (azimuth `-theta_z`).
+pub fn ridge_starts(data: &super::objective::FitData, id: ModelId, parent: &[f64]) -> Vec<Vec<f64>> {
+    use crate::models::Ndf;
+    let Some(pid) = parent_of(id).filter(|p| *p != ModelId::Ellipsoid) else { return Vec::new() };
+    let Ok(model) = crate::models::Model::from_params(pid, parent) else { return Vec::new() };
+    let d: Vec<f64> = data.bins.iter().map(|b| model.d(b.m)).collect();
+    let norm: f64 = data.bins.iter().zip(&d).map(|(b, d)| d * b.w).sum();
+    if !(norm > 0.0 && norm.is_finite() && data.n > 0.0) {
+        return Vec::new();
+    }
+    let (ax, ay, tz) = (parent[0], parent[1], parent[2]);
+    let (sn, cs) = tz.sin_cos();
+    let floor = 1.5 * crate::models::ALPHA_MIN;
+    let mut out = Vec::new();
+    for axis in 0..2 {
+        let half_across = 0.5 * if axis == 0 { ay } else { ax };
+        let (mut held, mut second) = (0.0, 0.0);
+        for (b, d) in data.bins.iter().zip(&d) {
+            let e = b.c - data.n * b.w * d / norm;
+            if !(e > 0.0 && b.m.z > 0.0) {
+                continue;
+            }
+            let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
+            // Slopes in the parent's frame: x' along (cos tz, -sin tz), y' along (sin tz, cos tz).
+            let (su, sv) = (cs * sx - sn * sy, sn * sx + cs * sy);
+            let (along, across) = if axis == 0 { (su, sv) } else { (sv, su) };
+            if across.abs() <= half_across {
+                held += e;
+                second += e * along * along;
+            }
+        }
+        if !(held > 0.0) {
+            continue;
+        }
+        let width = (second / held).sqrt().max(floor);
+        let w = (held / data.n).clamp(0.005, 0.5);
+        let (a1, b1) = if axis == 0 { (width, floor) } else { (floor, width) };
+        out.push(vec![a1, b1, ax, ay, tz, w]);
+    }
+    out
+}
+
 /// The parent written as the mixture: two copies of itself at weight one half (`ggx2`, `beckmann2`), or
 /// the ellipsoid core holding all but [`PARENT_CORE_WEIGHT`]'s remainder (`ellipsoid+ggx`). The same D (to
 /// that remainder), so the same objective.
@@ -105,11 +154,17 @@ pub fn degenerate(id: ModelId, parent: &[f64]) -> Vec<f64> {
     }
 }
 
-/// Least relative deviance a second lobe must remove to be reported: a mixture within it of its parent
-/// is reported as the parent ([`degenerate`]). On data one lobe describes a lobe that sits between the
-/// bins' centres, or holds a vanishing share, changes the deviance by rounding only; reporting the parent
-/// then makes the optimum unique (the Python cross-check applies the same rule).
-pub const PARENT_GAIN_MIN: f64 = 1e-7;
+/// The deviance a second lobe must remove to be reported: its added parameters' price in the ladder,
+/// `(p - p_parent) ln N` ([`price`]; `N` the normals in the region), at the smallest overdispersion the
+/// ladder uses (`c = 1`). A mixture that removes less is reported as its parent ([`degenerate`]): the
+/// deviance does not tell such a lobe from noise, and it is where the mixture's optimum is not unique (a
+/// lobe between the bins' centres, a sub-percent lobe free in its width along the flat valley of its weight,
+/// or one of several equally good sub-percent spikes on the noise of a one-lobe scan). Reporting the
+/// mixture's lower-complexity limit makes the result unique; `auto` never chooses such a mixture over its
+/// parent (its criterion `F / c + p ln N` is above the parent's). The Python cross-check applies the same rule.
+pub fn price(id: ModelId, parent: ModelId, n: f64) -> f64 {
+    (id.n_params() as f64 - parent.n_params() as f64) * n.max(1.0).ln()
+}
 
 /// LM patience of a mixture start (evaluations are limited to `patience * (p + 1)`): on data one lobe
 /// describes, the mixture's weight and second lobe are nearly free and LM creeps along that flat valley
@@ -127,14 +182,28 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
     let mut st = starts(id, &p);
     if id == ModelId::EllipsoidGgx {
         st.extend(residual_starts(&s.data, &p));
+    } else {
+        st.extend(ridge_starts(&s.data, id, &p));
     }
-    let fit = fit_from(s, id, &st, &o);
-    // A usable fit better than the parent (by PARENT_GAIN_MIN) stands. Otherwise (no start that far below the parent, no finite
+    let mut fit = fit_from(s, id, &st, &o);
+    // The best start, stopped by the patience before it converged, is carried to the optimum with the
+    // caller's own patience.
+    if let Ok(f) = &fit {
+        if !f.local.converged && opts.tolerances.max_iter > o.tolerances.max_iter {
+            if let Ok(g) = fit_from(s, id, &[public(f)], opts) {
+                if g.f <= f.f {
+                    let evaluations = f.evaluations + g.evaluations;
+                    fit = Ok(Fitted { evaluations, start_objectives: f.start_objectives.clone(), best_start: f.best_start, ..g });
+                }
+            }
+        }
+    }
+    // A usable fit better than the parent by its price stands. Otherwise (no start that far below the parent, no finite
     // start, or a lobe run off beyond the alpha range, e.g. a tail widening without bound to take up a flat
     // background) the parent written as a mixture is the result, said so in a warning.
     let valid = |f: &Fitted| crate::models::Model::from_params(id, &public(f)).is_ok();
     if let Ok(fit) = &fit {
-        if fit.f < parent.f - PARENT_GAIN_MIN * parent.f.abs() && valid(fit) {
+        if fit.f < parent.f - price(id, parent.id, s.data.n) && valid(fit) {
             return Ok(fit.clone());
         }
     }
@@ -142,7 +211,12 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
     let mut r = vec![0.0; s.data.bins.len()];
     let f = super::problem::residuals_into(&s.data, id, &x, &mut r);
     let why = match &fit {
-        Ok(g) if valid(g) => format!("no start ended below the one-lobe {} fit (by {PARENT_GAIN_MIN:e} relative)", parent.id),
+        Ok(g) if valid(g) => format!(
+            "no start lowered the deviance of the one-lobe {} fit by the price of the added parameters, (p - p_parent) ln N = {:.1} (best: {:.1})",
+            parent.id,
+            price(id, parent.id, s.data.n),
+            parent.f - g.f
+        ),
         Ok(_) => "the fit ran out of the model's domain (a lobe beyond the alpha range)".to_string(),
         Err(e) => format!("no start gave a usable fit ({})", e.message()),
     };

@@ -498,6 +498,15 @@ pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
     fit_auto_pruned(ndf, opts, true)
 }
 
+/// A fitted candidate of `auto`, or why it is left out: parameters outside the model's domain, or no fit.
+fn candidate(r: Result<Fitted>) -> (Option<Fitted>, Option<String>) {
+    match r {
+        Ok(f) if Model::from_params(f.id, &public(&f)).is_ok() => (Some(f), None),
+        Ok(f) => (None, Some(format!("{}: fitted parameters out of the model's domain; candidate dropped", f.id))),
+        Err(e) => (None, Some(format!("candidate dropped: {e}"))),
+    }
+}
+
 /// [`fit_auto`], with the ladder's pruning on or off: with `prune`, a mixture is not fitted when it
 /// cannot win (its deviance cannot fall below 0, so `p ln N` alone already exceeds the best criterion, data_formats/objective.md);
 /// its absence cannot change the choice, only the candidates listed. Public so a test can hold the two to the same choice.
@@ -506,17 +515,6 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, prune: bool) -> Re
     let s = Session::new(ndf, opts)?;
     // A candidate that cannot be fitted is left out (and said so); only when none is usable is it an error.
     let mut warnings = Vec::new();
-    let mut keep = |r: Result<Fitted>| match r {
-        Ok(f) if Model::from_params(f.id, &public(&f)).is_ok() => Some(f),
-        Ok(f) => {
-            warnings.push(format!("{}: fitted parameters out of the model's domain; candidate dropped", f.id));
-            None
-        }
-        Err(e) => {
-            warnings.push(format!("candidate dropped: {e}"));
-            None
-        }
-    };
     let delta = s.data.k_nonzero == 1;
     let mut mixtures: Vec<Fitted> = Vec::new();
     let mut pruned: Vec<ModelId> = Vec::new();
@@ -525,24 +523,57 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, prune: bool) -> Re
         let d = |id| Some(delta_fit(&s, id));
         (d(ModelId::Ggx), d(ModelId::GgxAniso), d(ModelId::Ellipsoid), d(ModelId::Beckmann), d(ModelId::BeckmannAniso))
     } else {
-        let ggx = keep(fit_iso(&s, ModelId::Ggx, opts));
-        let ggx_a = keep(fit_aniso(&s, ModelId::GgxAniso, ggx.as_ref(), opts));
-        let ell = match &ggx_a {
-            Some(a) => keep(fit_ellipsoid(&s, a, opts)),
-            None => None,
-        };
-        let beck = keep(fit_iso(&s, ModelId::Beckmann, opts));
-        let beck_a = keep(fit_aniso(&s, ModelId::BeckmannAniso, beck.as_ref(), opts));
+        // The GGX chain and the Beckmann chain are independent: on the caller's rayon pool they run side by
+        // side (a batch job's pool has one thread, so there they run in turn); each fit is serial, so the
+        // results and the order of the warnings are those of fitting them in turn.
+        let (g, b) = rayon::join(
+            || {
+                let ggx = candidate(fit_iso(&s, ModelId::Ggx, opts));
+                let ggx_a = candidate(fit_aniso(&s, ModelId::GgxAniso, ggx.0.as_ref(), opts));
+                let ell = match &ggx_a.0 {
+                    Some(a) => candidate(fit_ellipsoid(&s, a, opts)),
+                    None => (None, None),
+                };
+                [ggx, ggx_a, ell]
+            },
+            || {
+                let beck = candidate(fit_iso(&s, ModelId::Beckmann, opts));
+                let beck_a = candidate(fit_aniso(&s, ModelId::BeckmannAniso, beck.0.as_ref(), opts));
+                [beck, beck_a]
+            },
+        );
+        let [ggx, ggx_a, ell] = g.map(|(f, w)| {
+            warnings.extend(w);
+            f
+        });
+        let [beck, beck_a] = b.map(|(f, w)| {
+            warnings.extend(w);
+            f
+        });
         // The ladder's second rung: each mixture from the single lobe it extends, unless it cannot win.
         let singles: Vec<&Fitted> = [&ggx, &beck, &ggx_a, &beck_a, &ell].into_iter().flatten().collect();
         let bound = prune.then(|| mixture::Pruning::new(ndf, &s, &singles));
-        for (id, parent) in [(ModelId::Ggx2, &ggx_a), (ModelId::Beckmann2, &beck_a), (ModelId::EllipsoidGgx, &ell)] {
-            if let Some(p) = parent {
-                if bound.as_ref().is_some_and(|b| b.cannot_win(id, &mixtures)) {
-                    pruned.push(id);
-                    continue;
+        let rungs: Vec<(ModelId, &Fitted)> = [(ModelId::Ggx2, &ggx_a), (ModelId::Beckmann2, &beck_a), (ModelId::EllipsoidGgx, &ell)]
+            .into_iter()
+            .filter_map(|(id, p)| p.as_ref().map(|p| (id, p)))
+            .collect();
+        // The mixtures the single lobes alone do not rule out are fitted side by side; the rule in turn below
+        // then drops any that a mixture before it rules out (a stronger bound), as fitting them in turn would.
+        let fitted: Vec<Option<Result<Fitted>>> = {
+            use rayon::prelude::*;
+            rungs
+                .par_iter()
+                .map(|&(id, p)| (!bound.as_ref().is_some_and(|b| b.cannot_win(id, &[]))).then(|| mixture::fit_mixture(&s, id, p, opts)))
+                .collect()
+        };
+        for (&(id, _), r) in rungs.iter().zip(fitted) {
+            match r {
+                Some(r) if !bound.as_ref().is_some_and(|b| b.cannot_win(id, &mixtures)) => {
+                    let (f, w) = candidate(r);
+                    warnings.extend(w);
+                    mixtures.extend(f);
                 }
-                mixtures.extend(keep(mixture::fit_mixture(&s, id, p, opts)));
+                _ => pruned.push(id),
             }
         }
         (ggx, ggx_a, ell, beck, beck_a)
