@@ -293,10 +293,11 @@ pub fn find_spikes<S: BandSource<T = f64>>(src: &S, how: Despike, quantum: Optio
                 let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
                 pair_screen([r0, r1, r2], limit, &mut pass);
                 for j in 1..nx - 1 {
-                    if pass[j - 1] {
+                    let c = r1[j];
+                    // A hole is never tested (nor a point beside one, which the full test skips).
+                    if pass[j - 1] || !c.is_finite() {
                         continue;
                     }
-                    let c = r1[j];
                     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
                     for r in [r0, r1, r2] {
                         for v in &r[j - 1..j + 2] {
