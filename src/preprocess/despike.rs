@@ -215,33 +215,37 @@ fn pair_screen(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
 /// Sort 8 finite values ascending with the optimal 19-comparator network (Knuth, TAOCP vol. 3, 5.3.4).
 #[inline(always)]
 fn sort8(v: &mut [f64; 8]) {
-    const PAIRS: [(usize, usize); 19] = [
-        (0, 2),
-        (1, 3),
-        (4, 6),
-        (5, 7),
-        (0, 4),
-        (1, 5),
-        (2, 6),
-        (3, 7),
-        (0, 1),
-        (2, 3),
-        (4, 5),
-        (6, 7),
-        (2, 4),
-        (3, 5),
-        (1, 4),
-        (3, 6),
-        (1, 2),
-        (3, 4),
-        (5, 6),
-    ];
-    for (a, b) in PAIRS {
-        let (x, y) = (v[a], v[b]);
-        // Plain selects (no NaN handling: the values are finite), so they compile to min/max instructions.
-        v[a] = if y < x { y } else { x };
-        v[b] = if y < x { x } else { y };
+    let [mut x0, mut x1, mut x2, mut x3, mut x4, mut x5, mut x6, mut x7] = *v;
+    // One comparator on two locals: plain selects (no NaN handling: the values are finite), so that they
+    // compile to min/max instructions; a loop over a table of index pairs kept the values in memory and
+    // compiled to branches.
+    macro_rules! cx {
+        ($a:ident, $b:ident) => {
+            let (x, y) = ($a, $b);
+            $a = if y < x { y } else { x };
+            $b = if y < x { x } else { y };
+        };
     }
+    cx!(x0, x2);
+    cx!(x1, x3);
+    cx!(x4, x6);
+    cx!(x5, x7);
+    cx!(x0, x4);
+    cx!(x1, x5);
+    cx!(x2, x6);
+    cx!(x3, x7);
+    cx!(x0, x1);
+    cx!(x2, x3);
+    cx!(x4, x5);
+    cx!(x6, x7);
+    cx!(x2, x4);
+    cx!(x3, x5);
+    cx!(x1, x4);
+    cx!(x3, x6);
+    cx!(x1, x2);
+    cx!(x3, x4);
+    cx!(x5, x6);
+    *v = [x0, x1, x2, x3, x4, x5, x6, x7];
 }
 
 /// Points sampled (strided) for the scan's typical departure, the spread floor.
