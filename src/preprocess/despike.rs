@@ -178,7 +178,7 @@ fn near_median(rows: [&[f64]; 3], j: usize, half: f64) -> bool {
 /// screen passes the points of a smooth surface of any slope, where [`near_median`] passes only the
 /// gentle ones. The rounding of the sums and of the median is relative to the point's height, so a
 /// point is passed only when its height is below `2^40 limit` (then the rounding stays far below
-/// `limit / 2`); non-finite values compare false and are left to the full test, as is every point of a
+/// `limit / 2`) and below `f64::MAX / 4`; non-finite values compare false and are left to the full test, as is every point of a
 /// scan whose `limit` is 0.
 #[inline(always)]
 fn pair_screen(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
@@ -188,7 +188,8 @@ fn pair_screen(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
         return;
     }
     let m = n - 2;
-    let cap = limit * (1u64 << 40) as f64;
+    // Below `f64::MAX / 4` too, so that twice the point and the passed sums are finite.
+    let cap = (limit * (1u64 << 40) as f64).min(f64::MAX / 4.0);
     let (a0, a1, a2) = (&rows[0][..m], &rows[0][1..m + 1], &rows[0][2..m + 2]);
     let (b0, b1, b2) = (&rows[1][..m], &rows[1][1..m + 1], &rows[1][2..m + 2]);
     let (e0, e1, e2) = (&rows[2][..m], &rows[2][1..m + 1], &rows[2][2..m + 2]);
