@@ -64,6 +64,19 @@ fn departure(z: &Band<'_, f64>, nx: usize, ny: usize, i: usize, j: usize) -> Opt
     if !c.is_finite() {
         return None;
     }
+    if i >= 1 && j >= 1 && i + 1 < ny && j + 1 < nx {
+        // An interior point: its 8 neighbours straight from the three rows, in the order of the loop
+        // below; with any of them invalid it takes the general path.
+        let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
+        let mut nb = [r0[j - 1], r0[j], r0[j + 1], r1[j - 1], r1[j + 1], r2[j - 1], r2[j], r2[j + 1]];
+        if nb.iter().all(|v| v.is_finite()) {
+            sort8(&mut nb);
+            let med = 0.5 * (nb[3] + nb[4]);
+            let mut dev = nb.map(|v| (v - med).abs());
+            sort8(&mut dev);
+            return Some((c - med, MAD_NORMAL * (0.5 * (dev[3] + dev[4]))));
+        }
+    }
     let mut nb = [0.0f64; 8];
     let mut k = 0;
     for di in -1i64..=1 {
@@ -153,36 +166,87 @@ fn near_median(rows: [&[f64]; 3], j: usize, half: f64) -> bool {
     below >= 5 && above >= 5
 }
 
+/// Exact pre-screen of every interior point of the middle row of `rows` (`pass[j - 1]` for point `j`):
+/// whether each of the four sums of opposite neighbours, `h(j-d) + h(j+d)` over the four directions, lies
+/// within `limit` of twice the point, `2 h(j)`.
+///
+/// The median of 8 values made of 4 pairs lies between the least and the greatest pair midpoint (were
+/// the 4th plus 5th smallest above twice the greatest midpoint, each of the 4 values from the 5th up
+/// would have its partner strictly below the 4th smallest, and only 3 values are there). So a passed
+/// point's neighbours' median is within `limit / 2` of it and its departure below the threshold (at
+/// least `limit`). A plane adds opposite offsets to opposite neighbours, which cancel in each sum: the
+/// screen passes the points of a smooth surface of any slope, where [`near_median`] passes only the
+/// gentle ones. The rounding of the sums and of the median is relative to the point's height, so a
+/// point is passed only when its height is below `2^40 limit` (then the rounding stays far below
+/// `limit / 2`) and below `f64::MAX / 4`; non-finite values compare false and are left to the full test, as is every point of a
+/// scan whose `limit` is 0.
+#[inline(always)]
+fn pair_screen(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
+    let n = rows[1].len();
+    pass.clear();
+    if n < 3 {
+        return;
+    }
+    let m = n - 2;
+    // Below `f64::MAX / 4` too, so that twice the point and the passed sums are finite.
+    let cap = (limit * (1u64 << 40) as f64).min(f64::MAX / 4.0);
+    let (a0, a1, a2) = (&rows[0][..m], &rows[0][1..m + 1], &rows[0][2..m + 2]);
+    let (b0, b1, b2) = (&rows[1][..m], &rows[1][1..m + 1], &rows[1][2..m + 2]);
+    let (e0, e1, e2) = (&rows[2][..m], &rows[2][1..m + 1], &rows[2][2..m + 2]);
+    pass.resize(m, false);
+    let pass = &mut pass[..m];
+    for j in 0..m {
+        let c = b1[j];
+        let two = c + c;
+        let (lo, hi) = (two - limit, two + limit);
+        let s = [a0[j] + e2[j], a1[j] + e1[j], a2[j] + e0[j], b0[j] + b2[j]];
+        // Non-short-circuit `&` so that the loop has no branches and vectorizes.
+        pass[j] = (s[0] >= lo)
+            & (s[0] <= hi)
+            & (s[1] >= lo)
+            & (s[1] <= hi)
+            & (s[2] >= lo)
+            & (s[2] <= hi)
+            & (s[3] >= lo)
+            & (s[3] <= hi)
+            & (c.abs() < cap);
+    }
+}
+
 /// Sort 8 finite values ascending with the optimal 19-comparator network (Knuth, TAOCP vol. 3, 5.3.4).
 #[inline(always)]
 fn sort8(v: &mut [f64; 8]) {
-    const PAIRS: [(usize, usize); 19] = [
-        (0, 2),
-        (1, 3),
-        (4, 6),
-        (5, 7),
-        (0, 4),
-        (1, 5),
-        (2, 6),
-        (3, 7),
-        (0, 1),
-        (2, 3),
-        (4, 5),
-        (6, 7),
-        (2, 4),
-        (3, 5),
-        (1, 4),
-        (3, 6),
-        (1, 2),
-        (3, 4),
-        (5, 6),
-    ];
-    for (a, b) in PAIRS {
-        let (x, y) = (v[a], v[b]);
-        // Plain selects (no NaN handling: the values are finite), so they compile to min/max instructions.
-        v[a] = if y < x { y } else { x };
-        v[b] = if y < x { x } else { y };
+    let [mut x0, mut x1, mut x2, mut x3, mut x4, mut x5, mut x6, mut x7] = *v;
+    // One comparator on two locals: plain selects (no NaN handling: the values are finite), so that they
+    // compile to min/max instructions; a loop over a table of index pairs kept the values in memory and
+    // compiled to branches.
+    macro_rules! cx {
+        ($a:ident, $b:ident) => {
+            let (x, y) = ($a, $b);
+            $a = if y < x { y } else { x };
+            $b = if y < x { x } else { y };
+        };
     }
+    cx!(x0, x2);
+    cx!(x1, x3);
+    cx!(x4, x6);
+    cx!(x5, x7);
+    cx!(x0, x4);
+    cx!(x1, x5);
+    cx!(x2, x6);
+    cx!(x3, x7);
+    cx!(x0, x1);
+    cx!(x2, x3);
+    cx!(x4, x5);
+    cx!(x6, x7);
+    cx!(x2, x4);
+    cx!(x3, x5);
+    cx!(x1, x4);
+    cx!(x3, x6);
+    cx!(x1, x2);
+    cx!(x3, x4);
+    cx!(x5, x6);
+    *v = [x0, x1, x2, x3, x4, x5, x6, x7];
 }
 
 /// Points sampled (strided) for the scan's typical departure, the spread floor.
@@ -232,18 +296,26 @@ pub fn find_spikes<S: BandSource<T = f64>>(src: &S, how: Despike, quantum: Optio
     };
     let floor = typical.max(quantum.unwrap_or(0.0));
     let limit = SPIKE_THRESHOLD * floor;
-    // Exact pre-screen: the median lies between the neighbours' extremes, so a point within `limit` of
-    // both cannot depart by more than the threshold (which is at least `limit`).
+    // Exact pre-screens, cheapest first: the sums of opposite neighbours ([`pair_screen`], which passes
+    // nearly every point of a smooth surface); the median lies between the neighbours' extremes, so a
+    // point within `limit` of both cannot depart by more than the threshold (which is at least `limit`);
+    // then [`near_median`].
     let spikes: Vec<(usize, bool)> = bands
         .par_iter()
         .flat_map_iter(|b| {
             let mut out = Vec::new();
             let mut buf = Vec::new();
+            let mut pass = Vec::new();
             let z = src.band(b.start.saturating_sub(1), (b.end + 1).min(ny), &mut buf);
             for i in b.start.max(1)..b.end.min(ny - 1) {
                 let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
+                pair_screen([r0, r1, r2], limit, &mut pass);
                 for j in 1..nx - 1 {
                     let c = r1[j];
+                    // A hole is never tested (nor a point beside one, which the full test skips).
+                    if pass[j - 1] || !c.is_finite() {
+                        continue;
+                    }
                     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
                     for r in [r0, r1, r2] {
                         for v in &r[j - 1..j + 2] {
@@ -356,6 +428,82 @@ mod tests {
         assert!(want.len() > 20, "{} spikes found by the full test", want.len());
         assert_eq!(got, want);
         assert_eq!(rep.masked, want.len());
+    }
+
+    /// The bound [`pair_screen`] rests on, checked against sorting: the median of 4 pairs lies between
+    /// the least and the greatest pair midpoint, for pairs of any spread (random, and nearly equal
+    /// midpoints with wide pairs).
+    #[test]
+    fn median_of_pairs_lies_between_their_midpoints() {
+        let mut x = 0x51_7cc1_b727_220au64;
+        let mut rnd = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for t in 0..20000 {
+            let spread = if t % 2 == 0 { 1.0 } else { 1e3 };
+            let mut v = [0.0; 8];
+            let mut mids = [0.0; 4];
+            for k in 0..4 {
+                let (m, h) = (rnd(), spread * rnd().abs());
+                v[2 * k] = m - h;
+                v[2 * k + 1] = m + h;
+                mids[k] = 0.5 * (v[2 * k] + v[2 * k + 1]);
+            }
+            v.sort_by(f64::total_cmp);
+            let med = 0.5 * (v[3] + v[4]);
+            let (lo, hi) = mids.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &m| (l.min(m), h.max(m)));
+            let tol = 1e-12 * spread;
+            assert!(med >= lo - tol && med <= hi + tol, "{v:?}: median {med} outside [{lo}, {hi}]");
+        }
+    }
+
+    /// Every point [`pair_screen`] passes is one the full test clears, on steep planes in every
+    /// direction (where the neighbours' extremes are far from the point) with curvature, noise, spikes,
+    /// holes and large heights; the screen passes most points there.
+    #[test]
+    fn pair_screen_passes_only_points_the_full_test_clears() {
+        let (nx, ny) = (41, 37);
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut passed = 0usize;
+        let mut total = 0usize;
+        for (case, (gx, gy, base)) in [(3.0, -7.0, 0.0), (-50.0, 20.0, 0.076), (0.5, 0.5, -1.0), (1e3, 1e3, 10.0)].into_iter().enumerate() {
+            let mut z = vec![0.0; nx * ny];
+            for i in 0..ny {
+                for j in 0..nx {
+                    let (u, v) = (j as f64 * 1e-6, i as f64 * 1e-6);
+                    z[i * nx + j] = base + gx * u + gy * v + 5e2 * (u * u - 0.5 * v * v) + 4e-9 * rnd();
+                }
+            }
+            for k in (0..nx * ny).step_by(97 + case) {
+                z[k] += 3e-7 * (1 + k % 7) as f64 * if k % 2 == 0 { 1.0 } else { -1.0 };
+            }
+            z[5 * nx + 5] = f64::NAN;
+            let floor = 4e-9;
+            let limit = SPIKE_THRESHOLD * floor;
+            let band = whole(&z, nx, ny);
+            let mut pass = Vec::new();
+            for i in 1..ny - 1 {
+                pair_screen([band.row(i - 1), band.row(i), band.row(i + 1)], limit, &mut pass);
+                for j in 1..nx - 1 {
+                    total += 1;
+                    if pass[j - 1] {
+                        passed += 1;
+                        let (d, _) = departure(&band, nx, ny, i, j).expect("a passed point has 8 finite neighbours");
+                        assert!(d.abs() <= 0.5 * limit * (1.0 + 1e-6), "case {case} ({i}, {j}): departure {d:e} passed");
+                    }
+                }
+            }
+        }
+        assert!(passed * 10 > total * 8, "{passed} of {total} passed");
     }
 
     /// An interior point's departure and spread from the network agree bit for bit with the median and
