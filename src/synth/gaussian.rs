@@ -119,15 +119,16 @@ fn covariances(a2: &[f64], px: usize, py: usize, dx: f64, dy: f64) -> Covariance
             }
             acc
         })
-        .reduce(
-            || [0.0; 9],
-            |mut x, y| {
-                for k in 0..9 {
-                    x[k] += y[k];
-                }
-                x
-            },
-        );
+        .collect::<Vec<_>>()
+        // Rows summed in order: a parallel reduce's tree follows work stealing, and the scale it
+        // feeds must not change the heights from run to run.
+        .into_iter()
+        .fold([0.0; 9], |mut x, y| {
+            for k in 0..9 {
+                x[k] += y[k];
+            }
+            x
+        });
     let s = |v: f64| v * norm;
     Covariances {
         central: [[s(sums[0]), s(sums[1])], [s(sums[1]), s(sums[2])]],
