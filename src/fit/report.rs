@@ -115,8 +115,16 @@ pub struct SolverInfo {
     pub starts: usize,
     /// Index of the start that gave the best objective.
     pub best_start: usize,
-    /// Best objective of every start, in order (shows whether the problem was multimodal).
+    /// Best objective of every start, in order (shows whether the problem was multimodal). A start that
+    /// never reached a finite objective is infinite here and `null` in the JSON (JSON has no infinity).
+    #[serde(deserialize_with = "null_as_infinite")]
     pub start_objectives: Vec<f64>,
+}
+
+/// Read `start_objectives` back: serde_json writes a non-finite float as `null`.
+fn null_as_infinite<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Vec<f64>, D::Error> {
+    let v: Vec<Option<f64>> = serde::Deserialize::deserialize(d)?;
+    Ok(v.into_iter().map(|x| x.unwrap_or(f64::INFINITY)).collect())
 }
 
 /// Wall-clock times in milliseconds.
@@ -250,5 +258,29 @@ impl FitReport {
     /// The fitted model as a [`crate::models::Model`].
     pub fn to_model(&self) -> crate::Result<crate::models::Model> {
         crate::models::Model::from_params(self.model, &self.param_vec())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::SolverInfo;
+
+    /// A start that failed is written as `null` (serde_json's non-finite float) and read back infinite,
+    /// so a fit file with one reads again (batch `--resume`, the tests' own reader).
+    #[test]
+    fn a_failed_start_round_trips_through_null() {
+        let info = SolverInfo {
+            name: "lm".into(),
+            termination: "Converged".into(),
+            converged: true,
+            evaluations: 3,
+            starts: 2,
+            best_start: 0,
+            start_objectives: vec![1.5, f64::INFINITY],
+        };
+        let text = serde_json::to_string(&info).unwrap();
+        assert!(text.contains("\"start_objectives\":[1.5,null]"), "{text}");
+        let back: SolverInfo = serde_json::from_str(&text).unwrap();
+        assert_eq!(back.start_objectives, vec![1.5, f64::INFINITY]);
     }
 }
