@@ -127,6 +127,10 @@ pub struct NdfOptions {
     pub target_count: f64,
     /// Use this binning frame instead of estimating one (to put two NDFs on identical bins).
     pub frame: Option<SlopeFrame>,
+    /// Whether to count the normals the sampling does not resolve ([`resolution::assess`], the tail rule's
+    /// and the CSV's `unresolved` data): `None` or `Some(true)` does, `Some(false)` skips that pass (the
+    /// pipeline's choice when nothing needs it, [`crate::pipeline::Options::ndf_options`]).
+    pub resolution: Option<bool>,
 }
 
 /// Default mean count per bin: see `data_formats/ndf_csv.md` ("resolution") for the measurement behind it.
@@ -144,7 +148,7 @@ pub const FRAME_SUBSAMPLE: usize = 1 << 15;
 
 impl Default for NdfOptions {
     fn default() -> Self {
-        NdfOptions { scheme: NormalScheme::Central, cells_across: None, target_count: DEFAULT_TARGET_COUNT, frame: None }
+        NdfOptions { scheme: NormalScheme::Central, cells_across: None, target_count: DEFAULT_TARGET_COUNT, frame: None, resolution: None }
     }
 }
 
@@ -178,7 +182,9 @@ pub fn empirical_ndf(hf: &Scan, opts: &NdfOptions) -> Result<EmpiricalNdf> {
 /// the scan the bands make up. `invalid` counts the invalid points (for the error message only).
 pub fn empirical_ndf_of<S: BandSource<T = f64>>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize) -> Result<EmpiricalNdf> {
     let mut ndf = ndf_of(src, opts, invalid)?;
-    resolution::assess(src, &mut ndf);
+    if opts.resolution != Some(false) {
+        resolution::assess(src, &mut ndf);
+    }
     Ok(ndf)
 }
 
@@ -189,7 +195,9 @@ pub fn empirical_ndf_of<S: BandSource<T = f64>>(src: &S, opts: &NdfOptions, inva
 /// a slope error above [`precision::MAX_ROUNDING_FRACTION`] of the smallest robust slope scale (use f64).
 pub fn empirical_ndf_f32(h: &HeightsF32, opts: &NdfOptions) -> Result<EmpiricalNdf> {
     let mut ndf = ndf_of(h, opts, || h.invalid)?;
-    resolution::assess(h, &mut ndf);
+    if opts.resolution != Some(false) {
+        resolution::assess(h, &mut ndf);
+    }
     let bound = h.slope_rounding_bound(opts.scheme);
     let (a, b, c) = (ndf.frame.cov[0][0], ndf.frame.cov[0][1], ndf.frame.cov[1][1]);
     let lmin = (0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt()).max(0.0);

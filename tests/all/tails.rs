@@ -259,3 +259,34 @@ fn cli_na_despike_and_tail_options() {
     assert!(!o.status.success());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--tail all` reads no unresolved count, so the pipeline skips the resolution pass: its NDF carries no
+/// unresolved data, and its bins and fit (every field but the timings) are identical to those of the same
+/// run with the pass forced (`NdfOptions::resolution`); the default rule still has the pass.
+#[test]
+fn tail_all_skips_the_resolution_pass_with_identical_outputs() {
+    use ndfit::models::ModelChoice;
+    use ndfit::{Options, Pipeline};
+    let (hf, _) = cap(256, [0.05, 0.05, 0.4, 0.0, 0.0]);
+    let all = Options {
+        model: ModelChoice::Model(ModelId::Ellipsoid),
+        fit: FitOptions { tail: TailRule::All, ..FitOptions::default() },
+        ..Options::default()
+    };
+    let forced = Options { ndf: NdfOptions { resolution: Some(true), ..NdfOptions::default() }, ..all.clone() };
+    let skipped = Pipeline::new(all).run(hf.clone(), "cap").expect("run");
+    let kept = Pipeline::new(forced).run(hf.clone(), "cap").expect("run");
+    assert!(skipped.ndf.unresolved_share.is_none() && skipped.ndf.unresolved.is_empty());
+    assert!(kept.ndf.unresolved_share.is_some() && kept.ndf.unresolved.len() == kept.ndf.bins.len());
+    assert_eq!(skipped.ndf.bins, kept.ndf.bins);
+    let json = |r: &ndfit::fit::FitReport| {
+        let mut v = serde_json::to_value(r).expect("json");
+        v.as_object_mut().expect("object").remove("timings");
+        v
+    };
+    assert_eq!(json(&skipped.fit), json(&kept.fit));
+    let default =
+        Pipeline::new(Options { model: ModelChoice::Model(ModelId::Ellipsoid), ..Options::default() }).run(hf, "cap").expect("run");
+    assert_eq!(default.ndf.unresolved.len(), default.ndf.bins.len());
+    assert_eq!(default.fit.quality.tail.as_ref().map(|t| t.rule.as_str()), Some("core"));
+}

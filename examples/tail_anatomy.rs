@@ -1,0 +1,158 @@
+//! Measurement tool (not a test): what the hard-end error of the `core` rule is made of. For one cap
+//! (`CASE` index into the hard-end set, `N` grid), the NDF counted from central differences, from the exact
+//! slopes at the same samples, and from the exact slopes at `K x K` sub-samples of every pixel (the
+//! continuous truth up to the midpoint rule); the core-region fit error of each; and the residuals of the
+//! central counts against the dense ones, by whitened Lambert radius and azimuth.
+//!
+//!     CASE=1 cargo run --release --example tail_anatomy
+
+use ndfit::fit::metric::delta_to_model;
+use ndfit::fit::tail::TailRule;
+use ndfit::fit::{fit_model, FitOptions};
+use ndfit::models::{ModelId, Ndf};
+use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions};
+use ndfit::synth::ellipsoid::EllipsoidGeometry;
+use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
+
+/// `ndf` with its counts replaced by those of `slopes` weighted by `w` each (same bins, frame and `W`).
+fn recount(ndf: &EmpiricalNdf, slopes: &[[f64; 2]], w: f64) -> EmpiricalNdf {
+    let mut cnt = vec![0f64; ndf.grid.cells()];
+    for s in slopes {
+        cnt[ndf.grid.cell_of(ndf.frame.to_lambert(s[0], s[1]))] += w;
+    }
+    let mut out = ndf.clone();
+    for (b, &c) in out.bins.iter_mut().zip(&ndf.bin_cells) {
+        b.count = cnt[c as usize].round() as u64;
+    }
+    out
+}
+
+fn env(k: &str, d: usize) -> usize {
+    std::env::var(k).ok().map(|s| s.parse().expect(k)).unwrap_or(d)
+}
+
+fn main() {
+    let (case, n, k) = (env("CASE", 1), env("N", 1024), env("K", 8));
+    let p = HARD_END_SET[case];
+    let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+    let s = SynthSettings { nx: n, ny: n, seed: 7, ..SynthSettings::default() };
+    let (hf, truth) = ellipsoid_surface(&s, &ep).unwrap();
+    let g = EllipsoidGeometry::new(&ep, &s).unwrap();
+    let truth = truth.to_model().unwrap();
+    let ndf = empirical_ndf(&hf, &NdfOptions::default()).unwrap();
+    println!("{p:?} {n}^2: grid {} cells across, {} bins, {} samples", ndf.grid.n, ndf.bins.len(), ndf.n_samples);
+    let z = |i: usize, j: usize| hf.z[i * n + j];
+    let (mut same, mut dense) = (Vec::new(), Vec::new());
+    for i in 0..n {
+        for j in 0..n {
+            if let Some(sl) = g.slope(s.xc(j), s.yc(i)) {
+                if i >= 1 && j >= 1 && i + 1 < n && j + 1 < n && !(z(i, j - 1) + z(i, j + 1) + z(i - 1, j) + z(i + 1, j)).is_nan() {
+                    same.push(sl);
+                }
+            }
+            for a in 0..k {
+                for b in 0..k {
+                    let (x, y) =
+                        (s.xc(j) + ((a as f64 + 0.5) / k as f64 - 0.5) * s.dx, s.yc(i) + ((b as f64 + 0.5) / k as f64 - 0.5) * s.dy);
+                    if let Some(sl) = g.slope(x, y) {
+                        dense.push(sl);
+                    }
+                }
+            }
+        }
+    }
+    // Dense counts scaled to the sample count (rounded: the fit takes integer counts).
+    let scale = same.len() as f64 / dense.len() as f64;
+    let ex = recount(&ndf, &same, 1.0);
+    let de = recount(&ndf, &dense, scale);
+    let de_big = recount(&ndf, &dense, 1.0);
+    let fit = |nd: &EmpiricalNdf, tail: TailRule| {
+        let r = fit_model(nd, ModelId::Ellipsoid, &FitOptions { tail, ..FitOptions::default() }).unwrap();
+        100.0 * delta_to_model(&r.to_model().unwrap(), &truth).unwrap()
+    };
+    // The bin integrals of the truth (Walter et al. eq. 1) as counts, 1000 times the sample count.
+    let mut integ = ndf.clone();
+    let tot: Vec<f64> =
+        (0..ndf.bins.len()).map(|i| ndf.bin_integral(i, ndfit::ndf::grid::QuadOrder::Fine(4), |m| truth.d(m)).unwrap()).collect();
+    for (b, t) in integ.bins.iter_mut().zip(&tot) {
+        b.count = (t * 1000.0 * same.len() as f64).round() as u64;
+    }
+    integ.unresolved.iter_mut().for_each(|u| *u *= 1000);
+    let mut mid = ndf.clone();
+    mid.unresolved.iter_mut().for_each(|u| *u *= 1000);
+    for b in mid.bins.iter_mut() {
+        b.count = (truth.d(b.m) * b.proj_solid_angle * 1000.0 * same.len() as f64).round() as u64;
+    }
+    for (name, nd) in [("central", &ndf), ("exact same", &ex), ("dense (scaled)", &de), ("bin integrals", &integ), ("midpoint", &mid)] {
+        println!("  {name:>16}: core {:.3}%  all {:.3}%", fit(nd, TailRule::Core), fit(nd, TailRule::All));
+    }
+    let cutr = |nd: &EmpiricalNdf, pmax: f64| {
+        let mut o = nd.clone();
+        o.unresolved_share = Some(0.01);
+        o.unresolved = o
+            .bins
+            .iter()
+            .map(|b| {
+                let q = nd.frame.to_lambert(-b.m.x / b.m.z, -b.m.y / b.m.z);
+                if q[0].hypot(q[1]) > pmax {
+                    b.count + 1
+                } else {
+                    0
+                }
+            })
+            .collect();
+        fit(&o, TailRule::Unresolved)
+    };
+    for pm in [0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1] {
+        println!("   p_max {pm}: central {:.3}% exact {:.3}% integrals {:.3}%", cutr(&ndf, pm), cutr(&ex, pm), cutr(&integ, pm));
+    }
+    // Residuals c - E against the dense counts, in the core, by radius band and azimuth sector.
+    let cos_max = 70f64.to_radians().cos();
+    let cut = ndfit::fit::tail::tail_cut(&ndf, cos_max, TailRule::Core);
+    let region: Vec<usize> = (0..ndf.bins.len())
+        .filter(|&i| ndfit::fit::tail::usable(&ndf.bins[i]) && ndf.bins[i].m.z >= cos_max * ndf.bins[i].m.norm() && !cut.excludes(&ndf, i))
+        .collect();
+    let nc: f64 = region.iter().map(|&i| ndf.bins[i].count as f64).sum();
+    let nd: f64 = region.iter().map(|&i| de_big.bins[i].count as f64).sum();
+    let nt: f64 = region.iter().map(|&i| truth.d(ndf.bins[i].m) * ndf.bins[i].proj_solid_angle).sum();
+    println!("  region: {} bins, {} normals", region.len(), nc);
+    println!("  band   sector  bins  sum c   bias vs dense  chi2/bin vs dense  bias vs midpoint-truth  chi2/bin vs truth");
+    for band in 0..5 {
+        for sec in 0..4 {
+            let (mut nb, mut sc, mut se, mut chi, mut st, mut chit) = (0, 0.0, 0.0, 0.0, 0.0, 0.0);
+            for &i in &region {
+                let b = &ndf.bins[i];
+                let q = ndf.frame.to_lambert(-b.m.x / b.m.z, -b.m.y / b.m.z);
+                let r = q[0].hypot(q[1]);
+                let az = q[1].atan2(q[0]).rem_euclid(std::f64::consts::PI);
+                let s4 = ((az / std::f64::consts::FRAC_PI_4 + 0.5) as usize) % 4;
+                if (r * 5.0) as usize != band || s4 != sec {
+                    continue;
+                }
+                let c = b.count as f64;
+                let e = de_big.bins[i].count as f64 * nc / nd;
+                let et = truth.d(b.m) * b.proj_solid_angle * nc / nt;
+                nb += 1;
+                sc += c;
+                se += e;
+                st += et;
+                chi += (c - e).powi(2) / e.max(1.0);
+                chit += (c - et).powi(2) / et.max(1.0);
+            }
+            if nb > 0 {
+                println!(
+                    "  {:.1}-{:.1}  {:>3}deg  {nb:>4}  {sc:>7.0}  {:>+8.3}%  {:>8.2}  {:>+8.3}%  {:>8.2}",
+                    band as f64 / 5.0,
+                    (band + 1) as f64 / 5.0,
+                    sec * 45,
+                    100.0 * (sc - se) / se,
+                    chi / nb as f64,
+                    100.0 * (sc - st) / st,
+                    chit / nb as f64
+                );
+            }
+        }
+    }
+    let w = ndf.frame.whiten;
+    println!("  whiten {w:?}");
+}
