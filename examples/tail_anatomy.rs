@@ -2,7 +2,9 @@
 //! (`CASE` index into the hard-end set, `N` grid), the NDF counted from central differences, from the exact
 //! slopes at the same samples, and from the exact slopes at `K x K` sub-samples of every pixel (the
 //! continuous truth up to the midpoint rule); the core-region fit error of each; and the residuals of the
-//! central counts against the dense ones, by whitened Lambert radius and azimuth.
+//! central counts against the dense ones, by whitened Lambert radius and azimuth; the core fit's error
+//! over `p_max`, over 16 phases of the sample lattice, of the 2 x 2- and 3 x 3-merged counts (by EM), and
+//! behind a 45-degree aperture.
 //!
 //!     CASE=1 cargo run --release --example tail_anatomy
 
@@ -13,6 +15,9 @@ use ndfit::models::{ModelId, Ndf};
 use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions};
 use ndfit::synth::ellipsoid::EllipsoidGeometry;
 use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
+
+#[path = "support/floor.rs"]
+mod floor;
 
 /// `ndf` with its counts replaced by those of `slopes` weighted by `w` each (same bins, frame and `W`).
 fn recount(ndf: &EmpiricalNdf, slopes: &[[f64; 2]], w: f64) -> EmpiricalNdf {
@@ -74,14 +79,7 @@ fn main() {
         let r = fit_model(nd, ModelId::Ellipsoid, &FitOptions { tail, ..FitOptions::default() }).unwrap();
         100.0 * delta_to_model(&r.to_model().unwrap(), &truth).unwrap()
     };
-    // The bin integrals of the truth (Walter et al. eq. 1) as counts, 1000 times the sample count.
-    let mut integ = ndf.clone();
-    let tot: Vec<f64> =
-        (0..ndf.bins.len()).map(|i| ndf.bin_integral(i, ndfit::ndf::grid::QuadOrder::Fine(4), |m| truth.d(m)).unwrap()).collect();
-    for (b, t) in integ.bins.iter_mut().zip(&tot) {
-        b.count = (t * 1000.0 * same.len() as f64).round() as u64;
-    }
-    integ.unresolved.iter_mut().for_each(|u| *u *= 1000);
+    let integ = floor::bin_integral_counts(&ndf, &truth);
     let mut mid = ndf.clone();
     mid.unresolved.iter_mut().for_each(|u| *u *= 1000);
     for b in mid.bins.iter_mut() {
@@ -110,24 +108,43 @@ fn main() {
     for pm in [0.8, 0.9, 1.0, 1.1] {
         println!("   p_max {pm}: central {:.3}% exact {:.3}% integrals {:.3}%", cutr(&ndf, pm), cutr(&ex, pm), cutr(&integ, pm));
     }
-    // The same lattice shifted by quarter steps: the spread of the core fit's error over the lattice's
-    // phase (exact slopes at every footprint sample).
-    let mut errs = Vec::new();
-    for a in 0..4 {
-        for b in 0..4 {
-            let mut sl = Vec::new();
-            for i in 0..n {
-                for j in 0..n {
-                    if let Some(v) = g.slope(s.xc(j) + a as f64 * s.dx / 4.0, s.yc(i) + b as f64 * s.dy / 4.0) {
-                        sl.push(v);
-                    }
-                }
-            }
-            errs.push(fit(&recount(&ndf, &sl, 1.0), TailRule::Core));
+    let (lo, med, hi) = floor::phase_spread(&ndf, &g, &s, &truth);
+    println!("  16 lattice phases (exact slopes, core): min {:.3}% median {:.3}% max {:.3}%", 100.0 * lo, 100.0 * med, 100.0 * hi);
+    // The Poisson likelihood of the 2 x 2-merged counts with the fine bins' midpoint model, by EM: each
+    // block's count is shared among its fine bins in proportion to the current fit's D(m_k) W_k.
+    let em = |nd: &EmpiricalNdf, iters: usize, block: usize| -> Vec<f64> {
+        let nn = nd.grid.n;
+        let blk = |k: usize| {
+            let c = nd.bin_cells[k] as usize;
+            ((c / nn) / block) * nn + (c % nn) / block
+        };
+        let mut work = nd.clone();
+        for b in work.bins.iter_mut() {
+            b.count *= 1000;
         }
-    }
-    errs.sort_by(f64::total_cmp);
-    println!("  16 lattice phases (exact slopes, core): min {:.3}% median {:.3}% max {:.3}%", errs[0], 0.5 * (errs[7] + errs[8]), errs[15]);
+        work.unresolved.iter_mut().for_each(|u| *u *= 1000);
+        let mut out = Vec::new();
+        for _ in 0..iters {
+            let r = fit_model(&work, ModelId::Ellipsoid, &FitOptions::default()).unwrap();
+            let m = r.to_model().unwrap();
+            out.push(100.0 * delta_to_model(&m, &truth).unwrap());
+            let mut tot_c = std::collections::HashMap::new();
+            let mut tot_e = std::collections::HashMap::new();
+            for k in 0..nd.bins.len() {
+                let e = m.d(nd.bins[k].m) * nd.bins[k].proj_solid_angle;
+                *tot_c.entry(blk(k)).or_insert(0.0) += nd.bins[k].count as f64;
+                *tot_e.entry(blk(k)).or_insert(0.0) += e;
+            }
+            for k in 0..nd.bins.len() {
+                let e = m.d(nd.bins[k].m) * nd.bins[k].proj_solid_angle;
+                let (c, t) = (tot_c[&blk(k)], tot_e[&blk(k)]);
+                work.bins[k].count = if t > 0.0 { (1000.0 * c * e / t).round() as u64 } else { 0 };
+            }
+        }
+        out
+    };
+    println!("  EM 2x2: {:?}", em(&ndf, 6, 2).iter().map(|e| format!("{e:.3}")).collect::<Vec<_>>());
+    println!("  EM 3x3: {:?}", em(&ndf, 6, 3).iter().map(|e| format!("{e:.3}")).collect::<Vec<_>>());
     // Behind an aperture of 45 degrees (points whose central-difference slope exceeds 1 are dropouts), the
     // fit over max_theta 45: the scan, the truth's bin integrals on its bins, and 16 lattice phases of the
     // exact slopes (those steeper than 1 dropped) on its bins.
@@ -147,12 +164,7 @@ fn main() {
         let r = fit_model(nd, ModelId::Ellipsoid, &o45).unwrap();
         100.0 * delta_to_model(&r.to_model().unwrap(), &truth).unwrap()
     };
-    let mut integ45 = nandf.clone();
-    for k in 0..nandf.bins.len() {
-        let t = nandf.bin_integral(k, ndfit::ndf::grid::QuadOrder::Fine(4), |m| truth.d(m)).unwrap();
-        integ45.bins[k].count = (t * 1000.0 * nandf.n_samples as f64).round() as u64;
-    }
-    integ45.unresolved.iter_mut().for_each(|u| *u *= 1000);
+    let integ45 = floor::bin_integral_counts(&nandf, &truth);
     let mut na = Vec::new();
     for a in 0..4 {
         for b in 0..4 {
