@@ -49,7 +49,44 @@ fn main() {
     let truth = truth.to_model().unwrap();
     let cells = std::env::var("CELLS").ok().map(|s| s.parse().expect("CELLS"));
     let ndf = empirical_ndf(&hf, &NdfOptions { cells_across: cells, ..NdfOptions::default() }).unwrap();
+    // ROT=deg: the bins of the same whitening turned by that angle (W' = R W; a probe, the rim shape of
+    // the quadrature still assumes the symmetric W).
+    let rot = std::env::var("ROT").ok().map(|s| s.parse::<f64>().expect("ROT").to_radians());
+    let turned = |nd: EmpiricalNdf, h: &ndfit::Heightfield| match rot {
+        None => nd,
+        Some(t) => {
+            let mut f = nd.frame;
+            let (sn, cs) = t.sin_cos();
+            let (w, u) = (f.whiten, f.unwhiten);
+            f.whiten =
+                [[cs * w[0][0] - sn * w[1][0], cs * w[0][1] - sn * w[1][1]], [sn * w[0][0] + cs * w[1][0], sn * w[0][1] + cs * w[1][1]]];
+            f.unwhiten =
+                [[u[0][0] * cs - u[0][1] * sn, u[0][0] * sn + u[0][1] * cs], [u[1][0] * cs - u[1][1] * sn, u[1][0] * sn + u[1][1] * cs]];
+            empirical_ndf(h, &NdfOptions { cells_across: cells, frame: Some(f), ..NdfOptions::default() }).unwrap()
+        }
+    };
+    let ndf = turned(ndf, &hf);
     println!("{p:?} {n}^2: grid {} cells across, {} bins, {} samples", ndf.grid.n, ndf.bins.len(), ndf.n_samples);
+    // Sample rows per bin along each grid axis through the footprint's centre: the cell side over the
+    // step of the whitened Lambert point between neighbouring samples, near the lobe's centre and at |p| = 1.
+    for (name, along_y) in [("columns (x)", false), ("rows (y)", true)] {
+        let (mut at0, mut at1) = ((f64::INFINITY, 0.0), (f64::INFINITY, 0.0));
+        for t in 1..n - 1 {
+            let pt = |u: usize| {
+                let (x, y) = if along_y { (s.xc(n / 2), s.yc(u)) } else { (s.xc(u), s.yc(n / 2)) };
+                g.slope(x, y).map(|v| ndf.frame.to_lambert(v[0], v[1]))
+            };
+            let (Some(a), Some(b)) = (pt(t), pt(t + 1)) else { continue };
+            let (r, step) = (a[0].hypot(a[1]), (b[0] - a[0]).hypot(b[1] - a[1]));
+            if r < at0.0 {
+                at0 = (r, ndf.grid.h / step);
+            }
+            if (r - 1.0).abs() < (at1.0 - 1.0f64).abs() {
+                at1 = (r, ndf.grid.h / step);
+            }
+        }
+        println!("  samples per bin along the {name}: {:.1} at |p| {:.2}, {:.1} at |p| {:.2}", at0.1, at0.0, at1.1, at1.0);
+    }
     let z = |i: usize, j: usize| hf.z[i * n + j];
     let (mut same, mut dense) = (Vec::new(), Vec::new());
     for i in 0..n {
@@ -158,7 +195,7 @@ fn main() {
             }
         }
     }
-    let nandf = empirical_ndf(&nah, &NdfOptions::default()).unwrap();
+    let nandf = turned(empirical_ndf(&nah, &NdfOptions::default()).unwrap(), &nah);
     let o45 = FitOptions { max_theta: 45f64.to_radians(), ..FitOptions::default() };
     let fit45 = |nd: &EmpiricalNdf| {
         let r = fit_model(nd, ModelId::Ellipsoid, &o45).unwrap();
