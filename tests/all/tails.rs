@@ -140,8 +140,9 @@ fn na_cut_at_45_degrees_fits_within_one_percent() {
 /// with default options (the `core` tail rule): every case within 0.3% NDF error of the cap's exact NDF
 /// (the truth, Walter et al. eq. 1), except the 10:1 cap at alpha 0.02 (about 50 samples across its narrow
 /// half-width), within 0.4%: what is left there is the midpoint rule on its coarse bins and the sample
-/// lattice's phase, not its tail (objective.md, "What the core leaves"; `what_the_core_leaves_on_the_ten_to_one_cap`); and every case at
-/// least three times closer than with every bin kept (`--tail all`).
+/// lattice's phase, not its tail (objective.md, "What the core leaves";
+/// `what_the_core_leaves_on_the_ten_to_one_cap`); and every case at least three times closer than with
+/// every bin kept (`--tail all`).
 #[test]
 fn hard_end_set_at_1024_with_default_options() {
     let cases = [
