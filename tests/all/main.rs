@@ -8,6 +8,7 @@ mod cli;
 mod export;
 mod facade;
 mod fit;
+mod grid_turn;
 mod hostile;
 mod models;
 mod ndf;
