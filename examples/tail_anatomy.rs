@@ -49,8 +49,8 @@ fn main() {
     let truth = truth.to_model().unwrap();
     let cells = std::env::var("CELLS").ok().map(|s| s.parse().expect("CELLS"));
     let ndf = empirical_ndf(&hf, &NdfOptions { cells_across: cells, ..NdfOptions::default() }).unwrap();
-    // ROT=deg: the bins of the same whitening turned by that angle (W' = R W; a probe, the rim shape of
-    // the quadrature still assumes the symmetric W).
+    // ROT=deg: the bins of the same whitening turned by that angle further (W' = R W; the default frame is
+    // already turned by `SlopeFrame::grid_turn`, so ROT=-22.5 on a theta_z = 0 cap gives the symmetric W).
     let rot = std::env::var("ROT").ok().map(|s| s.parse::<f64>().expect("ROT").to_radians());
     let turned = |nd: EmpiricalNdf, h: &ndfit::Heightfield| match rot {
         None => nd,

@@ -352,7 +352,7 @@ mod tests {
         assert!((p[0].hypot(p[1]) - LAMBERT_RADIUS).abs() < 1e-12);
     }
 
-    /// W = Sigma^(-1/2): W Sigma W = I, and a zero covariance is floored.
+    /// W = R(t) Sigma^(-1/2): W Sigma W^T = I, W U = I, and a zero covariance is floored.
     #[test]
     fn whitening_and_floor() {
         let f = SlopeFrame::new([0.0, 0.0], [[0.04, 0.015], [0.015, 0.01]]);
@@ -362,10 +362,13 @@ mod tests {
                 let mut v = 0.0;
                 for k in 0..2 {
                     for l in 0..2 {
-                        v += w[i][k] * c[k][l] * w[l][j];
+                        v += w[i][k] * c[k][l] * w[j][l];
                     }
                 }
                 assert!((v - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
+                let u = f.unwhiten;
+                let wu = w[i][0] * u[0][j] + w[i][1] * u[1][j];
+                assert!((wu - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
             }
         }
         let z = SlopeFrame::new([1.0, 2.0], [[0.0, 0.0], [0.0, 0.0]]);
