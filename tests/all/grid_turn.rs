@@ -21,7 +21,8 @@ fn lattice_image_angle(p: [f64; 5]) -> f64 {
         for j in 2..n - 2 {
             let a = slope(i, j);
             let wa = f.to_whitened(a[0], a[1]);
-            if !(wa[0].hypot(wa[1]) < 1.0) {
+            let r = wa[0].hypot(wa[1]);
+            if r.is_nan() || r >= 1.0 {
                 continue;
             }
             for b in [slope(i, j + 1), slope(i + 1, j)] {
