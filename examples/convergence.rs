@@ -1,7 +1,8 @@
 //! Measurement tool (not a test): the convergence study of docs/ACCURACY.md. NDF error of the ellipsoid fit
 //! against the truth of synthetic ellipsoid caps (no form removal, default binning) as the scan resolution
 //! grows, for central differences with the default tail rule (`core`) and with every bin (`--tail all`), and
-//! for triangles.
+//! for triangles; and the default and every-bin fits of the truth's bin integrals on the same bins (no
+//! sampling: the midpoint rule's own error, objective.md "What the core leaves").
 //!
 //!     cargo run --release --example convergence
 //!
@@ -15,14 +16,17 @@ use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, NdfOptions, NormalScheme};
 use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings};
 
+#[path = "support/floor.rs"]
+mod floor;
+
 fn main() {
     let cases = [[0.3, 0.3, 0.0, 0.0, 0.0], [0.05, 0.05, 0.4, 0.0, 0.0], [0.35, 0.05, 0.16, 0.0, 0.3], [0.5, 0.05, -0.4, 0.1, 1.0]];
     let sizes: Vec<usize> = std::env::var("SIZES")
         .ok()
         .map(|s| s.split(',').map(|t| t.parse().expect("size")).collect())
         .unwrap_or(vec![128, 256, 512, 1024, 2048]);
-    println!("| truth (ax, ay, tx, ty, tz) | grid | across | central, default (cut) | central, --tail all | triangles |");
-    println!("| --- | --- | --- | --- | --- | --- |");
+    println!("| truth (ax, ay, tx, ty, tz) | grid | across | central, default (cut) | central, --tail all | triangles | bin integrals: default / all |");
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
     for p in cases {
         for &n in &sizes {
             let ep =
@@ -40,13 +44,18 @@ fn main() {
             let (ct, f) = err(NormalScheme::Central, TailRule::Core);
             let (c, _) = err(NormalScheme::Central, TailRule::All);
             let (t, _) = err(NormalScheme::Triangles, TailRule::All);
+            let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
+            let integ = floor::bin_integral_counts(&ndf, &truth);
+            let (fc, fa) = (floor::fit_error(&integ, &truth, TailRule::Core), floor::fit_error(&integ, &truth, TailRule::All));
             println!(
-                "| {p:?} | {n}^2 | {} | {:.3}% ({:.1}%) | {:.3}% | {:.3}% |",
+                "| {p:?} | {n}^2 | {} | {:.3}% ({:.1}%) | {:.3}% | {:.3}% | {:.3}% / {:.3}% |",
                 row.min(col),
                 100.0 * ct,
                 100.0 * f,
                 100.0 * c,
-                100.0 * t
+                100.0 * t,
+                100.0 * fc,
+                100.0 * fa
             );
         }
     }

@@ -4,7 +4,9 @@
 //! `unresolved` rule, the error of the despiked fit of the same
 //! scan with 0.05% spikes of +-50 Sq against the clean scan's fit, and with an aperture of 45 degrees
 //! (points steeper than 45 degrees dropped) the error against the truth over max_theta 45 and 40
-//! degrees (default tail rule).
+//! degrees (default tail rule). Then what no fit region removes (objective.md, "What the core leaves"):
+//! the default fit of the truth's bin integrals (no sampling: the midpoint rule's error on these bins),
+//! and the spread of the default fit over 16 phases of the sample lattice (exact slopes).
 //!
 //!     cargo run --release --example hard_end            # 1024^2
 //!     N=2048 cargo run --release --example hard_end
@@ -18,6 +20,9 @@ use ndfit::preprocess::despike::{despike, Despike};
 use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
 use ndfit::Heightfield;
 
+#[path = "support/floor.rs"]
+mod floor;
+
 /// The ellipsoid fit, or the error's message.
 fn fit(hf: &Heightfield, opts: &FitOptions) -> Result<Model, String> {
     let ndf = empirical_ndf(hf, &NdfOptions::default()).map_err(|e| e.to_string())?;
@@ -26,13 +31,18 @@ fn fit(hf: &Heightfield, opts: &FitOptions) -> Result<Model, String> {
 
 fn main() {
     let n: usize = std::env::var("N").ok().map(|s| s.parse().expect("N")).unwrap_or(1024);
-    println!("| truth (ax, ay, tx, ty, tz), {n}^2 | default (--tail core) | --tail all | --tail unresolved | spikes, despiked (not) vs clean fit | NA 45: max_theta 45 / 40 |");
-    println!("| --- | --- | --- | --- | --- | --- |");
+    println!("| truth (ax, ay, tx, ty, tz), {n}^2 | default (--tail core) | --tail all | --tail unresolved | spikes, despiked (not) vs clean fit | NA 45: max_theta 45 / 40 | bin integrals (default) | 16 lattice phases: median (min-max) |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     for p in HARD_END_SET {
         let ep =
             EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
-        let (hf, truth) = ellipsoid_surface(&SynthSettings { nx: n, ny: n, seed: 7, ..SynthSettings::default() }, &ep).expect("synth");
+        let s = SynthSettings { nx: n, ny: n, seed: 7, ..SynthSettings::default() };
+        let (hf, truth) = ellipsoid_surface(&s, &ep).expect("synth");
         let truth = truth.to_model().expect("truth");
+        let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
+        let integrals = floor::fit_error(&floor::bin_integral_counts(&ndf, &truth), &truth, TailRule::Core);
+        let g = ndfit::synth::ellipsoid::EllipsoidGeometry::new(&ep, &s).expect("geometry");
+        let (lo, med, hi) = floor::phase_spread(&ndf, &g, &s, &truth);
         let d = |m: &Result<Model, String>, r: &Result<Model, String>| match (m, r) {
             (Ok(m), Ok(r)) => format!("{:.3}%", 100.0 * delta_to_model(m, r).expect("delta")),
             (Err(e), _) | (_, Err(e)) => format!("failed ({e})"),
@@ -69,14 +79,18 @@ fn main() {
         let na45 = fit(&na, &o45);
         let na40 = fit(&na, &FitOptions { max_theta: 40f64.to_radians(), ..FitOptions::default() });
         println!(
-            "| {p:?} | {} | {} | {} | {} ({}) | {} / {} |",
+            "| {p:?} | {} | {} | {} | {} ({}) | {} / {} | {:.3}% | {:.3}% ({:.3}-{:.3}%) |",
             d(&clean, &truth),
             d(&all, &truth),
             d(&cut, &truth),
             d(&despiked, &clean),
             d(&raw, &clean),
             d(&na45, &truth),
-            d(&na40, &truth)
+            d(&na40, &truth),
+            100.0 * integrals,
+            100.0 * med,
+            100.0 * lo,
+            100.0 * hi
         );
     }
 }

@@ -46,12 +46,8 @@ pub fn quality(ndf: &EmpiricalNdf, model: &dyn Ndf, max_theta: f64) -> Result<Qu
 /// every bin.
 pub fn quality_in(ndf: &EmpiricalNdf, model: &dyn Ndf, max_theta: f64, tail_rule: &str) -> Result<Quality> {
     let cos_max = max_theta.min(std::f64::consts::FRAC_PI_2).cos();
-    let r2 = crate::fit::tail::CORE_RADIUS * crate::fit::tail::CORE_RADIUS;
     let kept = |k: usize, b: &crate::ndf::NdfBin| match tail_rule {
-        "core" => {
-            let p = ndf.frame.to_lambert(-b.m.x / b.m.z, -b.m.y / b.m.z);
-            p[0] * p[0] + p[1] * p[1] <= r2
-        }
+        "core" => !crate::fit::tail::outside_core(ndf, k),
         "unresolved" => ndf.unresolved.get(k).is_none_or(|&u| 2 * u <= b.count),
         _ => true,
     };

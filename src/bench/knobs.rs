@@ -128,6 +128,7 @@ impl Knobs {
                 // The identity frame: whitening does nothing, the map is the plain Lambert map of m.
                 Binning::Plain => Some(SlopeFrame::new([0.0, 0.0], [[1.0, 0.0], [0.0, 1.0]])),
             },
+            resolution: None,
         }
     }
 

@@ -29,7 +29,16 @@ const IQR_NORMAL: f64 = 1.348_979_500_392_163_5;
 /// Radius of the Lambert disk the hemisphere maps onto.
 pub const LAMBERT_RADIUS: f64 = std::f64::consts::SQRT_2;
 
-/// A centred, whitened frame of slope space: `s' = W (s - c)` with `W = Sigma^(-1/2)` (symmetric).
+/// Where the bin grid puts the image of the sample lattice's axes: at this angle from its rows and
+/// columns (modulo 45 degrees), by the turn `R(t)` of the frame's whitening `W = R(t) Sigma^(-1/2)` (any
+/// `R W` whitens as well); see [`SlopeFrame::grid_turn`] for `t`. 22.5 degrees is midway between the
+/// grid's axes and its diagonals, and `tan(22.5 deg) = sqrt 2 - 1` has the continued fraction
+/// `[0; 2, 2, 2, ...]`: no short lattice vector lies near a bin row, so no row of samples runs along a
+/// row of bins (the moire of a narrow lobe, objective.md "What the core leaves").
+pub const LATTICE_IMAGE_ANGLE: f64 = std::f64::consts::FRAC_PI_8;
+
+/// A centred, whitened frame of slope space: `s' = W (s - c)` with `W = R(t) Sigma^(-1/2)`
+/// ([`SlopeFrame::grid_turn`]).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SlopeFrame {
     /// Robust centre `c` of the slopes (coordinate-wise median), `grad h` convention of Heitz eq. 61.
@@ -37,9 +46,9 @@ pub struct SlopeFrame {
     /// Robust covariance `Sigma` of the slopes (Gaussian-consistent: IQR / 1.349 per axis and the
     /// Gnanadesikan-Kettenring identity for the correlation), after the floors.
     pub cov: [[f64; 2]; 2],
-    /// Whitening `W = Sigma^(-1/2)`.
+    /// Whitening `W = R(t) Sigma^(-1/2)` (`W Sigma W^T = I`; [`SlopeFrame::grid_turn`]).
     pub whiten: [[f64; 2]; 2],
-    /// Its inverse `Sigma^(1/2)`.
+    /// Its inverse `Sigma^(1/2) R(-t)`.
     pub unwhiten: [[f64; 2]; 2],
     /// `det Sigma^(1/2)`, the Jacobian `d^2 s / d^2 s'`.
     pub det_unwhiten: f64,
@@ -65,7 +74,38 @@ impl SlopeFrame {
         let sym =
             |d1: f64, d2: f64| [[cs * cs * d1 + sn * sn * d2, cs * sn * (d1 - d2)], [cs * sn * (d1 - d2), sn * sn * d1 + cs * cs * d2]];
         let center = if center[0].is_finite() && center[1].is_finite() { center } else { [0.0, 0.0] };
-        SlopeFrame { center, cov: sym(l1, l2), whiten: sym(1.0 / r1, 1.0 / r2), unwhiten: sym(r1, r2), det_unwhiten: r1 * r2 }
+        // W = R S^-1 and U = S R^T with S = Sigma^(1/2) symmetric, R = [[ct, -st], [st, ct]].
+        let (w, u) = (sym(1.0 / r1, 1.0 / r2), sym(r1, r2));
+        let (st, ct) = Self::grid_turn(u).sin_cos();
+        let whiten =
+            [[ct * w[0][0] - st * w[1][0], ct * w[0][1] - st * w[1][1]], [st * w[0][0] + ct * w[1][0], st * w[0][1] + ct * w[1][1]]];
+        let unwhiten =
+            [[u[0][0] * ct - u[0][1] * st, u[0][0] * st + u[0][1] * ct], [u[1][0] * ct - u[1][1] * st, u[1][0] * st + u[1][1] * ct]];
+        SlopeFrame { center, cov: sym(l1, l2), whiten, unwhiten, det_unwhiten: r1 * r2 }
+    }
+
+    /// The turn `t` of the whitening `W = R(t) Sigma^(-1/2)` for `Sigma^(1/2)` = `root` (symmetric).
+    ///
+    /// Derivation: on a lobe the slopes are an affine image of the positions, `s = c + H x` with `H` the
+    /// height's Hessian (symmetric); a cap (Walter et al. sec. 4, the surfaces that give the ellipsoid NDF)
+    /// covers the footprint `x^T H x <= r^2`, over which the positions have `Cov(x) ~ H^-1`, so
+    /// `Sigma = H Cov(x) H ~ H`. A lattice step `e` (a sample row or column) then moves the symmetrically
+    /// whitened slope by `Sigma^(-1/2) H e ~ Sigma^(1/2) e`: the images of the lattice's axes are the
+    /// columns of `Sigma^(1/2)`, at the angles `g_x`, `g_y`. With `theta_z = 0` (or any round lobe) they
+    /// are the grid's axes, the case of the moire; with a strong anisotropy both lie near the principal
+    /// axis `-theta_z`, so no constant turn suits every `theta_z`. `t` puts the images' mean direction
+    /// modulo 45 degrees (the circular mean of `8 g`, divided by 8) at [`LATTICE_IMAGE_ANGLE`].
+    pub fn grid_turn(root: [[f64; 2]; 2]) -> f64 {
+        let (gx, gy) = (root[1][0].atan2(root[0][0]), root[1][1].atan2(root[0][1]));
+        let (sy, sx) = ((8.0 * gx).sin() + (8.0 * gy).sin(), (8.0 * gx).cos() + (8.0 * gy).cos());
+        // Guard: images exactly 22.5 degrees apart (mod 45) have no mean; any turn is as good, keep gx's.
+        let mid = if sx.hypot(sy) > 1e-9 { sy.atan2(sx) / 8.0 } else { gx };
+        let t = LATTICE_IMAGE_ANGLE - mid;
+        if t.is_finite() {
+            t
+        } else {
+            LATTICE_IMAGE_ANGLE
+        }
     }
 
     /// The robust frame of a sample of slopes (any order; the slice is reordered). An empty sample gives
@@ -217,9 +257,13 @@ impl SlopeFrame {
         let (a, b, c) = (self.cov[0][0], self.cov[0][1], self.cov[1][1]);
         let half = (0.25 * (a - c) * (a - c) + b * b).sqrt();
         let (lmax, lmin) = (0.5 * (a + c) + half, (0.5 * (a + c) - half).max(0.0));
-        // Eigenvector of the small eigenvalue: angle of the major axis plus 90 degrees. The whitening is
-        // symmetric, so the axis is the same in whitened and Lambert coordinates.
-        let axis = 0.5 * (2.0 * b).atan2(a - c) + std::f64::consts::FRAC_PI_2;
+        // The squeezed direction of whitened (= Lambert) coordinates is where |U d| is smallest: the
+        // eigenvector of U^T U (= R Sigma R^T, same eigenvalues) of the small eigenvalue, i.e. the angle
+        // of the major axis plus 90 degrees. From U itself, so any whitening `R Sigma^(-1/2)` is followed.
+        let u = &self.unwhiten;
+        let (ma, mb, mc) =
+            (u[0][0] * u[0][0] + u[1][0] * u[1][0], u[0][0] * u[0][1] + u[1][0] * u[1][1], u[0][1] * u[0][1] + u[1][1] * u[1][1]);
+        let axis = 0.5 * (2.0 * mb).atan2(ma - mc) + std::f64::consts::FRAC_PI_2;
         super::grid::RimShape { ring: self.ring_scale(), axis, width: (lmin / lmax).sqrt(), core: 1.0 / lmax.sqrt() }
     }
 
@@ -308,7 +352,7 @@ mod tests {
         assert!((p[0].hypot(p[1]) - LAMBERT_RADIUS).abs() < 1e-12);
     }
 
-    /// W = Sigma^(-1/2): W Sigma W = I, and a zero covariance is floored.
+    /// W = R(t) Sigma^(-1/2): W Sigma W^T = I, W U = I, and a zero covariance is floored.
     #[test]
     fn whitening_and_floor() {
         let f = SlopeFrame::new([0.0, 0.0], [[0.04, 0.015], [0.015, 0.01]]);
@@ -318,10 +362,13 @@ mod tests {
                 let mut v = 0.0;
                 for k in 0..2 {
                     for l in 0..2 {
-                        v += w[i][k] * c[k][l] * w[l][j];
+                        v += w[i][k] * c[k][l] * w[j][l];
                     }
                 }
                 assert!((v - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
+                let u = f.unwhiten;
+                let wu = w[i][0] * u[0][j] + w[i][1] * u[1][j];
+                assert!((wu - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
             }
         }
         let z = SlopeFrame::new([1.0, 2.0], [[0.0, 0.0], [0.0, 0.0]]);

@@ -127,6 +127,10 @@ pub struct NdfOptions {
     pub target_count: f64,
     /// Use this binning frame instead of estimating one (to put two NDFs on identical bins).
     pub frame: Option<SlopeFrame>,
+    /// Whether to count the normals the sampling does not resolve ([`resolution::assess`], the tail rule's
+    /// and the CSV's `unresolved` data): `None` or `Some(true)` does, `Some(false)` skips that pass (the
+    /// pipeline's choice when nothing needs it, [`crate::pipeline::Options::ndf_options`]).
+    pub resolution: Option<bool>,
 }
 
 /// Default mean count per bin: see `data_formats/ndf_csv.md` ("resolution") for the measurement behind it.
@@ -144,7 +148,7 @@ pub const FRAME_SUBSAMPLE: usize = 1 << 15;
 
 impl Default for NdfOptions {
     fn default() -> Self {
-        NdfOptions { scheme: NormalScheme::Central, cells_across: None, target_count: DEFAULT_TARGET_COUNT, frame: None }
+        NdfOptions { scheme: NormalScheme::Central, cells_across: None, target_count: DEFAULT_TARGET_COUNT, frame: None, resolution: None }
     }
 }
 
@@ -282,8 +286,10 @@ fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize
     }
     let grid = BinGrid::new(cells);
 
-    // The resolution test (central differences) runs in the same pass, on the rows in cache.
-    let res = (scheme == NormalScheme::Central && grid.n > 0).then(|| resolution::RowTest::new(frame, grid, src.shape(), stencils));
+    // The resolution test (central differences) runs in the same pass, on the rows in cache, unless the
+    // caller said nothing reads it.
+    let res = (scheme == NormalScheme::Central && grid.n > 0 && opts.resolution != Some(false))
+        .then(|| resolution::RowTest::new(frame, grid, src.shape(), stencils));
     let mut acc = histogram(src, scheme, &frame, &grid, rows, res.as_ref());
     if acc.n == 0 {
         return Err(no_valid());

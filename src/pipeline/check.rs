@@ -67,7 +67,7 @@ pub fn ndf_options(scheme: NormalScheme, cells_across: Option<usize>, target_cou
     if !(target_count.is_finite() && target_count >= 1.0) {
         return Err(Error::invalid(format!("{} {target_count} must be at least 1", s.name("target_count"))));
     }
-    Ok(NdfOptions { scheme, cells_across, target_count, frame: None })
+    Ok(NdfOptions { scheme, cells_across, target_count, frame: None, resolution: None })
 }
 
 /// Extra ellipsoid starts beyond the default two: 0 to 4.

@@ -63,18 +63,21 @@ impl Options {
     }
 
     /// The NDF options for `scan` (preprocessed): [`Options::ndf`], or the preset's, whose capped grid
-    /// may need the scan's valid count; an explicit `cells_across` wins over the preset's.
+    /// may need the scan's valid count; an explicit `cells_across` wins over the preset's. Unless
+    /// `ndf.resolution` says otherwise, the unresolved normals are counted only when the fit's tail rule
+    /// reads them (not for `--tail all`).
     pub fn ndf_options(&self, scan: &Scan) -> NdfOptions {
         self.ndf_options_with(|| scan.valid_count() as u64)
     }
 
     /// [`Options::ndf_options`] for a scan of `valid()` valid points (called only when the preset needs it).
     fn ndf_options_with(&self, valid: impl FnOnce() -> u64) -> NdfOptions {
+        let resolution = Some(self.ndf.resolution.unwrap_or(self.fit.tail != crate::fit::tail::TailRule::All));
         match self.preset {
-            None => self.ndf.clone(),
+            None => NdfOptions { resolution, ..self.ndf.clone() },
             Some(p) => {
                 let po = p.ndf_options(if p.needs_sample_count() { valid() } else { 0 });
-                NdfOptions { cells_across: self.ndf.cells_across.or(po.cells_across), ..po }
+                NdfOptions { cells_across: self.ndf.cells_across.or(po.cells_across), resolution, ..po }
             }
         }
     }

@@ -83,7 +83,7 @@ impl Preset {
     /// the automatic one for [`PresetKnobs::target_count`], capped at [`PresetKnobs::max_cells`]).
     pub fn ndf_options(self, samples: u64) -> NdfOptions {
         let k = self.knobs();
-        let auto = NdfOptions { scheme: k.scheme, cells_across: None, target_count: k.target_count, frame: None };
+        let auto = NdfOptions { scheme: k.scheme, cells_across: None, target_count: k.target_count, frame: None, resolution: None };
         if k.max_cells >= MAX_AUTO_CELLS {
             // The automatic choice caps there already; leaving it automatic keeps the NDF's own guards
             // (the quantized-height cap) exactly as `ndfit fit` without a preset.

@@ -9,6 +9,7 @@ mod export;
 mod facade;
 mod fit;
 mod fused_resolution;
+mod grid_turn;
 mod hostile;
 mod models;
 mod ndf;

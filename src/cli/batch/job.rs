@@ -69,7 +69,11 @@ pub fn fit_scan(cfg: &JobConfig, spec: &ScanSpec, ctx: &JobContext<'_>) -> Resul
     let per = parse_scan_options(cfg, spec)?;
     let path: PathBuf = per.fit.scan.scan.clone();
     let model = parse_model(spec.model.as_deref().unwrap_or(&cfg.model)).map_err(|e| e.with_path(&path))?;
-    let opts = per.fit.options(model).map_err(|e| e.with_path(&path))?;
+    let mut opts = per.fit.options(model).map_err(|e| e.with_path(&path))?;
+    // The NDF CSV carries the unresolved counts whatever the tail rule.
+    if cfg.write_ndf {
+        opts.ndf.resolution = Some(true);
+    }
     let r = pipeline::fit_scan(&path, &opts, ctx.baseline)?;
     if cfg.write_ndf {
         let csv = ctx.extra_path("ndf", ".ndf.csv");

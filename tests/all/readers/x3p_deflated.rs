@@ -66,13 +66,17 @@ fn deflated_and_stored_point_data_read_and_fit_identically() {
         assert_eq!((s.nx, s.ny, f.nx, f.ny), (nx, ny, nx, ny));
         assert!(s.z.iter().zip(f.z.iter()).all(|(a, b)| a.to_bits() == b.to_bits()), "{ztype} {cz}: heights differ");
         assert!(f.z.iter().any(|v| v.is_finite()));
-        let fit = |p: &std::path::Path| {
-            let out = ndfit::Pipeline::new(ndfit::Options::default()).run_path(p).unwrap();
-            let mut v = serde_json::to_value(&out.fit).unwrap();
-            for k in ["timings", "input"] {
-                v.as_object_mut().unwrap().remove(k);
+        // The same outcome from both files: the same fit, or (this surface is rough at the sampling step,
+        // where no model may fit) the same error but for the file's name.
+        let fit = |p: &std::path::Path| match ndfit::Pipeline::new(ndfit::Options::default()).run_path(p) {
+            Ok(out) => {
+                let mut v = serde_json::to_value(&out.fit).unwrap();
+                for k in ["timings", "input"] {
+                    v.as_object_mut().unwrap().remove(k);
+                }
+                v
             }
-            v
+            Err(e) => serde_json::json!({ "error": e.to_string().replace(p.to_str().unwrap(), "") }),
         };
         if ztype == "D" {
             assert_eq!(fit(&ps), fit(&pd), "{cz}");
