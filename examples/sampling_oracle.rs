@@ -14,6 +14,9 @@ use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions};
 use ndfit::synth::ellipsoid::EllipsoidGeometry;
 use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
 
+#[path = "support/floor.rs"]
+mod floor;
+
 /// The NDF `ndf` with its counts replaced by those of `slopes` (same bins, frame and `W`).
 fn recount(ndf: &EmpiricalNdf, slopes: &[[f64; 2]]) -> EmpiricalNdf {
     let mut cnt = vec![0u64; ndf.grid.cells()];
@@ -58,20 +61,7 @@ fn main() {
             }
         }
         let cut = |nd: &EmpiricalNdf, pmax: f64| {
-            let mut o = nd.clone();
-            o.unresolved_share = Some(0.01);
-            o.unresolved = o
-                .bins
-                .iter()
-                .map(|b| {
-                    let q = nd.frame.to_lambert(-b.m.x / b.m.z, -b.m.y / b.m.z);
-                    if q[0].hypot(q[1]) > pmax {
-                        b.count + 1
-                    } else {
-                        0
-                    }
-                })
-                .collect();
+            let o = floor::cut_beyond_radius(nd, pmax);
             let r = fit_model(&o, ModelId::Ellipsoid, &FitOptions { tail: TailRule::Unresolved, ..FitOptions::default() }).unwrap();
             100.0 * delta_to_model(&r.to_model().unwrap(), &truth).unwrap()
         };

@@ -125,23 +125,7 @@ fn main() {
     for (name, nd) in [("central", &ndf), ("exact same", &ex), ("dense (scaled)", &de), ("bin integrals", &integ), ("midpoint", &mid)] {
         println!("  {name:>16}: core {:.3}%  all {:.3}%", fit(nd, TailRule::Core), fit(nd, TailRule::All));
     }
-    let cutr = |nd: &EmpiricalNdf, pmax: f64| {
-        let mut o = nd.clone();
-        o.unresolved_share = Some(0.01);
-        o.unresolved = o
-            .bins
-            .iter()
-            .map(|b| {
-                let q = nd.frame.to_lambert(-b.m.x / b.m.z, -b.m.y / b.m.z);
-                if q[0].hypot(q[1]) > pmax {
-                    b.count + 1
-                } else {
-                    0
-                }
-            })
-            .collect();
-        fit(&o, TailRule::Unresolved)
-    };
+    let cutr = |nd: &EmpiricalNdf, pmax: f64| fit(&floor::cut_beyond_radius(nd, pmax), TailRule::Unresolved);
     for pm in [0.8, 0.9, 1.0, 1.1] {
         println!("   p_max {pm}: central {:.3}% exact {:.3}% integrals {:.3}%", cutr(&ndf, pm), cutr(&ex, pm), cutr(&integ, pm));
     }

@@ -49,22 +49,29 @@ pub fn surface_stats(hf: &Heightfield) -> Result<SurfaceStats> {
     Ok(SurfaceStats { valid, invalid, z_min: lo, z_max: hi, z_mean: sum / valid as f64, sq, sdq, sdq_points })
 }
 
+/// Add the squared central-difference gradients of the middle row of `[below, row, above]` (interior
+/// points whose four neighbours are valid) to `acc`, counting them in `n`, left to right.
+fn add_gradients([zd, zc, zu]: [&[f64]; 3], dx: f64, dy: f64, acc: &mut f64, n: &mut usize) {
+    for j in 1..zc.len().saturating_sub(1) {
+        let (l, r) = (zc[j - 1], zc[j + 1]);
+        let (d, u) = (zd[j], zu[j]);
+        if l.is_nan() || r.is_nan() || d.is_nan() || u.is_nan() {
+            continue;
+        }
+        let gx = (r - l) / (2.0 * dx);
+        let gy = (u - d) / (2.0 * dy);
+        *acc += gx * gx + gy * gy;
+        *n += 1;
+    }
+}
+
 /// RMS central-difference gradient of `z` (row-major `nx` x `ny`) over interior points whose four
 /// neighbours are valid; returns (Sdq, number of points). NaN and 0 when there is no such point.
 pub fn sdq_central(z: &[f64], nx: usize, ny: usize, dx: f64, dy: f64) -> (f64, usize) {
     let (mut acc, mut n) = (0.0, 0usize);
     for i in 1..ny.saturating_sub(1) {
-        for j in 1..nx.saturating_sub(1) {
-            let (l, r) = (z[i * nx + j - 1], z[i * nx + j + 1]);
-            let (d, u) = (z[(i - 1) * nx + j], z[(i + 1) * nx + j]);
-            if l.is_nan() || r.is_nan() || d.is_nan() || u.is_nan() {
-                continue;
-            }
-            let gx = (r - l) / (2.0 * dx);
-            let gy = (u - d) / (2.0 * dy);
-            acc += gx * gx + gy * gy;
-            n += 1;
-        }
+        let row = |i: usize| &z[i * nx..(i + 1) * nx];
+        add_gradients([row(i - 1), row(i), row(i + 1)], dx, dy, &mut acc, &mut n);
     }
     if n == 0 {
         (f64::NAN, 0)
@@ -107,18 +114,7 @@ pub fn surface_stats_of<S: BandSource<T = f64>>(src: &S) -> Result<SurfaceStats>
             if i == 0 || i + 1 >= ny {
                 continue;
             }
-            let (zd, zc, zu) = (row(i - 1), row(i), row(i + 1));
-            for j in 1..nx.saturating_sub(1) {
-                let (l, r) = (zc[j - 1], zc[j + 1]);
-                let (d, u) = (zd[j], zu[j]);
-                if l.is_nan() || r.is_nan() || d.is_nan() || u.is_nan() {
-                    continue;
-                }
-                let gx = (r - l) / (2.0 * dx);
-                let gy = (u - d) / (2.0 * dy);
-                acc += gx * gx + gy * gy;
-                n += 1;
-            }
+            add_gradients([row(i - 1), row(i), row(i + 1)], dx, dy, &mut acc, &mut n);
         }
     }
     let (sdq, sdq_points) = if n == 0 { (f64::NAN, 0) } else { ((acc / n as f64).sqrt(), n) };

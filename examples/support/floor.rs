@@ -65,3 +65,23 @@ pub fn phase_spread(ndf: &EmpiricalNdf, g: &EllipsoidGeometry, s: &SynthSettings
     e.sort_by(f64::total_cmp);
     (e[0], 0.5 * (e[7] + e[8]), e[15])
 }
+
+/// `nd` with every bin beyond whitened Lambert radius `pmax` marked unresolved (and the share set low
+/// enough for the rule to apply), so that `TailRule::Unresolved` fits exactly the disc `|p| <= pmax`.
+pub fn cut_beyond_radius(nd: &EmpiricalNdf, pmax: f64) -> EmpiricalNdf {
+    let mut o = nd.clone();
+    o.unresolved_share = Some(0.01);
+    o.unresolved = o
+        .bins
+        .iter()
+        .map(|b| {
+            let q = nd.frame.to_lambert(-b.m.x / b.m.z, -b.m.y / b.m.z);
+            if q[0].hypot(q[1]) > pmax {
+                b.count + 1
+            } else {
+                0
+            }
+        })
+        .collect();
+    o
+}
