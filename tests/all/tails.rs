@@ -229,13 +229,7 @@ fn cli_na_despike_and_tail_options() {
     std::fs::create_dir_all(&dir).expect("dir");
     let scan = dir.join("cap.x3p");
     let bin = crate::common::ndfit_bin();
-    let o = Command::new(&bin)
-        .arg("synth")
-        .arg(&scan)
-        .args(["--surface", "ellipsoid", "--nx", "128", "--ny", "128", "--dx", "1e-6", "--alpha-x", "0.3"])
-        .output()
-        .expect("synth");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    synth_cap(&scan);
     let fit = |args: &[&str], out: &std::path::Path| {
         Command::new(&bin).arg("fit").arg(&scan).args(["--model", "ggx", "-q", "-o"]).arg(out).args(args).output().expect("fit")
     };
@@ -368,13 +362,7 @@ fn batch_ndf_csv_keeps_the_unresolved_column_with_tail_all() {
     std::fs::create_dir_all(&scans).expect("dir");
     let bin = crate::common::ndfit_bin();
     let scan = scans.join("cap.x3p");
-    let o = Command::new(&bin)
-        .arg("synth")
-        .arg(&scan)
-        .args(["--surface", "ellipsoid", "--nx", "128", "--ny", "128", "--dx", "1e-6", "--alpha-x", "0.3"])
-        .output()
-        .expect("synth");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    synth_cap(&scan);
     let out = dir.path().join("out");
     let o = Command::new(&bin)
         .arg("batch")
@@ -398,4 +386,15 @@ fn batch_ndf_csv_keeps_the_unresolved_column_with_tail_all() {
     assert!(batch.iter().all(|u| u.parse::<u64>().is_ok()), "{:?}", &batch[..5]);
     assert!(batch.iter().any(|u| u != "0"));
     assert_eq!(batch, column(&ndf_csv));
+}
+
+/// Write the 128^2 alpha 0.3 cap the CLI tests fit, through `ndfit synth`.
+fn synth_cap(scan: &std::path::Path) {
+    let o = std::process::Command::new(crate::common::ndfit_bin())
+        .arg("synth")
+        .arg(scan)
+        .args(["--surface", "ellipsoid", "--nx", "128", "--ny", "128", "--dx", "1e-6", "--alpha-x", "0.3"])
+        .output()
+        .expect("synth");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
