@@ -229,12 +229,13 @@ def ridge_starts(model: str, parent: np.ndarray, bins, log_expected):
     su = s @ np.array([math.cos(tz), -math.sin(tz)])
     sv = s @ np.array([math.sin(tz), math.cos(tz)])
     out = []
-    for along, across, a_across, first in ((su, sv, ay, True), (sv, su, ax, False)):
-        band = (np.abs(across) <= 0.5 * a_across) & (x > 0)
-        if not np.any(band):
-            continue
-        held = float(x[band].sum())
-        width = max(math.sqrt(float(x[band] @ along[band] ** 2) / held), 1.5 * ALPHA_FLOOR)
-        lobe = (width, 1.5 * ALPHA_FLOOR) if first else (1.5 * ALPHA_FLOOR, width)
-        out.append(np.array([*lobe, ax, ay, tz, min(max(held / n, 0.005), 0.5)]))
+    for along, across, a_along, a_across, first in ((su, sv, ax, ay, True), (sv, su, ay, ax, False)):
+        for reach in (math.inf, 0.5 * a_along):
+            band = (np.abs(across) <= 0.5 * a_across) & (np.abs(along) <= reach) & (x > 0)
+            if not np.any(band):
+                continue
+            held = float(x[band].sum())
+            width = max(math.sqrt(float(x[band] @ along[band] ** 2) / held), 1.5 * ALPHA_FLOOR)
+            lobe = (width, 1.5 * ALPHA_FLOOR) if first else (1.5 * ALPHA_FLOOR, width)
+            out.append(np.array([*lobe, ax, ay, tz, min(max(held / n, 0.005), 0.5)]))
     return out
