@@ -8,20 +8,12 @@ use ndfit::fit::tail::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings};
+use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
 
 fn main() {
-    let cases = [
-        [0.35, 0.05, 0.16, 0.0, 0.3],
-        [0.2, 0.02, 0.0, 0.4, 0.0],
-        [0.5, 0.05, -0.4, 0.1, 1.0],
-        [0.1, 0.02, 0.2, 0.2, -0.7],
-        [0.05, 0.05, 0.4, 0.0, 0.0],
-        [0.02, 0.02, 0.3, -0.3, 0.0],
-        [0.3, 0.1, 0.3, -0.2, 0.8],
-        [1.5, 0.15, -0.5, 0.5, -1.0],
-        [0.9, 0.5, 0.0, 0.0, 0.2],
-    ];
+    // The hard-end caps without the round one, then three rougher ones.
+    let extra = [[0.3, 0.1, 0.3, -0.2, 0.8], [1.5, 0.15, -0.5, 0.5, -1.0], [0.9, 0.5, 0.0, 0.0, 0.2]];
+    let cases: Vec<[f64; 5]> = HARD_END_SET[..6].iter().chain(&extra).copied().collect();
     let cases256 = [
         [0.05, 0.05, 0.0, 0.0, 0.0],
         [0.3, 0.3, 0.0, 0.0, 0.0],
@@ -30,7 +22,7 @@ fn main() {
         [0.25, 0.25, 0.45, 0.0, 0.0],
         [0.35, 0.2, 0.0, -0.35, 1.0],
     ];
-    let cases: Vec<[f64; 5]> = if std::env::var("SET256").is_ok() { cases256.to_vec() } else { cases.to_vec() };
+    let cases: Vec<[f64; 5]> = if std::env::var("SET256").is_ok() { cases256.to_vec() } else { cases };
     let n: usize = std::env::var("N").ok().map(|s| s.parse().unwrap()).unwrap_or(1024);
     let tols: Vec<f64> =
         std::env::var("TOLS").ok().map(|s| s.split(',').map(|t| t.parse().unwrap()).collect()).unwrap_or(vec![0.002, 0.005, 0.01]);

@@ -39,6 +39,12 @@ pub struct InputInfo {
 impl InputInfo {
     /// Describe `hf` read from `path`.
     pub fn new(path: &Path, hf: &Scan) -> InputInfo {
+        Self::with_invalid(path, hf, hf.invalid_count())
+    }
+
+    /// [`InputInfo::new`] with the invalid points counted by the caller (a scan whose spikes are masked
+    /// apart from its heights, [`crate::preprocess::Prepared`]).
+    pub fn with_invalid(path: &Path, hf: &Scan, invalid: usize) -> InputInfo {
         InputInfo {
             path: path.display().to_string(),
             format: hf.meta.format.clone(),
@@ -46,7 +52,7 @@ impl InputInfo {
             ny: hf.ny,
             dx: hf.dx,
             dy: hf.dy,
-            invalid: hf.invalid_count(),
+            invalid,
             file_grid: hf.meta.file_grid.filter(|g| *g != [hf.nx, hf.ny]),
             despike: hf.meta.despike.clone(),
         }

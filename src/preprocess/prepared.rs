@@ -138,17 +138,6 @@ impl Prepared<'_> {
     /// The fit report's description of this scan read from `path` (as [`crate::fit::InputInfo::new`]
     /// gives for the scan [`Prepared::into_scan`] makes).
     pub fn input_info(&self, path: &std::path::Path) -> crate::fit::InputInfo {
-        let hf = &self.raw;
-        crate::fit::InputInfo {
-            path: path.display().to_string(),
-            format: hf.meta.format.clone(),
-            nx: hf.nx,
-            ny: hf.ny,
-            dx: hf.dx,
-            dy: hf.dy,
-            invalid: self.invalid_count(),
-            file_grid: hf.meta.file_grid.filter(|g| *g != [hf.nx, hf.ny]),
-            despike: hf.meta.despike.clone(),
-        }
+        crate::fit::InputInfo::with_invalid(path, &self.raw, self.invalid_count())
     }
 }
