@@ -8,6 +8,10 @@
 //! in cache. Each finished block is handed, read-only, to a thread computing the MD5 that ISO 5436-2
 //! records for the point data, so the checksum costs no wall time when a core is free. The zip reader
 //! still checks the entry's CRC-32 at its end, which is read to the last byte.
+//!
+//! When the zip's bytes are in memory (a mapped file), the entry is inflated with `flate2::Decompress`
+//! straight from those bytes into the heights: the `Read` adapter chain copied every compressed byte
+//! through a buffer first, and its CRC-32 is then computed beside the MD5 on the hashing thread.
 
 use std::io::Read;
 
@@ -25,10 +29,12 @@ const MAX_DEFLATE_RATIO: u64 = 1032;
 
 /// The heights of X3P point data entry `name` when the zip stores it compressed (`None` when stored:
 /// the caller reads those bytes in place). The entry must declare exactly `n` values of type `t`;
-/// `md5_want` is the point-data MD5 recorded in main.xml, checked when given.
+/// `md5_want` is the point-data MD5 recorded in main.xml, checked when given. `file` holds the zip's
+/// bytes when they are in memory (then a deflated entry is inflated from them in place).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn read_deflated_points<R: Read + std::io::Seek>(
     zip: &mut zip::ZipArchive<R>,
+    file: Option<&[u8]>,
     name: &str,
     n: usize,
     t: ZType,
@@ -55,7 +61,100 @@ pub(crate) fn read_deflated_points<R: Read + std::io::Seek>(
             entry.compressed_size()
         )));
     }
+    if let (Some(file), zip::CompressionMethod::Deflated, false) = (file, entry.compression(), entry.encrypted()) {
+        let start = entry.data_start().ok_or_else(|| Error::corrupt(format!("{name}: no data offset")))?;
+        let compressed = entry.compressed_size();
+        let input = usize::try_from(start)
+            .ok()
+            .zip(usize::try_from(compressed).ok())
+            .and_then(|(a, len)| a.checked_add(len).and_then(|b| file.get(a..b)))
+            .ok_or_else(|| Error::corrupt(format!("{name}: truncated, its {compressed} compressed bytes are not all in the file")))?;
+        let src = SliceInflate { d: flate2::Decompress::new(false), input, pos: 0 };
+        return inflate_from(src, Some(entry.crc32()), name, n, t, inc, off, md5_want).map(Some);
+    }
     inflate_heights(entry, name, n, t, inc, off, md5_want).map(Some)
+}
+
+/// Where the inflated bytes come from: a `Read` (the zip crate's entry reader, which checks the CRC-32
+/// itself) or raw deflate bytes in memory.
+trait Source {
+    /// Fill `buf` completely; `done` is the count already delivered (for the message of a short stream).
+    fn fill(&mut self, buf: &mut [u8], name: &str, done: usize, need: usize) -> Result<()>;
+    /// Check that the stream ends exactly after the `need` bytes delivered.
+    fn end(&mut self, name: &str, need: usize) -> Result<()>;
+}
+
+struct ReadSource<R>(R);
+
+impl<R: Read> Source for ReadSource<R> {
+    fn fill(&mut self, buf: &mut [u8], name: &str, done: usize, need: usize) -> Result<()> {
+        fill_block(&mut self.0, buf, name, done, need)
+    }
+
+    fn end(&mut self, name: &str, need: usize) -> Result<()> {
+        // Reading past the last value also makes the zip reader check the entry's CRC-32.
+        let mut probe = [0u8; 1];
+        loop {
+            match self.0.read(&mut probe) {
+                Ok(0) => return Ok(()),
+                Ok(_) => return Err(Error::corrupt(format!("{name}: holds more than the {need} bytes main.xml declares"))),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(Error::corrupt(format!("{name}: cannot decompress the point data ({e})"))),
+            }
+        }
+    }
+}
+
+/// A raw deflate stream in memory, inflated with flate2's low-level API into the caller's slices.
+struct SliceInflate<'a> {
+    d: flate2::Decompress,
+    input: &'a [u8],
+    pos: usize,
+}
+
+impl SliceInflate<'_> {
+    /// One call: inflate into `out`, returning the bytes written, the input bytes used and whether the
+    /// stream ended.
+    fn step(&mut self, out: &mut [u8], name: &str) -> Result<(usize, usize, bool)> {
+        let (i0, o0) = (self.d.total_in(), self.d.total_out());
+        let status = self
+            .d
+            .decompress(&self.input[self.pos..], out, flate2::FlushDecompress::None)
+            .map_err(|e| Error::corrupt(format!("{name}: cannot decompress the point data ({e})")))?;
+        let used = (self.d.total_in() - i0) as usize;
+        self.pos += used;
+        Ok(((self.d.total_out() - o0) as usize, used, status == flate2::Status::StreamEnd))
+    }
+}
+
+impl Source for SliceInflate<'_> {
+    fn fill(&mut self, buf: &mut [u8], name: &str, done: usize, need: usize) -> Result<()> {
+        let mut got = 0;
+        while got < buf.len() {
+            let (k, used, ended) = self.step(&mut buf[got..], name)?;
+            got += k;
+            if got < buf.len() && (ended || (k == 0 && used == 0)) {
+                return Err(Error::corrupt(format!("{name}: holds {} bytes, {need} expected", done + got)));
+            }
+        }
+        Ok(())
+    }
+
+    fn end(&mut self, name: &str, need: usize) -> Result<()> {
+        let mut probe = [0u8; 1];
+        loop {
+            let (k, used, ended) = self.step(&mut probe, name)?;
+            if k > 0 {
+                return Err(Error::corrupt(format!("{name}: holds more than the {need} bytes main.xml declares")));
+            }
+            if ended {
+                return Ok(());
+            }
+            if used == 0 {
+                return Err(Error::corrupt(format!("{name}: cannot decompress the point data (the deflate stream ends early)")));
+            }
+        }
+    }
 }
 
 /// The point data of a deflated entry `name` holding exactly `n` values of type `t`, as heights in
@@ -63,7 +162,23 @@ pub(crate) fn read_deflated_points<R: Read + std::io::Seek>(
 /// `md5_want` (32 hex digits), the MD5 of the stored bytes must match (`field` names it in the error).
 /// A stream holding fewer or more bytes than `n` values, or failing to inflate, is `corrupt`.
 pub(crate) fn inflate_heights<R: Read>(
-    mut entry: R,
+    entry: R,
+    name: &str,
+    n: usize,
+    t: ZType,
+    inc: f64,
+    off: f64,
+    md5_want: Option<(&str, &str)>,
+) -> Result<Vec<f64>> {
+    inflate_from(ReadSource(entry), None, name, n, t, inc, off, md5_want)
+}
+
+/// [`inflate_heights`] from any [`Source`]; with `crc_want`, the CRC-32 of the inflated bytes must
+/// equal it (computed on the hashing thread).
+#[allow(clippy::too_many_arguments)]
+fn inflate_from(
+    mut entry: impl Source,
+    crc_want: Option<u32>,
     name: &str,
     n: usize,
     t: ZType,
@@ -92,25 +207,30 @@ pub(crate) fn inflate_heights<R: Read>(
         raw.resize(need, 0);
         (&mut raw[..], Some(&mut z))
     };
-    let md5 = std::thread::scope(|s| -> Result<Option<String>> {
-        let (tx, hasher) = match md5_want {
-            Some(_) => {
+    let sums = std::thread::scope(|s| -> Result<Option<(Option<String>, u32)>> {
+        let (tx, hasher) = match md5_want.is_some() || crc_want.is_some() {
+            true => {
                 let (tx, rx) = std::sync::mpsc::sync_channel::<&[u8]>(64);
+                let want_md5 = md5_want.is_some();
                 let h = s.spawn(move || {
-                    let mut m = crate::io::md5::Md5::default();
+                    let mut m = want_md5.then(crate::io::md5::Md5::default);
+                    let mut c = crc32fast::Hasher::new();
                     for block in rx {
-                        m.update(block);
+                        if let Some(m) = m.as_mut() {
+                            m.update(block);
+                        }
+                        c.update(block);
                     }
-                    m.finish().iter().map(|b| format!("{b:02x}")).collect::<String>()
+                    (m.map(|m| m.finish().iter().map(|b| format!("{b:02x}")).collect::<String>()), c.finalize())
                 });
                 (Some(tx), Some(h))
             }
-            None => (None, None),
+            false => (None, None),
         };
         let mut done = 0;
         let mut sent = true;
         for chunk in bytes.chunks_mut(BLOCK) {
-            fill_block(&mut entry, chunk, name, done, need)?;
+            entry.fill(chunk, name, done, need)?;
             done += chunk.len();
             let chunk: &[u8] = chunk;
             if let Some(tx) = &tx {
@@ -122,22 +242,24 @@ pub(crate) fn inflate_heights<R: Read>(
             }
         }
         drop(tx);
-        // The stream must end exactly here: reading past the last value also makes the zip reader check
-        // the entry's CRC-32.
-        let mut probe = [0u8; 1];
-        loop {
-            match entry.read(&mut probe) {
-                Ok(0) => break,
-                Ok(_) => return Err(Error::corrupt(format!("{name}: holds more than the {need} bytes main.xml declares"))),
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(Error::corrupt(format!("{name}: cannot decompress the point data ({e})"))),
-            }
-        }
+        // The stream must end exactly here.
+        entry.end(name, need)?;
         match hasher {
             Some(h) if sent => Ok(h.join().ok()),
             _ => Ok(None),
         }
     })?;
+    let (md5, crc) = match sums {
+        Some((m, c)) => (m, Some(c)),
+        None => (None, None),
+    };
+    if let (Some(want), Some(got)) = (crc_want, crc) {
+        if want != got {
+            return Err(Error::corrupt(format!(
+                "{name}: CRC-32 mismatch ({got:08x}, the zip records {want:08x}): the point data is corrupt"
+            )));
+        }
+    }
     if let (Some((field, want)), Some(got)) = (md5_want, md5) {
         if !got.eq_ignore_ascii_case(want) {
             return Err(Error::corrupt(format!(
@@ -248,5 +370,122 @@ mod tests {
         let cut = &c[..c.len() / 2];
         let e = inflate_heights(flate2::read::DeflateDecoder::new(cut), "d", 1000, ZType::D, 1.0, 0.0, None).unwrap_err();
         assert_eq!(e.kind(), crate::error::ErrorKind::Corrupt, "{e}");
+    }
+
+    /// A zip holding `raw` deflated as `bindata/data.bin`.
+    fn zip_of(raw: &[u8]) -> Vec<u8> {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        let mut zw = zip::ZipWriter::new(&mut buf);
+        let opts = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated).compression_level(Some(6));
+        zw.start_file("bindata/data.bin", opts).unwrap();
+        zw.write_all(raw).unwrap();
+        zw.finish().unwrap();
+        buf.into_inner()
+    }
+
+    /// Both ways of reading a zipped entry: through the zip crate's reader, and in place from the bytes.
+    fn both(file: &[u8], n: usize, t: ZType, inc: f64, off: f64, md5: Option<(&str, &str)>) -> [Result<Vec<f64>>; 2] {
+        [None, Some(file)].map(|f| {
+            let mut zip = zip::ZipArchive::new(std::io::Cursor::new(file)).unwrap();
+            read_deflated_points(&mut zip, f, "bindata/data.bin", n, t, inc, off, md5, (n, 1)).map(|z| z.expect("deflated"))
+        })
+    }
+
+    /// The in-place inflate equals the `Read` path and the whole-buffer decode bit for bit (every Z type,
+    /// an offset/increment, non-finite values, several blocks and a partial one), and both check the MD5.
+    #[test]
+    fn in_place_inflate_matches_the_reader_path() {
+        let n = 2 * BLOCK / 8 + 13;
+        for (t, inc, off) in
+            [(ZType::D, 1.0, 0.0), (ZType::D, 1e-9, 2.5e-6), (ZType::F, 1.0, 0.0), (ZType::I, 3e-9, -1e-7), (ZType::L, 1e-10, 0.0)]
+        {
+            let mut raw = Vec::new();
+            for k in 0..n {
+                let x = (k as f64 * 0.0013).cos() * 1e3 + (k % 7) as f64;
+                match t {
+                    ZType::D => raw.extend_from_slice(&(if k % 1009 == 5 { f64::NEG_INFINITY } else { x * 1e-6 }).to_le_bytes()),
+                    ZType::F => raw.extend_from_slice(&(if k % 997 == 3 { f32::NAN } else { x as f32 * 1e-6 }).to_le_bytes()),
+                    ZType::L => raw.extend_from_slice(&((x * 1e4) as i32).to_le_bytes()),
+                    ZType::I => raw.extend_from_slice(&(x as i16).to_le_bytes()),
+                }
+            }
+            let whole = crate::io::x3p::decode(&raw, t, inc, off, None).unwrap();
+            let md5 = crate::io::md5::md5_hex(&raw);
+            let file = zip_of(&raw);
+            for got in both(&file, n, t, inc, off, Some(("MD5ChecksumPointData", &md5))) {
+                let got = got.unwrap();
+                assert_eq!(got.len(), whole.len());
+                assert!(whole.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits()), "{t:?}");
+            }
+            let wrong = "00000000000000000000000000000000";
+            for got in both(&file, n, t, inc, off, Some(("MD5ChecksumPointData", wrong))) {
+                assert!(got.unwrap_err().message().contains("MD5"), "{t:?}");
+            }
+        }
+    }
+
+    /// Wrong lengths, a damaged stream, a damaged CRC and a cut file: `corrupt` on both paths, never a panic.
+    #[test]
+    fn in_place_inflate_refuses_damage() {
+        let raw: Vec<u8> = (0..40_000u32).flat_map(|k| ((k as f64).sqrt() * 1e-6).to_le_bytes()).collect();
+        let file = zip_of(&raw);
+        for n in [40_001, 39_999] {
+            for got in both(&file, n, ZType::D, 1.0, 0.0, None) {
+                // The entry's declared size is checked before any inflating.
+                let e = got.unwrap_err();
+                assert!(e.message().contains("holds 320000 bytes but"), "{e}");
+            }
+        }
+        // The stream's own lengths: inflate_from with a declared count that is wrong.
+        let c = deflate(&raw);
+        for (n, want) in [(40_001usize, "holds 320000 bytes, 320008"), (39_999, "more than the 319992 bytes")] {
+            let src = SliceInflate { d: flate2::Decompress::new(false), input: &c, pos: 0 };
+            let e = inflate_from(src, None, "d", n, ZType::D, 1.0, 0.0, None).unwrap_err();
+            assert!(e.message().contains(want), "{e}");
+        }
+        let cut = &c[..c.len() / 2];
+        let e = inflate_from(
+            SliceInflate { d: flate2::Decompress::new(false), input: cut, pos: 0 },
+            None,
+            "d",
+            40_000,
+            ZType::D,
+            1.0,
+            0.0,
+            None,
+        )
+        .unwrap_err();
+        assert_eq!(e.kind(), crate::error::ErrorKind::Corrupt, "{e}");
+        // A wrong CRC-32 (the stream intact) and a damaged byte inside the stream.
+        let src = SliceInflate { d: flate2::Decompress::new(false), input: &c, pos: 0 };
+        let e = inflate_from(src, Some(crc32fast::hash(&raw) ^ 1), "d", 40_000, ZType::D, 1.0, 0.0, None).unwrap_err();
+        assert!(e.message().contains("CRC-32 mismatch"), "{e}");
+        let ok = inflate_from(
+            SliceInflate { d: flate2::Decompress::new(false), input: &c, pos: 0 },
+            Some(crc32fast::hash(&raw)),
+            "d",
+            40_000,
+            ZType::D,
+            1.0,
+            0.0,
+            None,
+        );
+        assert_eq!(ok.unwrap().len(), 40_000);
+        let mut bad = file.clone();
+        let start = {
+            let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&file[..])).unwrap();
+            let e = zip.by_name("bindata/data.bin").unwrap();
+            e.data_start().unwrap() as usize + e.compressed_size() as usize / 2
+        };
+        bad[start] ^= 0x5a;
+        for got in both(&bad, 40_000, ZType::D, 1.0, 0.0, None) {
+            assert_eq!(got.unwrap_err().kind(), crate::error::ErrorKind::Corrupt);
+        }
+        // A file cut inside the entry: the zip's directory is gone, so cut the compressed bytes'
+        // extent instead by lying about the file's length.
+        let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&file[..])).unwrap();
+        let e = read_deflated_points(&mut zip, Some(&file[..start]), "bindata/data.bin", 40_000, ZType::D, 1.0, 0.0, None, (40_000, 1))
+            .unwrap_err();
+        assert!(e.message().contains("truncated"), "{e}");
     }
 }

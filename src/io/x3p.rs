@@ -223,7 +223,8 @@ fn read_x3p_in(bytes: &[u8], map: Option<&std::sync::Arc<memmap2::Mmap>>) -> Res
             .and_then(md5_field)
             .filter(|_| n.saturating_mul(ztype.size()) <= MAX_POINT_MD5)
             .map(|w| ("MD5ChecksumPointData", w));
-        if let Some(inflated) = crate::io::inflate::read_deflated_points(&mut zip, &data_path, n, ztype, z_inc, z_off, md5_want, (nx, ny))?
+        if let Some(inflated) =
+            crate::io::inflate::read_deflated_points(&mut zip, Some(bytes), &data_path, n, ztype, z_inc, z_off, md5_want, (nx, ny))?
         {
             z = inflated.into();
         } else {
