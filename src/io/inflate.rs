@@ -207,21 +207,23 @@ fn inflate_from(
         raw.resize(need, 0);
         (&mut raw[..], Some(&mut z))
     };
-    let sums = std::thread::scope(|s| -> Result<Option<(Option<String>, u32)>> {
+    let sums = std::thread::scope(|s| -> Result<Option<(Option<String>, Option<u32>)>> {
         let (tx, hasher) = match md5_want.is_some() || crc_want.is_some() {
             true => {
                 let (tx, rx) = std::sync::mpsc::sync_channel::<&[u8]>(64);
-                let want_md5 = md5_want.is_some();
+                let (want_md5, want_crc) = (md5_want.is_some(), crc_want.is_some());
                 let h = s.spawn(move || {
                     let mut m = want_md5.then(crate::io::md5::Md5::default);
-                    let mut c = crc32fast::Hasher::new();
+                    let mut c = want_crc.then(crc32fast::Hasher::new);
                     for block in rx {
                         if let Some(m) = m.as_mut() {
                             m.update(block);
                         }
-                        c.update(block);
+                        if let Some(c) = c.as_mut() {
+                            c.update(block);
+                        }
                     }
-                    (m.map(|m| m.finish().iter().map(|b| format!("{b:02x}")).collect::<String>()), c.finalize())
+                    (m.map(|m| m.finish().iter().map(|b| format!("{b:02x}")).collect::<String>()), c.map(|c| c.finalize()))
                 });
                 (Some(tx), Some(h))
             }
@@ -249,11 +251,11 @@ fn inflate_from(
             _ => Ok(None),
         }
     })?;
-    let (md5, crc) = match sums {
-        Some((m, c)) => (m, Some(c)),
-        None => (None, None),
-    };
-    if let (Some(want), Some(got)) = (crc_want, crc) {
+    let (md5, crc) = sums.unwrap_or((None, None));
+    if let Some(want) = crc_want {
+        // The zip reader's own check is bypassed on this path, so a CRC-32 that was not computed (the
+        // hashing thread lost, which only a panic can do) refuses the data rather than passing it.
+        let got = crc.ok_or_else(|| Error::corrupt(format!("{name}: the point data's CRC-32 could not be checked")))?;
         if want != got {
             return Err(Error::corrupt(format!(
                 "{name}: CRC-32 mismatch ({got:08x}, the zip records {want:08x}): the point data is corrupt"
