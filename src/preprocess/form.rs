@@ -99,6 +99,20 @@ impl FormModel {
         }
     }
 
+    /// The form's constant slope `grad form` (m/m) on a grid of spacing `dx`, `dy`, when it is a plane:
+    /// every difference scheme is exact on a plane, so each slope of the residual is the slope of the raw
+    /// heights minus this (up to rounding), and passes that need only slopes can read the raw heights.
+    pub fn plane_slope(&self, dx: f64, dy: f64) -> Option<[f64; 2]> {
+        match &self.kind {
+            // `u = 2 j / (nx - 1) - 1` per column and `v = 2 i / (ny - 1) - 1` per row ([`scaled`]).
+            FormKind::Plane { c, u, ny } => {
+                let per = |n: usize, d: f64| if n > 1 { 2.0 / ((n - 1) as f64 * d) } else { 0.0 };
+                Some([c[1] * per(u.len(), dx), c[2] * per(*ny, dy)])
+            }
+            FormKind::Poly { .. } => None,
+        }
+    }
+
     /// The residual heights of the whole grid `hf` (the form's own grid).
     pub fn residual<S: BandSource<T = f64>>(&self, hf: &S) -> Vec<f64> {
         let GridShape { nx, ny, .. } = hf.shape();
