@@ -9,7 +9,10 @@
 //! histogram, the resolution test) reads bands, so it sees exactly the heights `apply` would have made,
 //! bit for bit, and the working memory is a few bands per thread. Removing the form from the heights
 //! band by band is the same as folding it into the slopes: each central difference is taken of the
-//! residual rows, in cache, just before it is binned. A cylinder form is removed into a residual buffer
+//! residual rows, in cache, just before it is binned. The counting pass goes further for a plane: it
+//! reads the heights as stored ([`RawMasked`]) and subtracts the plane's constant slope
+//! ([`BandSource::plane_folded`]), so no band is remade there; slopes then agree with the residual's
+//! to rounding (a normal on a cell edge may change cell). A cylinder form is removed into a residual buffer
 //! as before (its fit holds every point anyway).
 
 use crate::error::Result;
