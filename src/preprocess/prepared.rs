@@ -82,10 +82,14 @@ impl<'a> Prepared<'a> {
         &self.masked
     }
 
-    /// Number of invalid points after masking (NaN as read, plus the masked spikes); bands counted on
-    /// every thread.
+    /// Number of invalid points after masking (NaN as read, plus the masked spikes): from the form's fit,
+    /// or bands counted on every thread.
     pub fn invalid_count(&self) -> usize {
         use rayon::prelude::*;
+        if let Some(f) = &self.form {
+            // The form's fit counted the valid heights already (the same grid: crop and subsampling come first).
+            return self.raw.nx * self.raw.ny - f.valid() + self.masked.len();
+        }
         let step = self.raw.band_rows();
         let bands: Vec<std::ops::Range<usize>> = crate::ndf::bands::bands_of(0..self.raw.ny, step).collect();
         let nan: usize = bands

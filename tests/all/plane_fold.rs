@@ -80,6 +80,8 @@ fn folded_plane_equals_the_residual_heights() {
             if nx * ny > 10_000 {
                 assert!(!p.masked().is_empty(), "{what}: spikes masked");
             }
+            // The invalid points the form's fit counted, against those of the residual heights.
+            assert_eq!(p.invalid_count(), residual.z.iter().filter(|h| h.is_nan()).count(), "{what}: invalid points");
             // Placed on the residual heights alike: the same frame, grid and bins.
             assert_eq!(folded.frame, old.frame, "{what}: frame");
             assert_eq!(folded.grid.n, old.grid.n, "{what}: grid");
