@@ -9,7 +9,7 @@ pub mod form;
 pub mod prepared;
 
 pub use despike::{Despike, DespikeReport};
-pub use prepared::{prepare, Prepared};
+pub use prepared::{prepare, Prepared, RawMasked};
 
 use crate::error::{Error, Result};
 use crate::scan::{Heightfield, Scan};

@@ -169,6 +169,14 @@ pub trait BandSource: Sync {
     fn shape(&self) -> GridShape;
     /// Rows `lo..hi` (`lo < hi <= ny`): a view of stored rows, or computed into `buf`.
     fn band<'b>(&'b self, lo: usize, hi: usize, buf: &'b mut Vec<Self::T>) -> Band<'b, Self::T>;
+    /// The same heights up to a plane, read with no arithmetic per band: a source each of whose slopes
+    /// (by any [`super::NormalScheme`], all exact on a plane) exceeds this one's by the returned constant
+    /// `grad h`, up to rounding. Passes that need only slopes (the histogram and the resolution test)
+    /// read it and subtract the constant: the plane is folded into the slopes, not removed from every
+    /// height. `None` (the default): read this source itself.
+    fn plane_folded(&self) -> Option<(crate::preprocess::RawMasked<'_>, [f64; 2])> {
+        None
+    }
     /// Rows per band for passes over the whole grid.
     fn band_rows(&self) -> usize {
         band_rows(self.shape().nx, std::mem::size_of::<Self::T>())

@@ -122,12 +122,24 @@ impl Block {
     fn flush(&mut self, frame: &SlopeFrame, grid: &BinGrid, acc: &mut Acc) {
         #[cfg(target_arch = "x86_64")]
         {
+            if avx512() {
+                // SAFETY: the CPU supports these AVX-512 subsets (checked just above); the body is safe Rust.
+                unsafe { self.flush_avx512(frame, grid, acc) };
+                return;
+            }
             if std::arch::is_x86_feature_detected!("avx2") {
                 // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
                 unsafe { self.flush_avx2(frame, grid, acc) };
                 return;
             }
         }
+        self.flush_body(frame, grid, acc)
+    }
+
+    /// [`Block::flush`] compiled for 8-wide vectors (the same IEEE arithmetic, bit for bit).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq")]
+    unsafe fn flush_avx512(&mut self, frame: &SlopeFrame, grid: &BinGrid, acc: &mut Acc) {
         self.flush_body(frame, grid, acc)
     }
 
@@ -244,6 +256,16 @@ impl Block {
         acc.m2[2] += sum(&m[4]);
         self.n = 0;
     }
+}
+
+/// Whether the CPU has the AVX-512 subsets the 8-wide kernels are compiled for (detected at run time:
+/// the binary stays portable).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+pub(super) fn avx512() -> bool {
+    std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+        && std::arch::is_x86_feature_detected!("avx512dq")
 }
 
 /// Row blocks of the dispersion split: the rows are cut into this many blocks of equal height, and the

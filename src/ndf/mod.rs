@@ -288,9 +288,22 @@ fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize
 
     // The resolution test (central differences) runs in the same pass, on the rows in cache, unless the
     // caller said nothing reads it.
-    let res = (scheme == NormalScheme::Central && grid.n > 0 && opts.resolution != Some(false))
-        .then(|| resolution::RowTest::new(frame, grid, src.shape(), stencils));
-    let mut acc = histogram(src, scheme, &frame, &grid, rows, res.as_ref());
+    let test = scheme == NormalScheme::Central && grid.n > 0 && opts.resolution != Some(false);
+    // A plane form is folded into the slopes: the pass reads the heights as stored, in the frame moved
+    // by the plane's slope (the whitening and the bins are the same; see `BandSource::plane_folded`).
+    let (res, mut acc) = match src.plane_folded() {
+        Some((raw, g)) => {
+            let moved = SlopeFrame { center: [frame.center[0] + g[0], frame.center[1] + g[1]], ..frame };
+            let res = test.then(|| resolution::RowTest::new(moved, grid, src.shape(), stencils));
+            let acc = histogram(&raw, scheme, &moved, &grid, rows, res.as_ref());
+            (res, acc)
+        }
+        None => {
+            let res = test.then(|| resolution::RowTest::new(frame, grid, src.shape(), stencils));
+            let acc = histogram(src, scheme, &frame, &grid, rows, res.as_ref());
+            (res, acc)
+        }
+    };
     if acc.n == 0 {
         return Err(no_valid());
     }

@@ -213,8 +213,9 @@ pub fn read_prepared(path: &Path, opts: &ReadOptions, pre: &Preprocess) -> Resul
     crate::preprocess::prepare(hf, pre).map_err(|e| e.with_path(path))
 }
 
-/// Stage 2 for a [`Prepared`] scan: its empirical NDF, read band by band (the same bins, bit for bit, as
-/// [`ndf`] of [`Prepared::into_scan`]).
+/// Stage 2 for a [`Prepared`] scan: its empirical NDF, read band by band (the same frame and bins as
+/// [`ndf`] of [`Prepared::into_scan`]; a plane form is folded into the slopes, so a normal within
+/// rounding of a cell edge may be counted in the neighbouring cell).
 pub fn ndf_prepared(scan: &Prepared, opts: &NdfOptions) -> Result<EmpiricalNdf> {
     crate::ndf::empirical_ndf_of(scan, opts, || scan.invalid_count())
 }

@@ -66,6 +66,8 @@ pub fn remove_polynomial(hf: &Scan, order: usize) -> Result<Vec<f64>> {
 pub struct FormModel {
     /// The mean of the valid heights, subtracted first.
     mean: f64,
+    /// How many heights were valid (not NaN) in the fit.
+    valid: usize,
     kind: FormKind,
 }
 
@@ -96,6 +98,25 @@ impl FormModel {
                     (h - mean) - f
                 }));
             }
+        }
+    }
+
+    /// How many heights of the fitted grid are valid (not NaN), counted by the fit's first pass.
+    pub fn valid(&self) -> usize {
+        self.valid
+    }
+
+    /// The form's constant slope `grad form` (m/m) on a grid of spacing `dx`, `dy`, when it is a plane:
+    /// every difference scheme is exact on a plane, so each slope of the residual is the slope of the raw
+    /// heights minus this (up to rounding), and passes that need only slopes can read the raw heights.
+    pub fn plane_slope(&self, dx: f64, dy: f64) -> Option<[f64; 2]> {
+        match &self.kind {
+            // `u = 2 j / (nx - 1) - 1` per column and `v = 2 i / (ny - 1) - 1` per row ([`scaled`]).
+            FormKind::Plane { c, u, ny } => {
+                let per = |n: usize, d: f64| if n > 1 { 2.0 / ((n - 1) as f64 * d) } else { 0.0 };
+                Some([c[1] * per(u.len(), dx), c[2] * per(*ny, dy)])
+            }
+            FormKind::Poly { .. } => None,
         }
     }
 
@@ -155,7 +176,7 @@ fn polynomial_fit<S: BandSource<T = f64>>(src: &S, order: usize, plane_path: boo
     }
     let mean = sums.iter().map(|p| p.1).sum::<f64>() / valid as f64;
     if plane_path && t == [(0, 0), (1, 0), (0, 1)] {
-        return plane_fit(src, mean);
+        return plane_fit(src, mean, valid);
     }
     let lu: Vec<[f64; 4]> = (0..nx).map(|j| legendre(scaled(j, nx))).collect();
     let lv: Vec<[f64; 4]> = (0..ny).map(|i| legendre(scaled(i, ny))).collect();
@@ -207,7 +228,7 @@ fn polynomial_fit<S: BandSource<T = f64>>(src: &S, order: usize, plane_path: boo
     let svd = ata.svd(true, true);
     let smax = svd.singular_values.max();
     let coef = svd.solve(&atb, smax * 1e-12).map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
-    Ok(FormModel { mean, kind: FormKind::Poly { coef: coef.iter().copied().collect(), t, lu, lv } })
+    Ok(FormModel { mean, valid, kind: FormKind::Poly { coef: coef.iter().copied().collect(), t, lu, lv } })
 }
 
 /// The plane case of [`fit_polynomial`] (basis `1, u, v`, both axes longer than one sample), the
@@ -216,7 +237,7 @@ fn polynomial_fit<S: BandSource<T = f64>>(src: &S, order: usize, plane_path: boo
 ///
 /// Normal equations: a row `i` at `v_i` contributes `n, sum u, sum u^2, sum r, sum u r` over its valid
 /// points (`r = h - mean`), and the `v` entries are those times `v_i` or `v_i^2`.
-fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64) -> Result<FormModel> {
+fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64, valid: usize) -> Result<FormModel> {
     const L: usize = 4;
     let shape = src.shape();
     let (nx, ny) = (shape.nx, shape.ny);
@@ -274,7 +295,7 @@ fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64) -> Result<FormModel> {
     let svd = ata.svd(true, true);
     let smax = svd.singular_values.max();
     let c = svd.solve(&atb, smax * 1e-12).map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
-    Ok(FormModel { mean, kind: FormKind::Plane { c: [c[0], c[1], c[2]], u, ny } })
+    Ok(FormModel { mean, valid, kind: FormKind::Plane { c: [c[0], c[1], c[2]], u, ny } })
 }
 
 /// Residuals after removing the least-squares plane (order 1).

@@ -9,7 +9,10 @@
 //! histogram, the resolution test) reads bands, so it sees exactly the heights `apply` would have made,
 //! bit for bit, and the working memory is a few bands per thread. Removing the form from the heights
 //! band by band is the same as folding it into the slopes: each central difference is taken of the
-//! residual rows, in cache, just before it is binned. A cylinder form is removed into a residual buffer
+//! residual rows, in cache, just before it is binned. The counting pass goes further for a plane: it
+//! reads the heights as stored ([`RawMasked`]) and subtracts the plane's constant slope
+//! ([`BandSource::plane_folded`]), so no band is remade there; slopes then agree with the residual's
+//! to rounding (a normal on a cell edge may change cell). A cylinder form is removed into a residual buffer
 //! as before (its fit holds every point anyway).
 
 use crate::error::Result;
@@ -79,10 +82,14 @@ impl<'a> Prepared<'a> {
         &self.masked
     }
 
-    /// Number of invalid points after masking (NaN as read, plus the masked spikes); bands counted on
-    /// every thread.
+    /// Number of invalid points after masking (NaN as read, plus the masked spikes): from the form's fit,
+    /// or bands counted on every thread.
     pub fn invalid_count(&self) -> usize {
         use rayon::prelude::*;
+        if let Some(f) = &self.form {
+            // The form's fit counted the valid heights already (the same grid: crop and subsampling come first).
+            return self.raw.nx * self.raw.ny - f.valid() + self.masked.len();
+        }
         let step = self.raw.band_rows();
         let bands: Vec<std::ops::Range<usize>> = crate::ndf::bands::bands_of(0..self.raw.ny, step).collect();
         let nan: usize = bands
@@ -106,31 +113,66 @@ impl<'a> Prepared<'a> {
     }
 }
 
+/// The heights as read with the despiked points masked, and no form removed: what a [`Prepared`] scan
+/// whose form is a plane hands to the passes that need only slopes ([`BandSource::plane_folded`]). A
+/// band with no masked point is a view of the stored rows (no copy, no arithmetic).
+pub struct RawMasked<'p> {
+    raw: &'p Scan<'p>,
+    masked: &'p [usize],
+}
+
+impl BandSource for RawMasked<'_> {
+    type T = f64;
+    fn shape(&self) -> GridShape {
+        self.raw.shape()
+    }
+    fn band<'b>(&'b self, lo: usize, hi: usize, buf: &'b mut Vec<f64>) -> Band<'b, f64> {
+        masked_band(self.raw, None, self.masked, lo, hi, buf)
+    }
+}
+
+/// Rows `lo..hi` of `raw`, less `form` (if any), with the points `masked` (sorted flat indices) set to
+/// NaN: a view of the stored rows when there is nothing to change.
+fn masked_band<'b>(
+    raw: &'b Scan<'_>,
+    form: Option<&FormModel>,
+    masked: &[usize],
+    lo: usize,
+    hi: usize,
+    buf: &'b mut Vec<f64>,
+) -> Band<'b, f64> {
+    let nx = raw.nx;
+    let m = masked.partition_point(|&k| k < lo * nx)..masked.partition_point(|&k| k < hi * nx);
+    if form.is_none() && m.is_empty() {
+        return raw.band(lo, hi, buf);
+    }
+    buf.clear();
+    buf.reserve(nx * (hi - lo));
+    {
+        let mut rbuf = Vec::new();
+        let rows = raw.band(lo, hi, &mut rbuf);
+        match form {
+            Some(f) => (lo..hi).for_each(|i| f.residual_row(i, rows.row(i), buf)),
+            None => buf.extend_from_slice(rows.values()),
+        }
+    }
+    for &k in &masked[m] {
+        buf[k - lo * nx] = f64::NAN;
+    }
+    Band::new(buf, lo, raw.shape())
+}
+
 impl BandSource for Prepared<'_> {
     type T = f64;
     fn shape(&self) -> GridShape {
         self.raw.shape()
     }
     fn band<'b>(&'b self, lo: usize, hi: usize, buf: &'b mut Vec<f64>) -> Band<'b, f64> {
-        let nx = self.raw.nx;
-        let m = self.masked.partition_point(|&k| k < lo * nx)..self.masked.partition_point(|&k| k < hi * nx);
-        if self.form.is_none() && m.is_empty() {
-            return self.raw.band(lo, hi, buf);
-        }
-        buf.clear();
-        buf.reserve(nx * (hi - lo));
-        {
-            let mut rbuf = Vec::new();
-            let raw = self.raw.band(lo, hi, &mut rbuf);
-            match &self.form {
-                Some(f) => (lo..hi).for_each(|i| f.residual_row(i, raw.row(i), buf)),
-                None => buf.extend_from_slice(raw.values()),
-            }
-        }
-        for &k in &self.masked[m] {
-            buf[k - lo * nx] = f64::NAN;
-        }
-        Band::new(buf, lo, self.shape())
+        masked_band(&self.raw, self.form.as_ref(), &self.masked, lo, hi, buf)
+    }
+    fn plane_folded(&self) -> Option<(RawMasked<'_>, [f64; 2])> {
+        let g = self.form.as_ref()?.plane_slope(self.raw.dx, self.raw.dy)?;
+        Some((RawMasked { raw: &self.raw, masked: &self.masked }, g))
     }
 }
 

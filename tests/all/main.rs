@@ -14,6 +14,7 @@ mod hostile;
 mod models;
 mod ndf;
 mod ndf_storage;
+mod plane_fold;
 mod quantized;
 mod readers;
 mod scale;
