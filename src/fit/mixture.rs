@@ -198,13 +198,21 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
             }
         }
     }
+    // A lobe on its way to the roughness bound is taken there.
+    if let Ok(f) = &fit {
+        if let Some(g) = to_bound(s, id, f, opts) {
+            fit = Ok(g);
+        }
+    }
     // A usable fit better than the parent by its price stands. Otherwise (no start that far below the parent, no finite
     // start, or a lobe run off beyond the alpha range, e.g. a tail widening without bound to take up a flat
     // background) the parent written as a mixture is the result, said so in a warning.
     let valid = |f: &Fitted| crate::models::Model::from_params(id, &public(f)).is_ok();
     if let Ok(fit) = &fit {
         if fit.f < parent.f - price(id, parent.id, s.data.n) && valid(fit) {
-            return Ok(fit.clone());
+            let mut fit = fit.clone();
+            fit.warnings.extend(bound_notes(id, &public(&fit)));
+            return Ok(fit);
         }
     }
     let x = super::params::to_internal(id, &degenerate(id, &p));
@@ -235,6 +243,64 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
         Err(_) => (0, Vec::new(), 0),
     };
     Ok(Fitted { id, x, f, local, evaluations, start_objectives, best_start, warnings, delta: false })
+}
+
+/// A mixture fit whose roughnesses beyond a tenth of [`super::params::LOBE_ALPHA_MAX`] (lobes already flat
+/// to `2 s^2 / alpha^2 = 0.15%` over slopes to `tan 70 deg`) are set to the bound and the rest refitted, when
+/// that lowers the objective. Along such a lobe's flat valley (only the ratio of its weight to its width is
+/// measured) the bounded map's derivative vanishes towards the bound, so LM stops wherever its tolerance
+/// meets the valley's slope (a deviance change of 1e-9 relative), where a bounded optimizer (the Python
+/// cross-check's L-BFGS-B) goes on to the bound; the refit makes the end point the valley's end, not the
+/// solver's.
+fn to_bound(s: &Session, id: ModelId, f: &Fitted, opts: &FitOptions) -> Option<Fitted> {
+    let max = super::params::LOBE_ALPHA_MAX;
+    let mut q = public(f);
+    let wi = super::params::weight_slot(id)?;
+    // The first lobe's log-odds; a lobe flat along an axis has its density over the region scaled by
+    // `1 / alpha` on that axis (`1 / alpha^2` for an isotropic tail), so its odds grow with alpha to keep it.
+    let mut v = super::params::v_of(q[wi]);
+    let mut moved = false;
+    for &i in super::params::alpha_slots(id) {
+        if q[i] > 1.0 && !super::params::at_lobe_bound(q[i]) {
+            let first = i < 2;
+            let axes = if id == ModelId::EllipsoidGgx && !first { 2.0 } else { 1.0 };
+            let shift = axes * (max / q[i]).ln();
+            v += if first { shift } else { -shift };
+            q[i] = max;
+            moved = true;
+        }
+    }
+    if !moved {
+        return None;
+    }
+    q[wi] = super::params::weight_of(v);
+    let g = fit_from(s, id, &[q], opts).ok()?;
+    (g.f <= f.f).then(|| Fitted {
+        evaluations: f.evaluations + g.evaluations,
+        start_objectives: f.start_objectives.clone(),
+        best_start: f.best_start,
+        ..g
+    })
+}
+
+/// One note per roughness of a mixture fit `p` (contract parameters) that ends at
+/// [`super::params::LOBE_ALPHA_MAX`]: that lobe is flat along the axis over the fitted slopes, and only the
+/// ratio of its weight to its width is measured there (the bound fixes the width).
+pub fn bound_notes(id: ModelId, p: &[f64]) -> Vec<String> {
+    let names = id.param_names();
+    super::params::alpha_slots(id)
+        .iter()
+        .filter(|&&i| super::params::at_lobe_bound(p[i]))
+        .map(|&i| {
+            format!(
+                "{id}: {} = {:.4} is at the mixture lobes' bound {}: that lobe is flat along this axis over the fitted slopes \
+                 (a background; its weight and width are not told apart, the bound fixes the width)",
+                names[i],
+                p[i],
+                super::params::LOBE_ALPHA_MAX
+            )
+        })
+        .collect()
 }
 
 /// Fit mixture `id` with its parent's chain first.
