@@ -396,7 +396,10 @@ def fit(
         if best is None or fv < best[1]:
             best = (x, fv, st)
     if model in mixtures.PARENT:
-        end = mixtures.valley_end(model, from_search(model, best[0]))
+        reg = obj.region(bins)
+        z = reg.m[:, 2]
+        s_max = float(np.max(np.sqrt(np.maximum(1.0 - z * z, 0.0)) / z)) if len(z) else 0.0
+        end = mixtures.valley_end(model, from_search(model, best[0]), s_max)
         if end is not None:
             x, fv, ne, st = _run(model, bins, objective, end, "lbfgs", stop)
             evaluations += ne

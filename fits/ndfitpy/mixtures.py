@@ -270,19 +270,24 @@ def ridge_starts(model: str, parent: np.ndarray, bins, log_expected, log_d=None)
     return out
 
 
-def valley_end(model: str, p: np.ndarray):
-    """The point at the end of a flat lobe's valley, or None: every roughness above 1 that is not yet at LOBE_ALPHA_MAX
-    (within 1e-3 relative) set to the bound, the lobe's odds scaled to keep its density over the region (a lobe flat
-    along an axis has density 1 / alpha there; an isotropic tail 1 / alpha^2). Over the region only the lobe's weight
-    over its width is measured, and a local optimizer stalls anywhere along that valley; the fit refits from here and
-    keeps the lower objective (data_formats/objective.md, "Mixtures and the ladder")."""
+#: alpha / s_max beyond which a lobe is flat to 1% over slopes up to s_max: 2 s_max^2 / alpha^2 <= 0.01.
+FLAT_LOBE = 10.0 * math.sqrt(2.0)
+
+
+def valley_end(model: str, p: np.ndarray, s_max: float):
+    """The point at the end of a flat lobe's valley, or None: every roughness flat to 1% over the region (at least
+    FLAT_LOBE times s_max, the region's steepest slope) and not yet at LOBE_ALPHA_MAX (within 1e-3 relative) set to
+    the bound, the lobe's odds scaled to keep its density over the region (a lobe flat along an axis has density
+    w / alpha there; an isotropic tail w / alpha^2). Over the region only the lobe's weight over its width is measured,
+    and a local optimizer stalls anywhere along that valley; the fit refits from here and keeps it when the objective
+    is not higher (data_formats/objective.md, "The lobes' roughness bound")."""
     q = np.array(p, dtype=float)
     slots = (0, 1, 5) if model == "ellipsoid+ggx" else (0, 1, 2, 3)
     wi = len(q) - 1
     v = math.log(q[wi]) - math.log1p(-q[wi])
     moved = False
     for i in slots:
-        if q[i] > 1.0 and q[i] < LOBE_ALPHA_MAX * (1.0 - 1e-3):
+        if q[i] >= FLAT_LOBE * s_max and q[i] < LOBE_ALPHA_MAX * (1.0 - 1e-3):
             first = i < 2
             shift = (2.0 if model == "ellipsoid+ggx" and not first else 1.0) * math.log(LOBE_ALPHA_MAX / q[i])
             v += shift if first else -shift

@@ -71,7 +71,7 @@ def test_lobe_bound_is_the_search_box_and_valley_end_keeps_the_region():
     lb, ub, _ = fitmod._bounds("ggx2", fitmod.to_search("ggx2", CASES["ggx2"]))
     assert math.isclose(math.exp(ub[2]), mixtures.LOBE_ALPHA_MAX) and math.isclose(math.exp(ub[0]), mixtures.LOBE_ALPHA_MAX)
     p = np.array([0.15, 0.1, 80.0, 0.3, 0.2, 0.2])
-    q = mixtures.valley_end("ggx2", p)
+    q = mixtures.valley_end("ggx2", p, math.tan(math.radians(70)))
     assert q[2] == mixtures.LOBE_ALPHA_MAX and q[3] == p[3] and q[5] < p[5]  # the widened (second) lobe gains weight
     s = np.linspace(-math.tan(math.radians(70)), math.tan(math.radians(70)), 41)
     sx, sy = np.meshgrid(s, s)
@@ -80,5 +80,6 @@ def test_lobe_bound_is_the_search_box_and_valley_end_keeps_the_region():
     m /= np.linalg.norm(m, axis=1)[:, None]
     ratio = models.d("ggx2", q, m) / models.d("ggx2", p, m)
     assert np.ptp(ratio) / ratio.mean() < 2 * 7.55 / 80.0**2, np.ptp(ratio) / ratio.mean()
-    assert mixtures.valley_end("ggx2", q) is None  # already at the bound
-    assert mixtures.valley_end("ggx2", np.array(CASES["ggx2"])) is None  # no flat lobe
+    assert mixtures.valley_end("ggx2", q, 2.75) is None  # already at the bound
+    assert mixtures.valley_end("ggx2", np.array(CASES["ggx2"]), 2.75) is None  # no flat lobe
+    assert mixtures.valley_end("ggx2", p, 6.0) is None  # 80 is not flat to 1% over slopes up to 6

@@ -245,13 +245,18 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
     Ok(Fitted { id, x, f, local, evaluations, start_objectives, best_start, warnings, delta: false })
 }
 
-/// A mixture fit whose roughnesses beyond a tenth of [`super::params::LOBE_ALPHA_MAX`] (lobes already flat
-/// to `2 s^2 / alpha^2 = 0.15%` over slopes to `tan 70 deg`) are set to the bound and the rest refitted, when
-/// that lowers the objective. Along such a lobe's flat valley (only the ratio of its weight to its width is
-/// measured) the bounded map's derivative vanishes towards the bound, so LM stops wherever its tolerance
-/// meets the valley's slope (a deviance change of 1e-9 relative), where a bounded optimizer (the Python
-/// cross-check's L-BFGS-B) goes on to the bound; the refit makes the end point the valley's end, not the
-/// solver's.
+/// A mixture fit whose roughnesses are flat to 1% over the region (`2 s_max^2 / alpha^2 <= 0.01`, `s_max` the
+/// steepest slope of its bins: `alpha >= 10 sqrt(2) s_max`) and not yet at [`super::params::LOBE_ALPHA_MAX`] set
+/// to the bound and the rest refitted, when that does not raise the objective; the lobe's odds are scaled by
+/// `alpha / LOBE_ALPHA_MAX` per flat axis (`w / alpha` is what the region measures of a flat lobe), so the
+/// refit starts from the same D over the region. Along such a lobe's flat valley the bounded map's derivative
+/// vanishes towards the bound, so LM stops wherever its tolerance meets the valley's slope (deviance changes of
+/// 1e-9 relative), where the bound is the valley's end: the refit makes the end point the valley's, not the
+/// solver's. The Python cross-check ends the valley by the same rule (objective.md, "The lobes' roughness
+/// bound").
+/// `alpha / s_max` beyond which a lobe is flat to 1% over slopes up to `s_max`: `10 sqrt(2)`.
+pub const FLAT_LOBE: f64 = 14.142_135_623_730_951;
+
 fn to_bound(s: &Session, id: ModelId, f: &Fitted, opts: &FitOptions) -> Option<Fitted> {
     let max = super::params::LOBE_ALPHA_MAX;
     let mut q = public(f);
@@ -259,9 +264,11 @@ fn to_bound(s: &Session, id: ModelId, f: &Fitted, opts: &FitOptions) -> Option<F
     // The first lobe's log-odds; a lobe flat along an axis has its density over the region scaled by
     // `1 / alpha` on that axis (`1 / alpha^2` for an isotropic tail), so its odds grow with alpha to keep it.
     let mut v = super::params::v_of(q[wi]);
+    let s_max = s.data.bins.iter().map(|b| (1.0 - b.m.z * b.m.z).max(0.0).sqrt() / b.m.z).fold(0.0, f64::max);
+    let flat = FLAT_LOBE * s_max;
     let mut moved = false;
     for &i in super::params::alpha_slots(id) {
-        if q[i] > 1.0 && !super::params::at_lobe_bound(q[i]) {
+        if q[i] >= flat && !super::params::at_lobe_bound(q[i]) {
             let first = i < 2;
             let axes = if id == ModelId::EllipsoidGgx && !first { 2.0 } else { 1.0 };
             let shift = axes * (max / q[i]).ln();
