@@ -174,9 +174,11 @@ def initial_guess(bins: Bins, model: str) -> np.ndarray:
 def _bounds(model: str, x0: np.ndarray):
     lg = _is_log(model)
     wt = _is_weight(model)
-    ln_alpha_min = math.log(mixtures.ALPHA_FLOOR) if model in mixtures.PARENT else LN_ALPHA_MIN
+    mix = model in mixtures.PARENT
+    ln_alpha_min = math.log(mixtures.ALPHA_FLOOR) if mix else LN_ALPHA_MIN
+    ln_alpha_max = math.log(mixtures.LOBE_ALPHA_MAX) if mix else LN_ALPHA_MAX
     lb = np.where(lg, ln_alpha_min, np.where(wt, -LOGIT_MAX, -TILT_MAX))
-    ub = np.where(lg, LN_ALPHA_MAX, np.where(wt, LOGIT_MAX, TILT_MAX))
+    ub = np.where(lg, ln_alpha_max, np.where(wt, LOGIT_MAX, TILT_MAX))
     names = models.PARAM_NAMES[model]
     if "theta_z" in names:
         # theta_z has period pi, so an equivalent optimum lies within pi/2 of any start: +-pi leaves slack.
@@ -369,7 +371,7 @@ def fit(
         starts.extend(
             mixtures.data_starts(model, pre.param_array, bins, obj.log_expected, lambda a, c: _tilt_for_centre(a, c)[2:4])
         )
-        ridge = mixtures.ridge_starts(model, pre.param_array, bins, obj.log_expected)
+        ridge = mixtures.ridge_starts(model, pre.param_array, bins, obj.log_expected, models.log_d)
         ridges = set(range(len(starts), len(starts) + len(ridge)))
         starts.extend(ridge)
     elif model == "ellipsoid":
@@ -393,6 +395,17 @@ def fit(
         log.append({"start": s.tolist(), "value": fv, "status": st})
         if best is None or fv < best[1]:
             best = (x, fv, st)
+    if model in mixtures.PARENT:
+        reg = obj.region(bins)
+        z = reg.m[:, 2]
+        s_max = float(np.max(np.sqrt(np.maximum(1.0 - z * z, 0.0)) / z)) if len(z) else 0.0
+        end = mixtures.valley_end(model, from_search(model, best[0]), s_max)
+        if end is not None:
+            x, fv, ne, st = _run(model, bins, objective, end, "lbfgs", stop)
+            evaluations += ne
+            log.append({"start": end.tolist(), "value": fv, "status": st})
+            if fv <= best[1]:
+                best = (x, fv, st)
     p = from_search(model, best[0])
     names = models.PARAM_NAMES[model]
     if "theta_z" in names:

@@ -115,6 +115,12 @@ def canonical(model: str, p: np.ndarray, ellipsoid_canonical) -> np.ndarray:
 #: spikes can otherwise shrink below any bin and hide between the bins' centres, are searched from it up.
 ALPHA_FLOOR = 1e-4
 
+#: The largest roughness of a mixture lobe, on every axis: the same bound as the Rust fitter's (data_formats/objective.md,
+#: "Mixtures and the ladder"). Beyond it a lobe is flat over the fitted slopes (GGX's (1 + s^2/alpha^2)^-2 is within
+#: 2 s^2/alpha^2 = 1.5e-5 of its alpha -> infinity limit at s = tan 70 deg), so its weight and width are no longer told
+#: apart; without a bound the two fitters stop anywhere along that flat valley.
+LOBE_ALPHA_MAX = 1e3
+
 def price(model: str, n: float) -> float:
     """The deviance a mixture must remove below its parent to be reported: its added parameters' price in the ladder,
     (p - p_parent) ln N, N the normals in the region, at overdispersion 1. A mixture that removes less is reported as
@@ -212,11 +218,19 @@ def data_starts(model: str, parent: np.ndarray, bins, log_expected, tilt_for_cen
     return out
 
 
-def ridge_starts(model: str, parent: np.ndarray, bins, log_expected):
-    """The ridges of ggx2 / beckmann2 (arguments as data_starts): one per parent axis, a lobe at the floor across that
-    axis holding the excess in the band of slopes within half the parent's alpha across it, its width along the axis
-    the excess's root-mean-square slope there; the other lobe is the parent. A quantized or striated scan piles its
-    slopes up on such lines, which the splits (scaled copies of the parent) do not reach."""
+def ridge_starts(model: str, parent: np.ndarray, bins, log_expected, log_d=None):
+    """The ridges of ggx2 / beckmann2 (arguments as data_starts): per parent axis, a lobe at the floor across that axis
+    holding the excess in the band of slopes within half the parent's alpha across it, its width along the axis the
+    excess's root-mean-square slope there (over the whole band, and over its part within half the parent's alpha
+    along it); the other lobe is the parent. A quantized or striated scan piles its slopes up on such lines, which the
+    splits (scaled copies of the parent) do not reach.
+
+    With ``log_d`` (models.log_d), a third start per axis: the band's lobe flat along the axis, at LOBE_ALPHA_MAX. Over
+    the region such a lobe is a line of constant density, and only its weight over its width is measured, so the fit
+    can slide along that flat valley without end; from the root-mean-square width a local optimizer stalls partway
+    (objective changes of 1e-8 relative). The start is the valley's end: its weight puts the band's excess share h of
+    the region's normals in the lobe, odds w / (1 - w) = h / (1 - h) * P_parent / P_lobe with P the share of each lobe's
+    mass in the region (sum of D W over the region's bins)."""
     if model not in ("ggx2", "beckmann2"):
         return []
     p = np.asarray(parent, dtype=float)
@@ -228,6 +242,11 @@ def ridge_starts(model: str, parent: np.ndarray, bins, log_expected):
     ax, ay, tz = p
     su = s @ np.array([math.cos(tz), -math.sin(tz)])
     sv = s @ np.array([math.sin(tz), math.cos(tz)])
+    lobe_model = PARENT[model]
+
+    def in_region(q):
+        return float(np.exp(log_d(lobe_model, q, b.m)) @ b.proj_solid_angle)
+
     out = []
     for along, across, a_along, a_across, first in ((su, sv, ax, ay, True), (sv, su, ay, ax, False)):
         for reach in (math.inf, 0.5 * a_along):
@@ -238,4 +257,43 @@ def ridge_starts(model: str, parent: np.ndarray, bins, log_expected):
             width = max(math.sqrt(float(x[band] @ along[band] ** 2) / held), 1.5 * ALPHA_FLOOR)
             lobe = (width, 1.5 * ALPHA_FLOOR) if first else (1.5 * ALPHA_FLOOR, width)
             out.append(np.array([*lobe, ax, ay, tz, min(max(held / n, 0.005), 0.5)]))
+            if log_d is None or reach != math.inf:
+                continue
+            flat = (LOBE_ALPHA_MAX, 1.5 * ALPHA_FLOOR) if first else (1.5 * ALPHA_FLOOR, LOBE_ALPHA_MAX)
+            p_lobe, p_parent = in_region(np.array([*flat, tz])), in_region(p)
+            h = min(held / n, 0.5)
+            if not (p_lobe > 0.0 and p_parent > 0.0 and h > 0.0):
+                continue
+            odds = h / (1.0 - h) * p_parent / p_lobe
+            w = min(max(odds / (1.0 + odds), 0.005), 1.0 - 1e-6)
+            out.append(np.array([*flat, ax, ay, tz, w]))
     return out
+
+
+#: alpha / s_max beyond which a lobe is flat to 1% over slopes up to s_max: 2 s_max^2 / alpha^2 <= 0.01.
+FLAT_LOBE = 10.0 * math.sqrt(2.0)
+
+
+def valley_end(model: str, p: np.ndarray, s_max: float):
+    """The point at the end of a flat lobe's valley, or None: every roughness flat to 1% over the region (at least
+    FLAT_LOBE times s_max, the region's steepest slope) and not yet at LOBE_ALPHA_MAX (within 1e-3 relative) set to
+    the bound, the lobe's odds scaled to keep its density over the region (a lobe flat along an axis has density
+    w / alpha there; an isotropic tail w / alpha^2). Over the region only the lobe's weight over its width is measured,
+    and a local optimizer stalls anywhere along that valley; the fit refits from here and keeps it when the objective
+    is not higher (data_formats/objective.md, "The lobes' roughness bound")."""
+    q = np.array(p, dtype=float)
+    slots = (0, 1, 5) if model == "ellipsoid+ggx" else (0, 1, 2, 3)
+    wi = len(q) - 1
+    v = math.log(q[wi]) - math.log1p(-q[wi])
+    moved = False
+    for i in slots:
+        if q[i] >= FLAT_LOBE * s_max and q[i] < LOBE_ALPHA_MAX * (1.0 - 1e-3):
+            first = i < 2
+            shift = (2.0 if model == "ellipsoid+ggx" and not first else 1.0) * math.log(LOBE_ALPHA_MAX / q[i])
+            v += shift if first else -shift
+            q[i] = LOBE_ALPHA_MAX
+            moved = True
+    if not moved:
+        return None
+    q[wi] = 1.0 / (1.0 + math.exp(-v))
+    return q

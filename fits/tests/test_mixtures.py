@@ -60,3 +60,26 @@ def test_fit_recovers_a_mixture_from_expected_counts(model):
     res = fit(bins, model)
     d = obj.model_delta(model, res.params, model, truth, bins)
     assert d < 1e-3, (res.params, d)
+
+
+def test_lobe_bound_is_the_search_box_and_valley_end_keeps_the_region():
+    """Mixture lobes are searched up to LOBE_ALPHA_MAX (the Rust fitter's bound), and valley_end moves a flat lobe to
+    it without changing D's shape over slopes up to tan 70 deg: checked by direct evaluation of both mixtures, their
+    ratio constant there to the flat-lobe limit's 2 s^2 / alpha^2 (independent of how valley_end scales the odds)."""
+    from ndfitpy import fit as fitmod, mixtures
+
+    lb, ub, _ = fitmod._bounds("ggx2", fitmod.to_search("ggx2", CASES["ggx2"]))
+    assert math.isclose(math.exp(ub[2]), mixtures.LOBE_ALPHA_MAX) and math.isclose(math.exp(ub[0]), mixtures.LOBE_ALPHA_MAX)
+    p = np.array([0.15, 0.1, 80.0, 0.3, 0.2, 0.2])
+    q = mixtures.valley_end("ggx2", p, math.tan(math.radians(70)))
+    assert q[2] == mixtures.LOBE_ALPHA_MAX and q[3] == p[3] and q[5] < p[5]  # the widened (second) lobe gains weight
+    s = np.linspace(-math.tan(math.radians(70)), math.tan(math.radians(70)), 41)
+    sx, sy = np.meshgrid(s, s)
+    keep = np.hypot(sx, sy) <= math.tan(math.radians(70))
+    m = np.column_stack([-sx[keep], -sy[keep], np.ones(keep.sum())])
+    m /= np.linalg.norm(m, axis=1)[:, None]
+    ratio = models.d("ggx2", q, m) / models.d("ggx2", p, m)
+    assert np.ptp(ratio) / ratio.mean() < 2 * 7.55 / 80.0**2, np.ptp(ratio) / ratio.mean()
+    assert mixtures.valley_end("ggx2", q, 2.75) is None  # already at the bound
+    assert mixtures.valley_end("ggx2", np.array(CASES["ggx2"]), 2.75) is None  # no flat lobe
+    assert mixtures.valley_end("ggx2", p, 6.0) is None  # 80 is not flat to 1% over slopes up to 6

@@ -14,7 +14,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::params::alpha_of;
+use super::params::{alpha_of, bounded_alpha_du, bounded_alpha_of};
 use crate::models::ellipsoid::rotation_xyz;
 use crate::models::ModelId;
 
@@ -122,18 +122,22 @@ impl LobeLnD {
             ModelId::BeckmannAniso | ModelId::Beckmann2 => (Shape::Aniso, true),
             ModelId::Ellipsoid | ModelId::EllipsoidGgx => (Shape::Full, false),
         };
-        Self::with_shape(shape, beckmann, x)
+        Self::with_shape(shape, beckmann, false, x)
     }
 
     /// Freeze a lobe of `shape` at its internal vector `x` (`[u]`, `[u_x, u_y, theta_z]` or the
-    /// ellipsoid's five).
-    pub(crate) fn with_shape(shape: Shape, beckmann: bool, x: &[f64]) -> LobeLnD {
+    /// ellipsoid's five); `bounded`: a mixture lobe's roughness map ([`super::params::bounded_alpha_of`]).
+    pub(crate) fn with_shape(shape: Shape, beckmann: bool, bounded: bool, x: &[f64]) -> LobeLnD {
         let (ux, uy, tx, ty, tz) = match shape {
             Shape::Iso => (x[0], x[0], 0.0, 0.0, 0.0),
             Shape::Aniso => (x[0], x[1], 0.0, 0.0, x[2]),
             Shape::Full => (x[0], x[1], x[2], x[3], x[4]),
         };
-        let (ax, ay) = (alpha_of(ux), alpha_of(uy));
+        let (ax, ay, gx, gy) = if bounded {
+            (bounded_alpha_of(ux), bounded_alpha_of(uy), bounded_alpha_du(ux), bounded_alpha_du(uy))
+        } else {
+            (alpha_of(ux), alpha_of(uy), ux.exp(), uy.exp())
+        };
         let (sx, cx) = tx.sin_cos();
         let (sy, cy) = ty.sin_cos();
         let (sz, cz) = tz.sin_cos();
@@ -157,8 +161,8 @@ impl LobeLnD {
             ay,
             iax: 1.0 / ax,
             iay: 1.0 / ay,
-            gx: ux.exp(),
-            gy: uy.exp(),
+            gx,
+            gy,
             r,
             r_tx: drx * ry * rz,
             r_ty: rx * dry * rz,

@@ -9,7 +9,8 @@
 //! `d ln D / d x1 = p1 d ln D1 / d x1`, `d ln D / d x2 = p2 d ln D2 / d x2` (a shared `theta_z` gets
 //! both terms), `d ln D / d v = w (1 - w) (D1 - D2) / D = p1 - w`.
 //!
-//! Internal vectors (roughnesses as `u` of [`super::params`], the weight as `v`):
+//! Internal vectors (roughnesses as `u` of [`super::params`], bounded by
+//! [`super::params::LOBE_ALPHA_MAX`], the weight as `v`):
 //! `ggx2`, `beckmann2`: `[u_x1, u_y1, u_x2, u_y2, theta_z, v]`;
 //! `ellipsoid+ggx`: `[u_x1, u_y1, theta_x, theta_y, theta_z, u2, v]`.
 
@@ -46,10 +47,14 @@ impl MixtureLnD {
         let (lobe1, lobe2, v) = match id {
             ModelId::Ggx2 | ModelId::Beckmann2 => {
                 let b = id == ModelId::Beckmann2;
-                (LobeLnD::with_shape(Shape::Aniso, b, &[x[0], x[1], x[4]]), LobeLnD::with_shape(Shape::Aniso, b, &[x[2], x[3], x[4]]), x[5])
+                (
+                    LobeLnD::with_shape(Shape::Aniso, b, true, &[x[0], x[1], x[4]]),
+                    LobeLnD::with_shape(Shape::Aniso, b, true, &[x[2], x[3], x[4]]),
+                    x[5],
+                )
             }
             // ellipsoid+ggx (the only other id LnD::new sends here).
-            _ => (LobeLnD::with_shape(Shape::Full, false, &x[..5]), LobeLnD::with_shape(Shape::Iso, false, &x[5..6]), x[6]),
+            _ => (LobeLnD::with_shape(Shape::Full, false, true, &x[..5]), LobeLnD::with_shape(Shape::Iso, false, true, &x[5..6]), x[6]),
         };
         MixtureLnD { id, lobe1, lobe2, w: 1.0 / (1.0 + (-v).exp()), ln_w: -softplus(-v), ln_1w: -softplus(v) }
     }

@@ -198,13 +198,21 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
             }
         }
     }
+    // A lobe on its way to the roughness bound is taken there.
+    if let Ok(f) = &fit {
+        if let Some(g) = to_bound(s, id, f, opts) {
+            fit = Ok(g);
+        }
+    }
     // A usable fit better than the parent by its price stands. Otherwise (no start that far below the parent, no finite
     // start, or a lobe run off beyond the alpha range, e.g. a tail widening without bound to take up a flat
     // background) the parent written as a mixture is the result, said so in a warning.
     let valid = |f: &Fitted| crate::models::Model::from_params(id, &public(f)).is_ok();
     if let Ok(fit) = &fit {
         if fit.f < parent.f - price(id, parent.id, s.data.n) && valid(fit) {
-            return Ok(fit.clone());
+            let mut fit = fit.clone();
+            fit.warnings.extend(bound_notes(id, &public(&fit)));
+            return Ok(fit);
         }
     }
     let x = super::params::to_internal(id, &degenerate(id, &p));
@@ -235,6 +243,71 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
         Err(_) => (0, Vec::new(), 0),
     };
     Ok(Fitted { id, x, f, local, evaluations, start_objectives, best_start, warnings, delta: false })
+}
+
+/// A mixture fit whose roughnesses are flat to 1% over the region (`2 s_max^2 / alpha^2 <= 0.01`, `s_max` the
+/// steepest slope of its bins: `alpha >= 10 sqrt(2) s_max`) and not yet at [`super::params::LOBE_ALPHA_MAX`] set
+/// to the bound and the rest refitted, when that does not raise the objective; the lobe's odds are scaled by
+/// `alpha / LOBE_ALPHA_MAX` per flat axis (`w / alpha` is what the region measures of a flat lobe), so the
+/// refit starts from the same D over the region. Along such a lobe's flat valley the bounded map's derivative
+/// vanishes towards the bound, so LM stops wherever its tolerance meets the valley's slope (deviance changes of
+/// 1e-9 relative), where the bound is the valley's end: the refit makes the end point the valley's, not the
+/// solver's. The Python cross-check ends the valley by the same rule (objective.md, "The lobes' roughness
+/// bound").
+/// `alpha / s_max` beyond which a lobe is flat to 1% over slopes up to `s_max`: `10 sqrt(2)`.
+pub const FLAT_LOBE: f64 = 14.142_135_623_730_951;
+
+fn to_bound(s: &Session, id: ModelId, f: &Fitted, opts: &FitOptions) -> Option<Fitted> {
+    let max = super::params::LOBE_ALPHA_MAX;
+    let mut q = public(f);
+    let wi = super::params::weight_slot(id)?;
+    // The first lobe's log-odds; a lobe flat along an axis has its density over the region scaled by
+    // `1 / alpha` on that axis (`1 / alpha^2` for an isotropic tail), so its odds grow with alpha to keep it.
+    let mut v = super::params::v_of(q[wi]);
+    let s_max = s.data.bins.iter().map(|b| (1.0 - b.m.z * b.m.z).max(0.0).sqrt() / b.m.z).fold(0.0, f64::max);
+    let flat = FLAT_LOBE * s_max;
+    let mut moved = false;
+    for &i in super::params::alpha_slots(id) {
+        if q[i] >= flat && !super::params::at_lobe_bound(q[i]) {
+            let first = i < 2;
+            let axes = if id == ModelId::EllipsoidGgx && !first { 2.0 } else { 1.0 };
+            let shift = axes * (max / q[i]).ln();
+            v += if first { shift } else { -shift };
+            q[i] = max;
+            moved = true;
+        }
+    }
+    if !moved {
+        return None;
+    }
+    q[wi] = super::params::weight_of(v);
+    let g = fit_from(s, id, &[q], opts).ok()?;
+    (g.f <= f.f).then(|| Fitted {
+        evaluations: f.evaluations + g.evaluations,
+        start_objectives: f.start_objectives.clone(),
+        best_start: f.best_start,
+        ..g
+    })
+}
+
+/// One note per roughness of a mixture fit `p` (contract parameters) that ends at
+/// [`super::params::LOBE_ALPHA_MAX`]: that lobe is flat along the axis over the fitted slopes, and only the
+/// ratio of its weight to its width is measured there (the bound fixes the width).
+pub fn bound_notes(id: ModelId, p: &[f64]) -> Vec<String> {
+    let names = id.param_names();
+    super::params::alpha_slots(id)
+        .iter()
+        .filter(|&&i| super::params::at_lobe_bound(p[i]))
+        .map(|&i| {
+            format!(
+                "{id}: {} = {:.4} is at the mixture lobes' bound {}: that lobe is flat along this axis over the fitted slopes \
+                 (a background; its weight and width are not told apart, the bound fixes the width)",
+                names[i],
+                p[i],
+                super::params::LOBE_ALPHA_MAX
+            )
+        })
+        .collect()
 }
 
 /// Fit mixture `id` with its parent's chain first.

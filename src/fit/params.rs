@@ -13,9 +13,68 @@
 //! `ellipsoid`: `[u_x, u_y, theta_x, theta_y, theta_z]`.
 //!
 //! The mixtures' weight is logistic, `w = 1 / (1 + exp(-v))`, in `(0, 1)` for every real `v`
-//! ([`super::lnd_mixture`] gives their internal vectors).
+//! ([`super::lnd_mixture`] gives their internal vectors). A mixture lobe's roughness is bounded above as
+//! well, `alpha = ALPHA_MIN + (LOBE_ALPHA_MAX - ALPHA_MIN) / (1 + exp(-u))` ([`LOBE_ALPHA_MAX`] says why);
+//! near the floor this is the single lobes' map scaled (`ALPHA_MIN + (LOBE_ALPHA_MAX - ALPHA_MIN) exp(u)`),
+//! and the single lobes keep theirs, so their fits do not move.
 
 use crate::models::{ModelId, ALPHA_MIN};
+
+/// The largest roughness of a mixture lobe (`ggx2`, `beckmann2`, `ellipsoid+ggx`), on every axis; the
+/// Python cross-check bounds its search by the same value. Beyond it a lobe is flat over the fitted slopes:
+/// GGX's `(1 + s^2 / alpha^2)^-2` is within `2 s^2 / alpha^2` of its `alpha -> infinity` limit, `1.5e-5` at
+/// `s = tan 70 deg` (the default `max_theta`; Beckmann's `exp(-s^2 / alpha^2)` within half that), far below
+/// any bin's counting error. Such a lobe's weight and width are then no longer told apart by the data (only
+/// their ratio is): without a bound a near-uniform second lobe of tiny weight drifts along that flat valley
+/// to alphas of 1e4-1e5, wherever the solver stops. A lobe ending at the bound is flagged in the fit report
+/// (`warnings`): it is a flat background along that axis, and a renderer should read it as such.
+pub const LOBE_ALPHA_MAX: f64 = 1e3;
+
+/// Whether model `id`'s roughnesses use the bounded map ([`bounded_alpha_of`]): the mixtures'.
+#[inline]
+pub fn bounded(id: ModelId) -> bool {
+    matches!(id, ModelId::Ggx2 | ModelId::Beckmann2 | ModelId::EllipsoidGgx)
+}
+
+/// `u -> alpha` of a mixture lobe: `ALPHA_MIN + (LOBE_ALPHA_MAX - ALPHA_MIN) / (1 + exp(-u))`, in
+/// `(ALPHA_MIN, LOBE_ALPHA_MAX)` for every real `u`.
+#[inline]
+pub fn bounded_alpha_of(u: f64) -> f64 {
+    ALPHA_MIN + (LOBE_ALPHA_MAX - ALPHA_MIN) * weight_of(u)
+}
+
+/// `d alpha / d u` of [`bounded_alpha_of`]: `(LOBE_ALPHA_MAX - ALPHA_MIN) s (1 - s)`, `s = 1 / (1 + exp(-u))`
+/// (`1 - s` as `s(-u)`, exact near the bound).
+#[inline]
+pub fn bounded_alpha_du(u: f64) -> f64 {
+    (LOBE_ALPHA_MAX - ALPHA_MIN) * weight_of(u) * weight_of(-u)
+}
+
+/// `alpha -> u`, the inverse of [`bounded_alpha_of`]; an alpha at (or beyond) either end maps to a finite `u`
+/// whose alpha is that end to 1e-12 relative.
+#[inline]
+pub fn bounded_u_of(alpha: f64) -> f64 {
+    let range = LOBE_ALPHA_MAX - ALPHA_MIN;
+    let t = ((alpha - ALPHA_MIN).max(ALPHA_MIN * 1e-12) / range).min(1.0 - 1e-12);
+    t.ln() - (-t).ln_1p()
+}
+
+/// `u -> alpha` of model `id` ([`alpha_of`], or [`bounded_alpha_of`] for a mixture).
+#[inline]
+pub fn alpha_of_model(id: ModelId, u: f64) -> f64 {
+    if bounded(id) {
+        bounded_alpha_of(u)
+    } else {
+        alpha_of(u)
+    }
+}
+
+/// Whether a mixture's fitted roughness sits at [`LOBE_ALPHA_MAX`] (within `1e-3` relative: the solver
+/// approaches the bound as the logistic saturates).
+#[inline]
+pub fn at_lobe_bound(alpha: f64) -> bool {
+    alpha >= LOBE_ALPHA_MAX * (1.0 - 1e-3)
+}
 
 /// `u -> alpha`: `ALPHA_MIN + exp(u)`.
 #[inline]
@@ -67,7 +126,7 @@ pub fn v_of(w: f64) -> f64 {
 pub fn to_public(id: ModelId, x: &[f64]) -> Vec<f64> {
     let mut p = x.to_vec();
     for &i in alpha_slots(id) {
-        p[i] = alpha_of(x[i]);
+        p[i] = alpha_of_model(id, x[i]);
     }
     if let Some(i) = weight_slot(id) {
         p[i] = weight_of(x[i]);
@@ -79,7 +138,7 @@ pub fn to_public(id: ModelId, x: &[f64]) -> Vec<f64> {
 pub fn to_internal(id: ModelId, p: &[f64]) -> Vec<f64> {
     let mut x = p.to_vec();
     for &i in alpha_slots(id) {
-        x[i] = u_of(p[i]);
+        x[i] = if bounded(id) { bounded_u_of(p[i]) } else { u_of(p[i]) };
     }
     if let Some(i) = weight_slot(id) {
         x[i] = v_of(p[i]);
@@ -87,12 +146,12 @@ pub fn to_internal(id: ModelId, p: &[f64]) -> Vec<f64> {
     x
 }
 
-/// `d public_i / d x_i` (the map is diagonal): `alpha - ALPHA_MIN` for roughnesses, `w (1 - w)` for a
-/// weight, 1 for angles.
+/// `d public_i / d x_i` (the map is diagonal): `alpha - ALPHA_MIN` for roughnesses ([`bounded_alpha_du`]
+/// for a mixture's), `w (1 - w)` for a weight, 1 for angles.
 pub fn public_derivative(id: ModelId, x: &[f64]) -> Vec<f64> {
     let mut g = vec![1.0; x.len()];
     for &i in alpha_slots(id) {
-        g[i] = x[i].exp();
+        g[i] = if bounded(id) { bounded_alpha_du(x[i]) } else { x[i].exp() };
     }
     if let Some(i) = weight_slot(id) {
         let w = weight_of(x[i]);

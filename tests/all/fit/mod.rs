@@ -4,6 +4,7 @@
 
 pub(crate) mod fixtures;
 
+mod bound;
 mod cli;
 mod compare;
 mod covariance;
