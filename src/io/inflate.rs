@@ -324,6 +324,28 @@ mod tests {
         e.finish().unwrap()
     }
 
+    /// `n` values `x(k)` stored as type `t` (the floats in micrometres as metres), with a non-finite
+    /// value where `k % every == at`: `bad` for float64, NaN for float32.
+    fn encode(
+        t: ZType,
+        n: usize,
+        x: impl Fn(usize) -> f64,
+        (d_every, d_at, bad): (usize, usize, f64),
+        (f_every, f_at): (usize, usize),
+    ) -> Vec<u8> {
+        let mut raw = Vec::new();
+        for k in 0..n {
+            let x = x(k);
+            match t {
+                ZType::D => raw.extend_from_slice(&(if k % d_every == d_at { bad } else { x * 1e-6 }).to_le_bytes()),
+                ZType::F => raw.extend_from_slice(&(if k % f_every == f_at { f32::NAN } else { x as f32 * 1e-6 }).to_le_bytes()),
+                ZType::L => raw.extend_from_slice(&((x * 1e4) as i32).to_le_bytes()),
+                ZType::I => raw.extend_from_slice(&(x as i16).to_le_bytes()),
+            }
+        }
+        raw
+    }
+
     fn run(raw: &[u8], n: usize, t: ZType, inc: f64, off: f64, md5: Option<(&str, &str)>) -> Result<Vec<f64>> {
         let c = deflate(raw);
         inflate_heights(flate2::read::DeflateDecoder::new(&c[..]), "bindata/data.bin", n, t, inc, off, md5)
@@ -337,16 +359,7 @@ mod tests {
         for (t, inc, off) in
             [(ZType::D, 1.0, 0.0), (ZType::D, 1e-9, 2.5e-6), (ZType::F, 1.0, 0.0), (ZType::I, 3e-9, -1e-7), (ZType::L, 1e-10, 0.0)]
         {
-            let mut raw = Vec::new();
-            for k in 0..n {
-                let x = (k as f64 * 0.001).sin() * 1e3;
-                match t {
-                    ZType::D => raw.extend_from_slice(&(if k % 1001 == 5 { f64::INFINITY } else { x * 1e-6 }).to_le_bytes()),
-                    ZType::F => raw.extend_from_slice(&(if k % 999 == 3 { f32::NAN } else { x as f32 * 1e-6 }).to_le_bytes()),
-                    ZType::L => raw.extend_from_slice(&((x * 1e4) as i32).to_le_bytes()),
-                    ZType::I => raw.extend_from_slice(&(x as i16).to_le_bytes()),
-                }
-            }
+            let raw = encode(t, n, |k| (k as f64 * 0.001).sin() * 1e3, (1001, 5, f64::INFINITY), (999, 3));
             let whole = crate::io::x3p::decode(&raw, t, inc, off, None).unwrap();
             let md5 = crate::io::md5::md5_hex(&raw);
             let blocks = run(&raw, n, t, inc, off, Some(("MD5ChecksumPointData", &md5))).unwrap();
@@ -401,16 +414,7 @@ mod tests {
         for (t, inc, off) in
             [(ZType::D, 1.0, 0.0), (ZType::D, 1e-9, 2.5e-6), (ZType::F, 1.0, 0.0), (ZType::I, 3e-9, -1e-7), (ZType::L, 1e-10, 0.0)]
         {
-            let mut raw = Vec::new();
-            for k in 0..n {
-                let x = (k as f64 * 0.0013).cos() * 1e3 + (k % 7) as f64;
-                match t {
-                    ZType::D => raw.extend_from_slice(&(if k % 1009 == 5 { f64::NEG_INFINITY } else { x * 1e-6 }).to_le_bytes()),
-                    ZType::F => raw.extend_from_slice(&(if k % 997 == 3 { f32::NAN } else { x as f32 * 1e-6 }).to_le_bytes()),
-                    ZType::L => raw.extend_from_slice(&((x * 1e4) as i32).to_le_bytes()),
-                    ZType::I => raw.extend_from_slice(&(x as i16).to_le_bytes()),
-                }
-            }
+            let raw = encode(t, n, |k| (k as f64 * 0.0013).cos() * 1e3 + (k % 7) as f64, (1009, 5, f64::NEG_INFINITY), (997, 3));
             let whole = crate::io::x3p::decode(&raw, t, inc, off, None).unwrap();
             let md5 = crate::io::md5::md5_hex(&raw);
             let file = zip_of(&raw);
