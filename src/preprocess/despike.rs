@@ -362,6 +362,13 @@ mod tests {
 
     /// The 0-1 principle (Knuth 5.3.4, theorem Z): a network sorting all 256 inputs of zeros and ones
     /// sorts every input. Then random finite values against the comparison sort, value for value.
+    /// Uniform values in `[-0.5, 0.5)` from a seeded generator.
+    fn uniform(seed: u64) -> impl FnMut() -> f64 {
+        use rand::{RngExt, SeedableRng};
+        let mut r = rand::rngs::StdRng::seed_from_u64(seed);
+        move || r.random::<f64>() - 0.5
+    }
+
     #[test]
     fn sort8_is_a_sorting_network() {
         for m in 0u32..256 {
@@ -369,14 +376,9 @@ mod tests {
             sort8(&mut v);
             assert!(v.windows(2).all(|w| w[0] <= w[1]), "{m:08b}: {v:?}");
         }
-        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = uniform(0x2545_f491_4f6c_dd1d);
         for _ in 0..2000 {
-            let mut v: [f64; 8] = std::array::from_fn(|_| {
-                x ^= x << 13;
-                x ^= x >> 7;
-                x ^= x << 17;
-                (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-            });
+            let mut v: [f64; 8] = std::array::from_fn(|_| rnd());
             let mut want = v;
             want.sort_by(f64::total_cmp);
             sort8(&mut v);
@@ -390,13 +392,7 @@ mod tests {
     #[test]
     fn screened_spikes_equal_the_brute_force_test() {
         let (nx, ny) = (97, 83);
-        let mut x = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rnd = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rnd = uniform(0x9e37_79b9_7f4a_7c15);
         let mut z = vec![0.0; nx * ny];
         for i in 0..ny {
             for j in 0..nx {
@@ -435,13 +431,7 @@ mod tests {
     /// midpoints with wide pairs).
     #[test]
     fn median_of_pairs_lies_between_their_midpoints() {
-        let mut x = 0x51_7cc1_b727_220au64;
-        let mut rnd = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rnd = uniform(0x51_7cc1_b727_220a);
         for t in 0..20000 {
             let spread = if t % 2 == 0 { 1.0 } else { 1e3 };
             let mut v = [0.0; 8];
@@ -466,13 +456,7 @@ mod tests {
     #[test]
     fn pair_screen_passes_only_points_the_full_test_clears() {
         let (nx, ny) = (41, 37);
-        let mut x = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rnd = uniform(0x2545_f491_4f6c_dd1d);
         let mut passed = 0usize;
         let mut total = 0usize;
         for (case, (gx, gy, base)) in [(3.0, -7.0, 0.0), (-50.0, 20.0, 0.076), (0.5, 0.5, -1.0), (1e3, 1e3, 10.0)].into_iter().enumerate() {
