@@ -217,11 +217,7 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
         // read from regular files only.
         return Err(Error::new(ErrorKind::InvalidInput, "is not a regular file (a pipe, socket or device); scans are read from files"));
     }
-    // A read that keeps every row or every other row touches (within the kernel's fault-around window)
-    // every page: map them all in the one mmap call. Coarser strides touch a fraction of the rows: map
-    // pages as they are read (measured at stride 4: 8.0 against 9.7 ms at 4096^2, equal at 1024^2; at
-    // stride 2 and 2048^2 faulting them in took 10.7 ms against ~5 for the whole populated read).
-    let file = FileBytes::open(path, md.len(), stride <= 2)?;
+    let file = FileBytes::open(path, md.len())?;
     let bytes: &[u8] = &file;
     if bytes.is_empty() {
         return Err(Error::new(ErrorKind::BadData, "file is empty"));
@@ -234,6 +230,15 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
             Error::new(ErrorKind::UnknownFormat, "unknown scan format (neither its content nor its extension is recognised)")
         })?,
     };
+    // A read that keeps every row or every other row touches (within the kernel's fault-around window)
+    // every page: map them all at once. Coarser strides touch a fraction of the rows: map pages as they
+    // are read (measured at stride 4: 8.0 against 9.7 ms at 4096^2, equal at 1024^2; at stride 2 and
+    // 2048^2 faulting them in took 10.7 ms against ~5 for the whole populated read). The X3P reader
+    // decides for itself: the stored float64 data it reads in place is first touched by a pass on
+    // every thread, which faults the pages in faster than one populating call.
+    if stride <= 2 && format != Format::X3p {
+        file.populate();
+    }
     // Large native float64 NPY files are read in place (zero-copy, `crate::heights`); every other case
     // decodes into an owned buffer.
     let strided = match (&file, format) {
@@ -275,8 +280,7 @@ enum FileBytes {
 const MMAP_THRESHOLD: u64 = 4 << 20;
 
 impl FileBytes {
-    /// `populate`: map every page in the one mmap call (for reads of the whole file).
-    fn open(path: &Path, len: u64, populate: bool) -> Result<Self> {
+    fn open(path: &Path, len: u64) -> Result<Self> {
         if len < MMAP_THRESHOLD {
             return Ok(FileBytes::Owned(std::fs::read(path)?));
         }
@@ -284,16 +288,26 @@ impl FileBytes {
         // SAFETY: the map is only read, and only while the caller holds it. Known limit: a file
         // truncated by another process during the read faults (SIGBUS) instead of failing
         // cleanly; scans are read at rest, and the zero-copy read is what keeps large files fast.
-        // `populate` (MAP_POPULATE) maps every page in the one mmap call: no 4 KiB fault per page
-        // while decoding (a `madvise(MADV_SEQUENTIAL)` afterwards would come too late to matter).
-        let mut options = memmap2::MmapOptions::new();
-        // A scan read as tiles (larger than the tiling threshold) is faulted in band by band instead,
-        // and its pages released after use (`crate::ndf::bands`).
-        if populate && len <= crate::ndf::bands::release_threshold() {
-            options.populate();
-        }
-        let map = unsafe { options.map(&file)? };
+        let map = unsafe { memmap2::MmapOptions::new().map(&file)? };
         Ok(FileBytes::Mapped(std::sync::Arc::new(map)))
+    }
+
+    /// Map every page of a mapped file in one call ([`populate`]).
+    fn populate(&self) {
+        if let FileBytes::Mapped(map) = self {
+            populate(map);
+        }
+    }
+}
+
+/// Map every page of `map` now, in one call (`MADV_POPULATE_READ`): no fault per page while a reader
+/// decodes it in order (a `madvise(MADV_SEQUENTIAL)` would come too late to matter). A scan read as
+/// tiles (larger than the tiling threshold) is faulted in band by band instead, and its pages released
+/// after use (`crate::ndf::bands`). Best effort: a kernel without the advice faults pages as they come.
+pub(crate) fn populate(map: &memmap2::Mmap) {
+    #[cfg(target_os = "linux")]
+    if map.len() as u64 <= crate::ndf::bands::release_threshold() {
+        let _ = map.advise(memmap2::Advice::PopulateRead);
     }
 }
 

@@ -104,16 +104,33 @@ fn mapped_heights(map: &std::sync::Arc<memmap2::Mmap>, raw: &[u8], n: usize, crc
     let Some(z) = Heights::mapped(map.clone(), offset, n) else { return Ok(None) };
     let release = (raw.len() as u64) > crate::ndf::bands::release_threshold();
     // One pass, 1 MiB at a time: the CRC-32 and the infinity check (an infinity needs the decoding
-    // copy, which masks it); the pages of a scan read as tiles are released after each block.
+    // copy, which masks it). A scan read as tiles goes in order, its pages released after each block;
+    // otherwise the blocks are hashed on every thread (the first touch of each page is most of the cost)
+    // and their CRCs combined in order.
+    let blocks = || raw.chunks(1 << 20).zip(z.chunks(1 << 17));
+    let hash = |block: &[u8], vals: &[f64]| {
+        let mut h = crc32fast::Hasher::new();
+        h.update(block);
+        (h, vals.iter().any(|v| v.is_infinite()))
+    };
+    let parts: Vec<(crc32fast::Hasher, bool)> = if release {
+        blocks()
+            .map(|(block, vals)| {
+                let part = hash(block, vals);
+                crate::scan::heights::release_pages(block.as_ptr(), block.len());
+                crate::ndf::bands::report_tiled_progress(block.len() as u64);
+                part
+            })
+            .collect()
+    } else {
+        use rayon::prelude::*;
+        blocks().collect::<Vec<_>>().into_par_iter().map(|(block, vals)| hash(block, vals)).collect()
+    };
     let mut hasher = crc32fast::Hasher::new();
     let mut infinite = false;
-    for (block, vals) in raw.chunks(1 << 20).zip(z.chunks(1 << 17)) {
-        hasher.update(block);
-        infinite |= vals.iter().any(|v| v.is_infinite());
-        if release {
-            crate::scan::heights::release_pages(block.as_ptr(), block.len());
-            crate::ndf::bands::report_tiled_progress(block.len() as u64);
-        }
+    for (h, inf) in &parts {
+        hasher.combine(h);
+        infinite |= inf;
     }
     if hasher.finalize() != crc {
         return Err(Error::corrupt("CRC-32 mismatch, the point data are corrupt"));
@@ -217,6 +234,10 @@ fn read_x3p_in(bytes: &[u8], map: Option<&std::sync::Arc<memmap2::Mmap>>) -> Res
             map.is_some() && stored && ztype == ZType::D && z_inc == 1.0 && z_off == 0.0 && link.text_at(&["ValidPointsLink"]).is_none();
         if !candidate {
             budget()?;
+            // Decoded or inflated in order: every page mapped at once ([`crate::io::populate`]).
+            if let Some(map) = map {
+                crate::io::populate(map);
+            }
         }
         let md5_want = link
             .text_at(&["MD5ChecksumPointData"])
