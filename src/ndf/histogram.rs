@@ -164,11 +164,7 @@ impl Block {
         #[cfg(not(target_arch = "x86_64"))]
         self.map_body(frame, grid);
         for k in 0..self.n {
-            let mut c = self.cell[k] as usize;
-            if !(self.px[k] * self.px[k] + self.py[k] * self.py[k] > 0.0) {
-                c = grid.cell_of(frame.to_lambert(self.sx[k], self.sy[k]));
-            }
-            counts[c] += 1;
+            counts[self.cell_at(k, frame, grid)] += 1;
         }
         self.n = 0;
     }
@@ -200,7 +196,20 @@ impl Block {
             let ix = ((px[k] + r) * inv_h).max(0.0).min(last);
             let iy = ((py[k] + r) * inv_h).max(0.0).min(last);
             // SAFETY: ix, iy are finite and in [0, n - 1] with n <= 1023 (clamped just above).
-            cell[k] = unsafe { iy.to_int_unchecked::<i32>() * cols + ix.to_int_unchecked::<i32>() };
+            let c = unsafe { iy.to_int_unchecked::<i32>() * cols + ix.to_int_unchecked::<i32>() };
+            // Guard: |s'| > 1e150 overflows t (p = 0 or NaN); marked -1 for the exact map, which sends
+            // it to the rim.
+            cell[k] = if px[k] * px[k] + py[k] * py[k] > 0.0 { c } else { -1 };
+        }
+    }
+
+    /// The cell of slope `k` after [`Block::map_body`]: the vector result, or the exact map where the
+    /// guard marked it.
+    #[inline(always)]
+    fn cell_at(&self, k: usize, frame: &SlopeFrame, grid: &BinGrid) -> usize {
+        match self.cell[k] {
+            c if c >= 0 => c as usize,
+            _ => grid.cell_of(frame.to_lambert(self.sx[k], self.sy[k])),
         }
     }
 
@@ -209,16 +218,10 @@ impl Block {
         self.map_body(frame, grid);
         let n = self.n;
         let (sx, sy) = (&self.sx[..n], &self.sy[..n]);
-        let (px, py, cell) = (&self.px[..n], &self.py[..n], &self.cell[..n]);
         let (cx, cy) = (frame.center[0], frame.center[1]);
         let (shift, mask) = (acc.shift, (1usize << acc.shift) - 1);
         for k in 0..n {
-            let mut c = cell[k] as usize;
-            // Guard: |s'| > 1e150 overflows t (p = 0 or NaN); the exact map sends it to the rim.
-            if !(px[k] * px[k] + py[k] * py[k] > 0.0) {
-                c = grid.cell_of(frame.to_lambert(sx[k], sy[k]));
-            }
-            acc.lanes[(c << shift) + (k & mask)] += 1;
+            acc.lanes[(self.cell_at(k, frame, grid) << shift) + (k & mask)] += 1;
         }
         acc.pending += n as u64;
         // Fold long before a u32 counter could overflow (every sample in one cell and one lane).
