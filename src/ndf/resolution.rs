@@ -212,7 +212,9 @@ impl RowTest {
 
     /// Fill `code` for row `i` (column `j` at `j - 1`) and return the valid and the unresolved counts.
     /// Branch-free loops over equal-length slices, so that they vectorize; the arithmetic is
-    /// [`unresolved_at`]'s, operation for operation (no contraction into FMA).
+    /// [`unresolved_at`]'s, operation for operation (no contraction into FMA). Where the wide stencil
+    /// fits (rows `2..ny - 2`, columns `2..nx - 2`), one loop takes the validity, the test and the
+    /// counts; the rim of the grid is unresolved (the wide stencil leaves it).
     #[inline(always)]
     fn codes<H: HeightRows>(&self, hf: &H, i: usize, code: &mut [u8]) -> (u64, u64) {
         let nx = self.nx;
@@ -220,42 +222,48 @@ impl RowTest {
         let code = &mut code[..m];
         let f = |v: H::T| -> f64 { v.into() };
         let (r0, r1, r2) = (hf.row(i - 1), hf.row(i), hf.row(i + 1));
-        {
-            let (c, l, r, d, u) = (&r1[1..m + 1], &r1[..m], &r1[2..m + 2], &r0[1..m + 1], &r2[1..m + 1]);
-            for k in 0..m {
-                let valid = f(c[k]).is_finite() & f(l[k]).is_finite() & f(r[k]).is_finite() & f(d[k]).is_finite() & f(u[k]).is_finite();
-                // Unresolved until shown otherwise: the rim of the grid, where the wide stencil leaves it.
-                code[k] = valid as u8 | 2;
-            }
-        }
-        if i >= 2 && i + 2 < self.ny && nx >= 5 {
-            let n = nx - 4;
-            let (rm, rp) = (hf.row(i - 2), hf.row(i + 2));
-            let (l2, l, r, r2x) = (&r1[..n], &r1[1..n + 1], &r1[3..n + 3], &r1[4..n + 4]);
-            let (d, u, d2, u2) = (&r0[2..n + 2], &r2[2..n + 2], &rm[2..n + 2], &rp[2..n + 2]);
-            let out = &mut code[1..n + 1];
-            let (kx, ky, kx2, ky2) = (0.5 / self.dx, 0.5 / self.dy, 0.25 / self.dx, 0.25 / self.dy);
-            let (c, w) = (self.frame.center, self.frame.whiten);
-            let tt = self.tol * self.tol;
-            for k in 0..n {
-                let sx = (f(r[k]) - f(l[k])) * kx;
-                let sy = (f(u[k]) - f(d[k])) * ky;
-                let ex = ((f(r2x[k]) - f(l2[k])) * kx2 - sx) * THIRD;
-                let ey = ((f(u2[k]) - f(d2[k])) * ky2 - sy) * THIRD;
-                let (wx, wy) = (w[0][0] * ex + w[0][1] * ey, w[1][0] * ex + w[1][1] * ey);
-                let (cx, cy) = (sx - c[0], sy - c[1]);
-                let (px, py) = (w[0][0] * cx + w[0][1] * cy, w[1][0] * cx + w[1][1] * cy);
-                let r2s = (px * px + py * py).max(1.0);
-                let unresolved = !(wx * wx + wy * wy <= tt * r2s);
-                out[k] = (out[k] & 1) | ((unresolved as u8) << 1);
-            }
-        }
+        let valid_at = |j: usize| -> bool {
+            f(r1[j]).is_finite() & f(r1[j - 1]).is_finite() & f(r1[j + 1]).is_finite() & f(r0[j]).is_finite() & f(r2[j]).is_finite()
+        };
         let (mut all, mut bad) = (0u64, 0u64);
-        for &c in code.iter() {
-            all += (c & 1) as u64;
-            bad += (c == 3) as u64;
+        let mut rim = |k: usize, code: &mut [u8]| {
+            let v = valid_at(k + 1);
+            code[k] = v as u8 | 2;
+            all += v as u64;
+            bad += v as u64;
+        };
+        if !(i >= 2 && i + 2 < self.ny && nx >= 5) {
+            (0..m).for_each(|k| rim(k, code));
+            return (all, bad);
         }
-        (all, bad)
+        rim(0, code);
+        rim(m - 1, code);
+        let n = nx - 4;
+        let (rm, rp) = (hf.row(i - 2), hf.row(i + 2));
+        let (l2, l, cc, r, r2x) = (&r1[..n], &r1[1..n + 1], &r1[2..n + 2], &r1[3..n + 3], &r1[4..n + 4]);
+        let (d, u, d2, u2) = (&r0[2..n + 2], &r2[2..n + 2], &rm[2..n + 2], &rp[2..n + 2]);
+        let out = &mut code[1..n + 1];
+        let (kx, ky, kx2, ky2) = (0.5 / self.dx, 0.5 / self.dy, 0.25 / self.dx, 0.25 / self.dy);
+        let (c, w) = (self.frame.center, self.frame.whiten);
+        let tt = self.tol * self.tol;
+        let (mut a, mut b) = (0u64, 0u64);
+        for k in 0..n {
+            let valid = f(cc[k]).is_finite() & f(l[k]).is_finite() & f(r[k]).is_finite() & f(d[k]).is_finite() & f(u[k]).is_finite();
+            let sx = (f(r[k]) - f(l[k])) * kx;
+            let sy = (f(u[k]) - f(d[k])) * ky;
+            let ex = ((f(r2x[k]) - f(l2[k])) * kx2 - sx) * THIRD;
+            let ey = ((f(u2[k]) - f(d2[k])) * ky2 - sy) * THIRD;
+            let (wx, wy) = (w[0][0] * ex + w[0][1] * ey, w[1][0] * ex + w[1][1] * ey);
+            let (cx, cy) = (sx - c[0], sy - c[1]);
+            let (px, py) = (w[0][0] * cx + w[0][1] * cy, w[1][0] * cx + w[1][1] * cy);
+            let r2s = (px * px + py * py).max(1.0);
+            // A NaN (the wide stencil leaves the valid data) counts as unresolved.
+            let unresolved = !(wx * wx + wy * wy <= tt * r2s);
+            out[k] = valid as u8 | ((unresolved as u8) << 1);
+            a += valid as u64;
+            b += (valid & unresolved) as u64;
+        }
+        (all + a, bad + b)
     }
 
     /// Fill the NDF's resolution fields from the merged tallies, as [`assess`] does.
