@@ -245,7 +245,7 @@ pub(crate) fn build_bins(
         lattice::respect_lattice(frame, grid, lat, &cells, &mut ints);
     }
     let bins: Vec<NdfBin> = cells
-        .iter()
+        .par_iter()
         .zip(&ints)
         .map(|(&c, &(w, o, centroid))| {
             let count = counts[c];
