@@ -13,15 +13,17 @@ use super::{BandSource, BinGrid, NormalScheme, SlopeFrame};
 /// Counting goes through `lanes`: each cell has `2^shift` u32 counters side by side (one cache line),
 /// and consecutive samples alternate between them. Neighbouring normals of a smooth surface mostly
 /// fall in the same cell, and a single counter would chain every increment on the previous one's
-/// store (perf: 20% of the pass); interleaved counters let them overlap. They are folded into the u64
-/// `counts` at the end, or before a u32 could overflow.
+/// store (perf: 20% of the pass); interleaved counters let them overlap. The even and the odd row
+/// blocks of the dispersion split count into separate counters, so they are folded into the u64
+/// `counts` (and `odd`) once, at the end, or before a u32 could overflow.
 pub(super) struct Acc {
     pub(super) counts: Vec<u64>,
     /// The part of `counts` from the odd row blocks of the dispersion split ([`DISPERSION_BLOCKS`]).
     pub(super) odd: Vec<u64>,
-    /// Whether the samples pending in `lanes` come from an odd row block.
+    /// Whether the samples being counted come from an odd row block (they go to `lanes[1]`).
     odd_pending: bool,
-    lanes: Vec<u32>,
+    /// The interleaved counters of the even (`[0]`) and the odd (`[1]`) row blocks.
+    lanes: [Vec<u32>; 2],
     shift: u32,
     /// Samples counted into `lanes` since they were last folded.
     pending: u64,
@@ -43,7 +45,7 @@ impl Acc {
             counts: vec![0; cells],
             odd: vec![0; cells],
             odd_pending: false,
-            lanes: vec![0; cells << shift],
+            lanes: [vec![0; cells << shift], vec![0; cells << shift]],
             shift,
             pending: 0,
             n: 0,
@@ -59,13 +61,14 @@ impl Acc {
             return;
         }
         let k = 1usize << self.shift;
-        for ((c, o), l) in self.counts.iter_mut().zip(self.odd.iter_mut()).zip(self.lanes.chunks_exact_mut(k)) {
-            let v = l.iter().map(|&v| v as u64).sum::<u64>();
-            *c += v;
-            if self.odd_pending {
-                *o += v;
-            }
-            l.fill(0);
+        let [even, odd_lanes] = &mut self.lanes;
+        let lanes = even.chunks_exact_mut(k).zip(odd_lanes.chunks_exact_mut(k));
+        for ((c, o), (le, lo)) in self.counts.iter_mut().zip(self.odd.iter_mut()).zip(lanes) {
+            let (ve, vo) = (le.iter().map(|&v| v as u64).sum::<u64>(), lo.iter().map(|&v| v as u64).sum::<u64>());
+            *c += ve + vo;
+            *o += vo;
+            le.fill(0);
+            lo.fill(0);
         }
         self.pending = 0;
     }
@@ -220,8 +223,9 @@ impl Block {
         let (sx, sy) = (&self.sx[..n], &self.sy[..n]);
         let (cx, cy) = (frame.center[0], frame.center[1]);
         let (shift, mask) = (acc.shift, (1usize << acc.shift) - 1);
+        let lanes = &mut acc.lanes[acc.odd_pending as usize];
         for k in 0..n {
-            acc.lanes[(self.cell_at(k, frame, grid) << shift) + (k & mask)] += 1;
+            lanes[(self.cell_at(k, frame, grid) << shift) + (k & mask)] += 1;
         }
         acc.pending += n as u64;
         // Fold long before a u32 counter could overflow (every sample in one cell and one lane).
@@ -312,12 +316,11 @@ pub(super) fn histogram<S: BandSource>(
                 };
                 let hf = &src.band(lo, hi, &mut buf);
                 for i in b {
-                    // The dispersion split: samples of odd row blocks are also counted apart (flushed and
-                    // folded where the parity changes, so no block of samples mixes the two).
+                    // The dispersion split: samples of odd row blocks are also counted apart (the block
+                    // is flushed where the parity changes, so that none mixes the two).
                     let odd = dispersion_block(i - rows.start, rows.len()) % 2 == 1;
                     if odd != acc.odd_pending {
                         blk.flush(frame, grid, &mut acc);
-                        acc.fold();
                         acc.odd_pending = odd;
                     }
                     let valid = scheme.row_slopes(hf, i, 1, |sx, sy| {
@@ -353,24 +356,28 @@ mod tests {
     use crate::ndf::{empirical_ndf, NdfOptions};
     use crate::Heightfield;
 
-    /// The blocked, vectorized mapping agrees with the scalar `to_lambert` cell by cell, including
-    /// slopes so large that `t = 1 + |s'|^2` overflows (they go to the rim, not to the centre).
+    /// The interleaved counters of both parities fold into `counts`, the odd ones into `odd` too, and
+    /// are cleared.
     #[test]
     fn interleaved_counters_fold_into_counts() {
         for cells in [9, MAX_LANED_CELLS + 1] {
             let mut acc = Acc::new(cells);
             let k = 1usize << acc.shift;
-            // 3 samples in cell 2 spread over lanes, 5 in the last cell in one lane.
-            for (c, lane, v) in [(2, 0, 1u32), (2, k - 1, 2), (cells - 1, 0, 5)] {
-                acc.lanes[c * k + lane] += v;
+            // Even blocks: 3 samples in cell 2 spread over lanes, 5 in the last cell in one lane; odd
+            // blocks: 4 in cell 2 and 1 in cell 0.
+            for (parity, c, lane, v) in [(0, 2, 0, 1u32), (0, 2, k - 1, 2), (0, cells - 1, 0, 5), (1, 2, k - 1, 4), (1, 0, 0, 1)] {
+                acc.lanes[parity][c * k + lane] += v;
             }
-            acc.pending = 8;
+            acc.pending = 13;
             acc.fold();
-            assert_eq!((acc.counts[2], acc.counts[cells - 1], acc.counts.iter().sum::<u64>()), (3, 5, 8));
-            assert!(acc.lanes.iter().all(|&v| v == 0) && acc.pending == 0);
+            assert_eq!((acc.counts[0], acc.counts[2], acc.counts[cells - 1], acc.counts.iter().sum::<u64>()), (1, 7, 5, 13));
+            assert_eq!((acc.odd[0], acc.odd[2], acc.odd.iter().sum::<u64>()), (1, 4, 5));
+            assert!(acc.lanes.iter().flatten().all(|&v| v == 0) && acc.pending == 0);
         }
     }
 
+    /// The blocked, vectorized mapping agrees with the scalar `to_lambert` cell by cell, including
+    /// slopes so large that `t = 1 + |s'|^2` overflows (they go to the rim, not to the centre).
     #[test]
     fn blocked_mapping_matches_scalar() {
         let nx = 40;
@@ -396,5 +403,35 @@ mod tests {
         }
         assert_eq!(ndf.n_samples, want.iter().sum::<u64>());
         assert!((ndf.total() - 1.0).abs() < 1e-12);
+    }
+
+    /// The odd row blocks' counts of the dispersion split against a scalar count of the samples of the
+    /// rows whose block is odd, on a grid tall enough for every block and several tasks.
+    #[test]
+    fn odd_block_counts_match_a_scalar_count() {
+        let (nx, ny) = (37, 203);
+        let z: Vec<f64> = (0..nx * ny)
+            .map(|k| {
+                let (i, j) = ((k / nx) as f64, (k % nx) as f64);
+                1e-7 * ((0.31 * j).sin() * 3.0 + (0.17 * i + 0.05 * j).cos() * 2.0 + 0.01 * i * j)
+            })
+            .collect();
+        let hf = Heightfield::new(nx, ny, 1e-6, 1e-6, z).expect("shape");
+        let ndf = empirical_ndf(&hf, &NdfOptions { cells_across: Some(15), ..Default::default() }).expect("valid");
+        let (mut all, mut odd) = (vec![0u64; ndf.grid.cells()], vec![0u64; ndf.grid.cells()]);
+        let rows = NormalScheme::Central.rows(&hf);
+        for i in rows.clone() {
+            let is_odd = dispersion_block(i - rows.start, rows.len()) % 2 == 1;
+            NormalScheme::Central.row_slopes(&hf, i, 1, |sx, sy| {
+                let c = ndf.grid.cell_of(ndf.frame.to_lambert(sx, sy));
+                all[c] += 1;
+                odd[c] += is_odd as u64;
+            });
+        }
+        for (k, &c) in ndf.bin_cells.iter().enumerate() {
+            assert_eq!((ndf.bins[k].count, ndf.counts_odd[k]), (all[c as usize], odd[c as usize]), "cell {c}");
+        }
+        let odd_total: u64 = ndf.counts_odd.iter().sum();
+        assert!(odd_total > 0 && odd_total < ndf.n_samples, "both parities hold samples");
     }
 }
