@@ -180,8 +180,25 @@ fn near_median(rows: [&[f64]; 3], j: usize, half: f64) -> bool {
 /// point is passed only when its height is below `2^40 limit` (then the rounding stays far below
 /// `limit / 2`) and below `f64::MAX / 4`; non-finite values compare false and are left to the full test, as is every point of a
 /// scan whose `limit` is 0.
-#[inline(always)]
+/// The loop is compiled for AVX2 as well, selected at run time (the same IEEE operations: the binary
+/// stays portable and the decisions do not change).
 fn pair_screen(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+        return unsafe { pair_screen_avx2(rows, limit, pass) };
+    }
+    pair_screen_body(rows, limit, pass)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn pair_screen_avx2(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
+    pair_screen_body(rows, limit, pass)
+}
+
+#[inline(always)]
+fn pair_screen_body(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
     let n = rows[1].len();
     pass.clear();
     if n < 3 {
@@ -360,8 +377,6 @@ mod tests {
         Band::new(z, 0, GridShape { nx, ny, dx: 1e-6, dy: 1e-6, quantum: None })
     }
 
-    /// The 0-1 principle (Knuth 5.3.4, theorem Z): a network sorting all 256 inputs of zeros and ones
-    /// sorts every input. Then random finite values against the comparison sort, value for value.
     /// Uniform values in `[-0.5, 0.5)` from a seeded generator.
     fn uniform(seed: u64) -> impl FnMut() -> f64 {
         use rand::{RngExt, SeedableRng};
@@ -369,6 +384,8 @@ mod tests {
         move || r.random::<f64>() - 0.5
     }
 
+    /// The 0-1 principle (Knuth 5.3.4, theorem Z): a network sorting all 256 inputs of zeros and ones
+    /// sorts every input. Then random finite values against the comparison sort, value for value.
     #[test]
     fn sort8_is_a_sorting_network() {
         for m in 0u32..256 {
