@@ -21,63 +21,43 @@ pub fn write_csv(path: &Path, ndf: &EmpiricalNdf) -> Result<()> {
 /// The CSV of [`write_csv`] into any writer (standard output).
 ///
 /// Formatting the shortest round-trip decimals of ten numbers per bin dominates for large grids, so
-/// blocks of rows are formatted in parallel and written in order (the same bytes), each part written
-/// while the next is formatted. Floats go through `ryu` (shortest round-trip digits, like `core::fmt`
-/// but several times faster; it writes an exponent for very small or large magnitudes, e.g. `7.4e-6`,
-/// which every CSV reader parses).
+/// blocks of rows are formatted in parallel and written in order (the same bytes). Floats go through
+/// `ryu` (shortest round-trip digits, like `core::fmt` but several times faster; it writes an exponent
+/// for very small or large magnitudes, e.g. `7.4e-6`, which every CSV reader parses).
 pub fn write_csv_to<W: std::io::Write + ?Sized>(w: &mut W, ndf: &EmpiricalNdf) -> Result<()> {
     use rayon::prelude::*;
     const ROWS: usize = 2048;
-    /// Parts written while the next is formatted (each several blocks of rows).
-    const PARTS: usize = 4;
     writeln!(w, "{CSV_HEADER}")?;
-    let format = |lo: usize, hi: usize| -> Vec<Vec<u8>> {
-        ndf.bins[lo..hi]
-            .par_chunks(ROWS)
-            .enumerate()
-            .map(|(q, chunk)| {
-                let mut out = Vec::with_capacity(chunk.len() * 200);
-                let mut fb = ryu::Buffer::new();
-                let mut ib = itoa::Buffer::new();
-                for (k, b) in chunk.iter().enumerate() {
-                    let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
-                    for v in [b.m.x, b.m.y, b.m.z, b.d, b.stderr] {
-                        out.extend_from_slice(fb.format(v).as_bytes());
-                        out.push(b',');
-                    }
-                    out.extend_from_slice(ib.format(b.count).as_bytes());
-                    for v in [b.solid_angle, b.proj_solid_angle, sx, sy] {
-                        out.push(b',');
-                        out.extend_from_slice(fb.format(v).as_bytes());
-                    }
+    let blocks: Vec<Vec<u8>> = ndf
+        .bins
+        .par_chunks(ROWS)
+        .enumerate()
+        .map(|(q, chunk)| {
+            let mut out = Vec::with_capacity(chunk.len() * 200);
+            let mut fb = ryu::Buffer::new();
+            let mut ib = itoa::Buffer::new();
+            for (k, b) in chunk.iter().enumerate() {
+                let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
+                for v in [b.m.x, b.m.y, b.m.z, b.d, b.stderr] {
+                    out.extend_from_slice(fb.format(v).as_bytes());
                     out.push(b',');
-                    // Not assessed (triangle normals): an empty field.
-                    if let Some(&u) = ndf.unresolved.get(lo + q * ROWS + k) {
-                        out.extend_from_slice(ib.format(u).as_bytes());
-                    }
-                    out.push(b'\n');
                 }
-                out
-            })
-            .collect()
-    };
-    let n = ndf.bins.len();
-    // Part boundaries on block boundaries.
-    let step = n.div_ceil(PARTS).next_multiple_of(ROWS).max(ROWS);
-    let mut parts = (0..n).step_by(step).map(|lo| (lo, (lo + step).min(n)));
-    let Some((lo, hi)) = parts.next() else { return Ok(()) };
-    let mut ready = format(lo, hi);
-    for (lo, hi) in parts {
-        let next = std::thread::scope(|s| -> Result<Vec<Vec<u8>>> {
-            let next = s.spawn(|| format(lo, hi));
-            for b in &ready {
-                w.write_all(b)?;
+                out.extend_from_slice(ib.format(b.count).as_bytes());
+                for v in [b.solid_angle, b.proj_solid_angle, sx, sy] {
+                    out.push(b',');
+                    out.extend_from_slice(fb.format(v).as_bytes());
+                }
+                out.push(b',');
+                // Not assessed (triangle normals): an empty field.
+                if let Some(&u) = ndf.unresolved.get(q * ROWS + k) {
+                    out.extend_from_slice(ib.format(u).as_bytes());
+                }
+                out.push(b'\n');
             }
-            Ok(next.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-        })?;
-        ready = next;
-    }
-    for b in &ready {
+            out
+        })
+        .collect();
+    for b in &blocks {
         w.write_all(b)?;
     }
     Ok(())
