@@ -232,10 +232,9 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
     };
     // A read that keeps every row or every other row touches (within the kernel's fault-around window)
     // every page: map them all at once. Coarser strides touch a fraction of the rows: map pages as they
-    // are read (measured at stride 4: 8.0 against 9.7 ms at 4096^2, equal at 1024^2; at stride 2 and
-    // 2048^2 faulting them in took 10.7 ms against ~5 for the whole populated read). The X3P reader
-    // decides for itself: the stored float64 data it reads in place is first touched by a pass on
-    // every thread, which faults the pages in faster than one populating call.
+    // are read (docs/PERFORMANCE.md has the measurements). The X3P reader decides for itself: the stored
+    // float64 data it reads in place is first touched by a pass on every thread, which faults the pages
+    // in side by side instead of in one call on one thread.
     if stride <= 2 && format != Format::X3p {
         file.populate();
     }
