@@ -152,3 +152,49 @@ fn misaligned_or_scaled_stored_x3p_is_decoded() {
     assert_eq!(read.z.is_mapped(), data_at % 8 == 0, "mapped exactly when aligned (data at byte {data_at})");
     assert!(read.z.iter().zip(hf.z.iter()).all(|(a, b)| a.to_bits() == b.to_bits()));
 }
+
+/// The in-place read's checks on a stored float64 X3P of several 1 MiB blocks (hashed on every thread):
+/// a byte changed in a late block is a CRC-32 error, and infinities in late blocks send the scan to the
+/// decoding path, which masks exactly those points (NaN) and keeps every other height.
+#[test]
+fn stored_x3p_checks_hold_in_every_block() {
+    let mut hf = scan(1100, 700);
+    let n = hf.z.len();
+    let (a, b) = (n - 3, 2 * n / 3);
+    hf.z[a] = f64::INFINITY;
+    hf.z[b] = f64::NEG_INFINITY;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("inf.x3p");
+    let bytes = ndfit::io::x3p_write::x3p_bytes(&hf).expect("bytes");
+    std::fs::write(&path, &bytes).expect("write");
+    let read = ndfit::io::read_scan(&path, &Default::default()).expect("read");
+    assert!(!read.z.is_mapped(), "infinities need the decoding copy");
+    for k in 0..n {
+        if k == a || k == b {
+            assert!(read.z[k].is_nan(), "infinity at {k} masked");
+        } else {
+            assert_eq!(read.z[k].to_bits(), hf.z[k].to_bits(), "height {k}");
+        }
+    }
+    // One byte of the last MiB of the point data changed: the zip's CRC-32 no longer matches. The scan
+    // is above the size whose MD5 is checked (`MAX_POINT_MD5`), so the CRC-32 is the check that sees it.
+    let (nx, ny) = (2100, 2050);
+    assert!(nx * ny * 8 > ndfit::io::x3p::MAX_POINT_MD5);
+    let z: Vec<f64> = (0..nx * ny).map(|k| 1e-7 * ((k % nx) as f64 * 0.01).sin() + 1e-9 * (k / nx) as f64).collect();
+    let big = Heightfield::new(nx, ny, 1e-6, 1e-6, z).expect("shape");
+    let bytes = ndfit::io::x3p_write::x3p_bytes(&big).expect("bytes");
+    let start = {
+        let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&bytes)).expect("zip");
+        let entry = zip.by_name("bindata/data.bin").expect("data entry");
+        entry.data_start().expect("offset") as usize
+    };
+    let path = dir.path().join("good.x3p");
+    std::fs::write(&path, &bytes).expect("write");
+    assert!(ndfit::io::read_scan(&path, &Default::default()).expect("intact").z.is_mapped());
+    let mut bad = bytes;
+    bad[start + 8 * nx * ny - 5000] ^= 0x10;
+    let path = dir.path().join("bad.x3p");
+    std::fs::write(&path, &bad).expect("write");
+    let err = ndfit::io::read_scan(&path, &Default::default()).expect_err("corrupt data").to_string();
+    assert!(err.contains("CRC-32"), "{err}");
+}
