@@ -107,7 +107,6 @@ fn mapped_heights(map: &std::sync::Arc<memmap2::Mmap>, raw: &[u8], n: usize, crc
     // copy, which masks it). A scan read as tiles goes in order, its pages released after each block;
     // otherwise the blocks are hashed on every thread (the first touch of each page is most of the cost)
     // and their CRCs combined in order.
-    let blocks = || raw.chunks(1 << 20).zip(z.chunks(1 << 17));
     let hash = |block: &[u8], vals: &[f64]| {
         let mut h = crc32fast::Hasher::new();
         h.update(block);
@@ -115,7 +114,8 @@ fn mapped_heights(map: &std::sync::Arc<memmap2::Mmap>, raw: &[u8], n: usize, crc
         (h, vals.iter().map(|v| usize::from(v.abs() == f64::INFINITY)).sum::<usize>() > 0)
     };
     let parts: Vec<(crc32fast::Hasher, bool)> = if release {
-        blocks()
+        raw.chunks(1 << 20)
+            .zip(z.chunks(1 << 17))
             .map(|(block, vals)| {
                 let part = hash(block, vals);
                 crate::scan::heights::release_pages(block.as_ptr(), block.len());
@@ -125,7 +125,7 @@ fn mapped_heights(map: &std::sync::Arc<memmap2::Mmap>, raw: &[u8], n: usize, crc
             .collect()
     } else {
         use rayon::prelude::*;
-        blocks().collect::<Vec<_>>().into_par_iter().map(|(block, vals)| hash(block, vals)).collect()
+        raw.par_chunks(1 << 20).zip(z.par_chunks(1 << 17)).map(|(block, vals)| hash(block, vals)).collect()
     };
     let mut hasher = crc32fast::Hasher::new();
     let mut infinite = false;
