@@ -1,31 +1,28 @@
 //! The counting pass of the empirical NDF: slopes mapped to the Lambert disk in vectorized blocks and
-//! counted into per-task histograms with interleaved counters, merged once (step 3 of [`super`]).
+//! counted into per-task u32 counters, merged once (step 3 of [`super`]).
 
 use rayon::prelude::*;
 
 use super::bands::bands_of;
 use super::frame::LAMBERT_RADIUS;
-use super::resolution::{RowTest, Tally};
+use super::resolution::{RowSlopes, RowTest, Tally, COUNTED, UNRESOLVED, VALID};
 use super::{BandSource, BinGrid, NormalScheme, SlopeFrame};
 
 /// Per-task accumulator: counts per cell and slope moments about the frame centre.
 ///
-/// Counting goes through `lanes`: each cell has `2^shift` u32 counters side by side (one cache line),
-/// and consecutive samples alternate between them. Neighbouring normals of a smooth surface mostly
-/// fall in the same cell, and a single counter would chain every increment on the previous one's
-/// store (perf: 20% of the pass); interleaved counters let them overlap. The even and the odd row
-/// blocks of the dispersion split count into separate counters, so they are folded into the u64
-/// `counts` (and `odd`) once, at the end, or before a u32 could overflow.
+/// Counting goes through `counters`, one u32 per cell and row-block parity: the even and the odd row
+/// blocks of the dispersion split count apart, and are folded into the u64 `counts` (and `odd`) once,
+/// at the end, or before a u32 could overflow. One counter per cell: the block's cells are all known
+/// before it is counted, and a small footprint keeps the counters in the L2 cache beside the rows.
 pub(super) struct Acc {
     pub(super) counts: Vec<u64>,
     /// The part of `counts` from the odd row blocks of the dispersion split ([`DISPERSION_BLOCKS`]).
     pub(super) odd: Vec<u64>,
-    /// Whether the samples being counted come from an odd row block (they go to `lanes[1]`).
+    /// Whether the samples being counted come from an odd row block (they go to `counters[1]`).
     odd_pending: bool,
-    /// The interleaved counters of the even (`[0]`) and the odd (`[1]`) row blocks.
-    lanes: [Vec<u32>; 2],
-    shift: u32,
-    /// Samples counted into `lanes` since they were last folded.
+    /// The counters of the even (`[0]`) and the odd (`[1]`) row blocks.
+    counters: [Vec<u32>; 2],
+    /// Samples counted into `counters` since they were last folded.
     pending: u64,
     pub(super) n: u64,
     pub(super) m1: [f64; 2],
@@ -34,19 +31,13 @@ pub(super) struct Acc {
     pub(super) res: Tally,
 }
 
-/// Most cells for which counting uses 4 interleaved counters per cell (4 MiB of u32 per task at the
-/// 1023-cell maximum would leave the caches; the automatic grid has at most 255^2 = 65025 cells).
-const MAX_LANED_CELLS: usize = 1 << 16;
-
 impl Acc {
     fn new(cells: usize) -> Self {
-        let shift = if cells <= MAX_LANED_CELLS { 2 } else { 0 };
         Acc {
             counts: vec![0; cells],
             odd: vec![0; cells],
             odd_pending: false,
-            lanes: [vec![0; cells << shift], vec![0; cells << shift]],
-            shift,
+            counters: [vec![0; cells], vec![0; cells]],
             pending: 0,
             n: 0,
             m1: [0.0; 2],
@@ -55,20 +46,16 @@ impl Acc {
         }
     }
 
-    /// Add the interleaved counters into `counts` and clear them.
+    /// Add the counters into `counts` (the odd ones into `odd` too) and clear them.
     fn fold(&mut self) {
         if self.pending == 0 {
             return;
         }
-        let k = 1usize << self.shift;
-        let [even, odd_lanes] = &mut self.lanes;
-        let lanes = even.chunks_exact_mut(k).zip(odd_lanes.chunks_exact_mut(k));
-        for ((c, o), (le, lo)) in self.counts.iter_mut().zip(self.odd.iter_mut()).zip(lanes) {
-            let (ve, vo) = (le.iter().map(|&v| v as u64).sum::<u64>(), lo.iter().map(|&v| v as u64).sum::<u64>());
-            *c += ve + vo;
-            *o += vo;
-            le.fill(0);
-            lo.fill(0);
+        let [even, odd] = &mut self.counters;
+        for ((c, o), (e, d)) in self.counts.iter_mut().zip(self.odd.iter_mut()).zip(even.iter_mut().zip(odd.iter_mut())) {
+            *c += *e as u64 + *d as u64;
+            *o += *d as u64;
+            (*e, *d) = (0, 0);
         }
         self.pending = 0;
     }
@@ -108,13 +95,66 @@ pub(super) struct Block {
     px: [f64; BLOCK],
     py: [f64; BLOCK],
     cell: [i32; BLOCK],
+    /// Per slope: 1 when the resolution test found it unresolved and its row is binned (`nu` of them).
+    u: [u8; BLOCK],
+    nu: usize,
 }
 
 impl Block {
     pub(super) const LEN: usize = BLOCK;
 
     pub(super) fn new() -> Self {
-        Block { n: 0, sx: [0.0; BLOCK], sy: [0.0; BLOCK], px: [0.0; BLOCK], py: [0.0; BLOCK], cell: [0; BLOCK] }
+        Block { n: 0, sx: [0.0; BLOCK], sy: [0.0; BLOCK], px: [0.0; BLOCK], py: [0.0; BLOCK], cell: [0; BLOCK], u: [0; BLOCK], nu: 0 }
+    }
+
+    /// Add one slope (`unresolved`: also bin it among the unresolved); flush when the block is full.
+    #[inline(always)]
+    fn push(&mut self, sx: f64, sy: f64, unresolved: bool, frame: &SlopeFrame, grid: &BinGrid, acc: &mut Acc) {
+        let n = self.n;
+        (self.sx[n], self.sy[n], self.u[n]) = (sx, sy, unresolved as u8);
+        self.nu += unresolved as usize;
+        self.n += 1;
+        if self.n == BLOCK {
+            self.flush(frame, grid, acc);
+        }
+    }
+
+    /// Add the counted samples of a row, in order, flushing each time the block fills: whole runs
+    /// copied when every sample of the row counts (the usual case), one by one otherwise. With `bin`,
+    /// the unresolved ones are binned among the unresolved too (those the histogram does not count,
+    /// through `res` apart).
+    fn feed(&mut self, rs: &RowSlopes, bin: bool, res: Option<&RowTest>, frame: &SlopeFrame, grid: &BinGrid, acc: &mut Acc) {
+        let m = rs.sx.len();
+        let unresolved = |c: u8| bin && c & (VALID | UNRESOLVED) == VALID | UNRESOLVED;
+        if rs.counted == m as u64 {
+            let mut k = 0;
+            while k < m {
+                let n = self.n;
+                let len = (BLOCK - n).min(m - k);
+                self.sx[n..n + len].copy_from_slice(&rs.sx[k..k + len]);
+                self.sy[n..n + len].copy_from_slice(&rs.sy[k..k + len]);
+                let mut nu = 0;
+                for (u, &c) in self.u[n..n + len].iter_mut().zip(&rs.code[k..k + len]) {
+                    *u = unresolved(c) as u8;
+                    nu += *u as usize;
+                }
+                self.nu += nu;
+                self.n += len;
+                k += len;
+                if self.n == BLOCK {
+                    self.flush(frame, grid, acc);
+                }
+            }
+            return;
+        }
+        for k in 0..m {
+            let c = rs.code[k];
+            if c & COUNTED != 0 {
+                self.push(rs.sx[k], rs.sy[k], unresolved(c), frame, grid, acc);
+            } else if let (true, Some(t)) = (unresolved(c), res) {
+                t.bin_apart(rs.sx[k], rs.sy[k], &mut acc.res);
+            }
+        }
     }
 
     /// Map the block's slopes to Lambert points (as [`SlopeFrame::to_lambert`]), count them, add the
@@ -222,13 +262,24 @@ impl Block {
         let n = self.n;
         let (sx, sy) = (&self.sx[..n], &self.sy[..n]);
         let (cx, cy) = (frame.center[0], frame.center[1]);
-        let (shift, mask) = (acc.shift, (1usize << acc.shift) - 1);
-        let lanes = &mut acc.lanes[acc.odd_pending as usize];
+        let counters = &mut acc.counters[acc.odd_pending as usize];
         for k in 0..n {
-            lanes[(self.cell_at(k, frame, grid) << shift) + (k & mask)] += 1;
+            counters[self.cell_at(k, frame, grid)] += 1;
+        }
+        if self.nu > 0 {
+            let cells = &mut acc.res.cells;
+            if cells.is_empty() {
+                *cells = vec![0; grid.cells()];
+            }
+            for k in 0..n {
+                if self.u[k] != 0 {
+                    cells[self.cell_at(k, frame, grid)] += 1;
+                }
+            }
+            self.nu = 0;
         }
         acc.pending += n as u64;
-        // Fold long before a u32 counter could overflow (every sample in one cell and one lane).
+        // Fold long before a u32 counter could overflow (every sample in one cell).
         if acc.pending >= u32::MAX as u64 - BLOCK as u64 {
             acc.fold();
         }
@@ -309,6 +360,7 @@ pub(super) fn histogram<S: BandSource>(
             let mut acc = Acc::new(cells);
             let mut blk = Block::new();
             let mut buf = Vec::new();
+            let mut rs = RowSlopes::default();
             for b in bands_of(start..(start + len).min(end), step) {
                 let (lo, hi) = match res {
                     Some(t) => (t.stencil_rows(b.start).0, t.stencil_rows(b.end - 1).1),
@@ -323,18 +375,20 @@ pub(super) fn histogram<S: BandSource>(
                         blk.flush(frame, grid, &mut acc);
                         acc.odd_pending = odd;
                     }
-                    let valid = scheme.row_slopes(hf, i, 1, |sx, sy| {
-                        blk.sx[blk.n] = sx;
-                        blk.sy[blk.n] = sy;
-                        blk.n += 1;
-                        if blk.n == BLOCK {
-                            blk.flush(frame, grid, &mut acc);
-                        }
-                    });
-                    acc.n += valid;
-                    if let Some(t) = res {
-                        t.row(hf, i, &mut acc.res);
+                    if scheme == NormalScheme::Central {
+                        // Slopes (and the resolution test) of the whole row in one vectorized loop.
+                        let bin = match res {
+                            Some(t) => t.row(hf, i, &mut acc.res, &mut rs),
+                            None => {
+                                rs.central(hf, i);
+                                false
+                            }
+                        };
+                        acc.n += rs.counted;
+                        blk.feed(&rs, bin, res, frame, grid, &mut acc);
+                        continue;
                     }
+                    acc.n += scheme.row_slopes(hf, i, 1, |sx, sy| blk.push(sx, sy, false, frame, grid, &mut acc));
                 }
             }
             blk.flush(frame, grid, &mut acc);
@@ -344,7 +398,7 @@ pub(super) fn histogram<S: BandSource>(
             }
             acc
         })
-        // No identity accumulators (each would allocate and zero the interleaved counters): the chunks
+        // No identity accumulators (each would allocate and zero the counters): the chunks
         // are merged pairwise, and there is at least one chunk (the caller checked for stencils).
         .reduce_with(Acc::merge)
         .unwrap_or_else(|| Acc::new(cells))
@@ -356,24 +410,20 @@ mod tests {
     use crate::ndf::{empirical_ndf, NdfOptions};
     use crate::Heightfield;
 
-    /// The interleaved counters of both parities fold into `counts`, the odd ones into `odd` too, and
-    /// are cleared.
+    /// The counters of both parities fold into `counts`, the odd ones into `odd` too, and are cleared.
     #[test]
-    fn interleaved_counters_fold_into_counts() {
-        for cells in [9, MAX_LANED_CELLS + 1] {
-            let mut acc = Acc::new(cells);
-            let k = 1usize << acc.shift;
-            // Even blocks: 3 samples in cell 2 spread over lanes, 5 in the last cell in one lane; odd
-            // blocks: 4 in cell 2 and 1 in cell 0.
-            for (parity, c, lane, v) in [(0, 2, 0, 1u32), (0, 2, k - 1, 2), (0, cells - 1, 0, 5), (1, 2, k - 1, 4), (1, 0, 0, 1)] {
-                acc.lanes[parity][c * k + lane] += v;
-            }
-            acc.pending = 13;
-            acc.fold();
-            assert_eq!((acc.counts[0], acc.counts[2], acc.counts[cells - 1], acc.counts.iter().sum::<u64>()), (1, 7, 5, 13));
-            assert_eq!((acc.odd[0], acc.odd[2], acc.odd.iter().sum::<u64>()), (1, 4, 5));
-            assert!(acc.lanes.iter().flatten().all(|&v| v == 0) && acc.pending == 0);
+    fn counters_fold_into_counts() {
+        let cells = 9;
+        let mut acc = Acc::new(cells);
+        // Even blocks: 3 samples in cell 2, 5 in the last cell; odd blocks: 4 in cell 2 and 1 in cell 0.
+        for (parity, c, v) in [(0, 2, 3u32), (0, cells - 1, 5), (1, 2, 4), (1, 0, 1)] {
+            acc.counters[parity][c] += v;
         }
+        acc.pending = 13;
+        acc.fold();
+        assert_eq!((acc.counts[0], acc.counts[2], acc.counts[cells - 1], acc.counts.iter().sum::<u64>()), (1, 7, 5, 13));
+        assert_eq!((acc.odd[0], acc.odd[2], acc.odd.iter().sum::<u64>()), (1, 4, 5));
+        assert!(acc.counters.iter().flatten().all(|&v| v == 0) && acc.pending == 0);
     }
 
     /// The blocked, vectorized mapping agrees with the scalar `to_lambert` cell by cell, including

@@ -113,11 +113,58 @@ pub(super) struct Tally {
     /// Unresolved ones among them.
     bad: u64,
     /// Unresolved samples per cell (empty until the first is binned).
-    cells: Vec<u64>,
-    /// Per column of a row: bit 0 the stencil is valid, bit 1 the sample is unresolved.
-    code: Vec<u8>,
-    /// Unresolved slopes waiting to be binned (mapped to cells in vectorized blocks).
+    pub(super) cells: Vec<u64>,
+    /// Unresolved slopes the histogram does not count (an overflowing difference), binned apart.
     pending: Option<Box<super::histogram::Block>>,
+}
+
+/// The central-difference samples of one row (column `j` at `j - 1`): slopes and per-sample codes, made
+/// by one vectorized loop ([`RowTest::row`], or [`RowSlopes::central`] without the test).
+#[derive(Default)]
+pub(super) struct RowSlopes {
+    pub(super) sx: Vec<f64>,
+    pub(super) sy: Vec<f64>,
+    /// [`VALID`], [`UNRESOLVED`] and [`COUNTED`] bits.
+    pub(super) code: Vec<u8>,
+    /// Samples with [`COUNTED`] set.
+    pub(super) counted: u64,
+}
+
+/// The stencil's five heights are finite (the resolution test's validity).
+pub(super) const VALID: u8 = 1;
+/// The sample is unresolved (set only on the test's rows).
+pub(super) const UNRESOLVED: u8 = 2;
+/// The histogram counts the sample: `sx + sy + h` is not NaN ([`super::NormalScheme::row_slopes`]).
+pub(super) const COUNTED: u8 = 4;
+
+impl RowSlopes {
+    /// The slopes and [`COUNTED`] bits of row `i` of `hf` (`1 <= i < ny - 1`), as
+    /// [`super::NormalScheme::row_slopes`] takes them, in one branch-free loop.
+    pub(super) fn central<H: HeightRows>(&mut self, hf: &H, i: usize) {
+        let m = hf.nx().saturating_sub(2);
+        self.resize(m);
+        let f = |v: H::T| -> f64 { v.into() };
+        let (r0, r1, r2) = (hf.row(i - 1), hf.row(i), hf.row(i + 1));
+        let (kx, ky) = (0.5 / hf.dx(), 0.5 / hf.dy());
+        let (l, c, r, d, u) = (&r1[..m], &r1[1..m + 1], &r1[2..m + 2], &r0[1..m + 1], &r2[1..m + 1]);
+        let (sx, sy, code) = (&mut self.sx[..m], &mut self.sy[..m], &mut self.code[..m]);
+        let mut counted = 0u64;
+        for k in 0..m {
+            let (x, y) = ((f(r[k]) - f(l[k])) * kx, (f(u[k]) - f(d[k])) * ky);
+            let ok = !(x + y + f(c[k])).is_nan();
+            sx[k] = x;
+            sy[k] = y;
+            code[k] = (ok as u8) << 2;
+            counted += ok as u64;
+        }
+        self.counted = counted;
+    }
+
+    fn resize(&mut self, m: usize) {
+        self.sx.resize(m, 0.0);
+        self.sy.resize(m, 0.0);
+        self.code.resize(m, 0);
+    }
 }
 
 impl Tally {
@@ -153,51 +200,47 @@ impl RowTest {
         (i.saturating_sub(2), (i + 3).min(self.ny))
     }
 
-    /// Test every sample of row `i` (`1 <= i < ny - 1`) of `hf`, which holds rows `i - 2 ..= i + 2`.
-    pub(super) fn row<H: HeightRows>(&self, hf: &H, i: usize, t: &mut Tally) {
+    /// Take the slopes of row `i` (`1 <= i < ny - 1`) of `hf`, which holds rows `i - 2 ..= i + 2`, and
+    /// test every sample, into `rs`. Returns whether the row's unresolved samples are to be binned
+    /// (not while the share is already certain to exceed [`MAX_UNRESOLVED_SHARE`]).
+    pub(super) fn row<H: HeightRows>(&self, hf: &H, i: usize, t: &mut Tally, rs: &mut RowSlopes) -> bool {
+        rs.resize(self.nx.saturating_sub(2));
         if self.nx < 3 {
-            return;
+            rs.counted = 0;
+            return false;
         }
-        t.code.resize(self.nx - 2, 0);
         #[cfg(target_arch = "x86_64")]
-        let (all, bad) = if std::arch::is_x86_feature_detected!("avx2") {
+        let (all, bad, counted) = if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
-            unsafe { self.codes_avx2(hf, i, &mut t.code) }
+            unsafe { self.codes_avx2(hf, i, rs) }
         } else {
-            self.codes(hf, i, &mut t.code)
+            self.codes(hf, i, rs)
         };
         #[cfg(not(target_arch = "x86_64"))]
-        let (all, bad) = self.codes(hf, i, &mut t.code);
+        let (all, bad, counted) = self.codes(hf, i, rs);
         t.all += all;
         t.bad += bad;
-        if bad == 0 {
-            return;
-        }
+        rs.counted = counted;
         // Past the cap the share is above the limit whatever the remaining rows hold: stop binning.
-        if self.bad.fetch_add(bad, Ordering::Relaxed) as f64 > self.cap {
-            return;
-        }
+        bad > 0 && self.bad.fetch_add(bad, Ordering::Relaxed) as f64 <= self.cap
+    }
+
+    /// Bin one unresolved sample that the histogram does not count (its slopes overflow), as the
+    /// histogram would have binned it.
+    pub(super) fn bin_apart(&self, sx: f64, sy: f64, t: &mut Tally) {
         if t.cells.is_empty() {
             t.cells = vec![0; self.grid.cells()];
         }
         let blk = t.pending.get_or_insert_with(|| Box::new(super::histogram::Block::new()));
-        let (r0, r1, r2) = (hf.row(i - 1), hf.row(i), hf.row(i + 1));
-        let (kx, ky) = (0.5 / self.dx, 0.5 / self.dy);
-        for (k, &c) in t.code.iter().enumerate() {
-            if c == 3 {
-                let j = k + 1;
-                let (l, r, d, u): (f64, f64, f64, f64) = (r1[j - 1].into(), r1[j + 1].into(), r0[j].into(), r2[j].into());
-                blk.sx[blk.n] = (r - l) * kx;
-                blk.sy[blk.n] = (u - d) * ky;
-                blk.n += 1;
-                if blk.n == super::histogram::Block::LEN {
-                    blk.count_into(&self.frame, &self.grid, &mut t.cells);
-                }
-            }
+        blk.sx[blk.n] = sx;
+        blk.sy[blk.n] = sy;
+        blk.n += 1;
+        if blk.n == super::histogram::Block::LEN {
+            blk.count_into(&self.frame, &self.grid, &mut t.cells);
         }
     }
 
-    /// Bin the unresolved slopes still pending in `t` (at the end of a task).
+    /// Bin the unresolved slopes still waiting in `t` (at the end of a task).
     pub(super) fn settle(&self, t: &mut Tally) {
         if let Some(blk) = t.pending.as_mut() {
             blk.count_into(&self.frame, &self.grid, &mut t.cells);
@@ -206,51 +249,57 @@ impl RowTest {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn codes_avx2<H: HeightRows>(&self, hf: &H, i: usize, code: &mut [u8]) -> (u64, u64) {
-        self.codes(hf, i, code)
+    unsafe fn codes_avx2<H: HeightRows>(&self, hf: &H, i: usize, rs: &mut RowSlopes) -> (u64, u64, u64) {
+        self.codes(hf, i, rs)
     }
 
-    /// Fill `code` for row `i` (column `j` at `j - 1`) and return the valid and the unresolved counts.
-    /// Branch-free loops over equal-length slices, so that they vectorize; the arithmetic is
-    /// [`unresolved_at`]'s, operation for operation (no contraction into FMA). Where the wide stencil
-    /// fits (rows `2..ny - 2`, columns `2..nx - 2`), one loop takes the validity, the test and the
+    /// Fill `rs` for row `i` (column `j` at `j - 1`): the slopes as the histogram takes them, and the
+    /// codes; return the valid, the unresolved and the counted samples. Branch-free loops over
+    /// equal-length slices, so that they vectorize; the test's arithmetic is [`unresolved_at`]'s,
+    /// operation for operation (no contraction into FMA). Where the wide stencil fits (rows
+    /// `2..ny - 2`, columns `2..nx - 2`), one loop takes the slopes, the validity, the test and the
     /// counts; the rim of the grid is unresolved (the wide stencil leaves it).
     #[inline(always)]
-    fn codes<H: HeightRows>(&self, hf: &H, i: usize, code: &mut [u8]) -> (u64, u64) {
+    fn codes<H: HeightRows>(&self, hf: &H, i: usize, rs: &mut RowSlopes) -> (u64, u64, u64) {
         let nx = self.nx;
         let m = nx - 2;
-        let code = &mut code[..m];
+        let (sxs, sys, code) = (&mut rs.sx[..m], &mut rs.sy[..m], &mut rs.code[..m]);
         let f = |v: H::T| -> f64 { v.into() };
         let (r0, r1, r2) = (hf.row(i - 1), hf.row(i), hf.row(i + 1));
-        let valid_at = |j: usize| -> bool {
-            f(r1[j]).is_finite() & f(r1[j - 1]).is_finite() & f(r1[j + 1]).is_finite() & f(r0[j]).is_finite() & f(r2[j]).is_finite()
-        };
-        let (mut all, mut bad) = (0u64, 0u64);
-        let mut rim = |k: usize, code: &mut [u8]| {
-            let v = valid_at(k + 1);
-            code[k] = v as u8 | 2;
+        let (kx, ky, kx2, ky2) = (0.5 / self.dx, 0.5 / self.dy, 0.25 / self.dx, 0.25 / self.dy);
+        let (mut all, mut bad, mut counted) = (0u64, 0u64, 0u64);
+        let mut rim = |k: usize, sxs: &mut [f64], sys: &mut [f64], code: &mut [u8]| {
+            let j = k + 1;
+            let v =
+                f(r1[j]).is_finite() & f(r1[j - 1]).is_finite() & f(r1[j + 1]).is_finite() & f(r0[j]).is_finite() & f(r2[j]).is_finite();
+            let (x, y) = ((f(r1[j + 1]) - f(r1[j - 1])) * kx, (f(r2[j]) - f(r0[j])) * ky);
+            let ok = !(x + y + f(r1[j])).is_nan();
+            (sxs[k], sys[k]) = (x, y);
+            code[k] = v as u8 | UNRESOLVED | (ok as u8) << 2;
             all += v as u64;
             bad += v as u64;
+            counted += ok as u64;
         };
         if !(i >= 2 && i + 2 < self.ny && nx >= 5) {
-            (0..m).for_each(|k| rim(k, code));
-            return (all, bad);
+            (0..m).for_each(|k| rim(k, sxs, sys, code));
+            return (all, bad, counted);
         }
-        rim(0, code);
-        rim(m - 1, code);
+        rim(0, sxs, sys, code);
+        rim(m - 1, sxs, sys, code);
         let n = nx - 4;
         let (rm, rp) = (hf.row(i - 2), hf.row(i + 2));
         let (l2, l, cc, r, r2x) = (&r1[..n], &r1[1..n + 1], &r1[2..n + 2], &r1[3..n + 3], &r1[4..n + 4]);
         let (d, u, d2, u2) = (&r0[2..n + 2], &r2[2..n + 2], &rm[2..n + 2], &rp[2..n + 2]);
-        let out = &mut code[1..n + 1];
-        let (kx, ky, kx2, ky2) = (0.5 / self.dx, 0.5 / self.dy, 0.25 / self.dx, 0.25 / self.dy);
+        let (out, ox, oy) = (&mut code[1..n + 1], &mut sxs[1..n + 1], &mut sys[1..n + 1]);
         let (c, w) = (self.frame.center, self.frame.whiten);
         let tt = self.tol * self.tol;
-        let (mut a, mut b) = (0u64, 0u64);
+        let (mut a, mut b, mut h) = (0u64, 0u64, 0u64);
         for k in 0..n {
             let valid = f(cc[k]).is_finite() & f(l[k]).is_finite() & f(r[k]).is_finite() & f(d[k]).is_finite() & f(u[k]).is_finite();
             let sx = (f(r[k]) - f(l[k])) * kx;
             let sy = (f(u[k]) - f(d[k])) * ky;
+            // The histogram's own validity ([`super::NormalScheme::row_slopes`]).
+            let ok = !(sx + sy + f(cc[k])).is_nan();
             let ex = ((f(r2x[k]) - f(l2[k])) * kx2 - sx) * THIRD;
             let ey = ((f(u2[k]) - f(d2[k])) * ky2 - sy) * THIRD;
             let (wx, wy) = (w[0][0] * ex + w[0][1] * ey, w[1][0] * ex + w[1][1] * ey);
@@ -259,11 +308,14 @@ impl RowTest {
             let r2s = (px * px + py * py).max(1.0);
             // A NaN (the wide stencil leaves the valid data) counts as unresolved.
             let unresolved = !(wx * wx + wy * wy <= tt * r2s);
-            out[k] = valid as u8 | ((unresolved as u8) << 1);
+            ox[k] = sx;
+            oy[k] = sy;
+            out[k] = valid as u8 | (unresolved as u8) << 1 | (ok as u8) << 2;
             a += valid as u64;
             b += (valid & unresolved) as u64;
+            h += ok as u64;
         }
-        (all + a, bad + b)
+        (all + a, bad + b, counted + h)
     }
 
     /// Fill the NDF's resolution fields from the merged tallies, as [`assess`] does.
