@@ -188,6 +188,14 @@ pub trait BandSource: Sync {
     }
 }
 
+impl Scan<'_> {
+    /// Whether passes read this scan as a tiled scan (mapped, above [`release_threshold`]): each band's
+    /// pages are released after use, so nothing may read its rows outside a band.
+    pub fn is_tiled(&self) -> bool {
+        self.z.is_mapped() && (self.z.len() as u64).saturating_mul(8) > release_threshold()
+    }
+}
+
 impl BandSource for Scan<'_> {
     type T = f64;
     fn shape(&self) -> GridShape {
@@ -196,7 +204,7 @@ impl BandSource for Scan<'_> {
     #[inline]
     fn band<'b>(&'b self, lo: usize, hi: usize, _buf: &'b mut Vec<f64>) -> Band<'b, f64> {
         let mut b = Band::new(&self.z[lo * self.nx..hi * self.nx], lo, self.shape());
-        if self.z.is_mapped() && (self.z.len() as u64).saturating_mul(8) > release_threshold() {
+        if self.is_tiled() {
             // The kernel maps pages around a faulting one (fault-around, and whole large folios of the
             // page cache, up to 2 MiB): release that much beyond the band on either side too, within
             // the heights, or those pages would stay mapped.

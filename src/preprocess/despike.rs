@@ -15,6 +15,8 @@ use crate::ndf::bands::{bands_of, Band, BandSource};
 use crate::ndf::HeightRows;
 use crate::scan::Scan;
 
+use super::form::FormModel;
+
 /// Departure from the neighbours' median, in units of their spread, beyond which a point is a spike.
 pub const SPIKE_THRESHOLD: f64 = 30.0;
 /// Fewest valid neighbours (of 8) for a point to be tested.
@@ -68,13 +70,9 @@ fn departure(z: &Band<'_, f64>, nx: usize, ny: usize, i: usize, j: usize) -> Opt
         // An interior point: its 8 neighbours straight from the three rows, in the order of the loop
         // below; with any of them invalid it takes the general path.
         let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
-        let mut nb = [r0[j - 1], r0[j], r0[j + 1], r1[j - 1], r1[j + 1], r2[j - 1], r2[j], r2[j + 1]];
+        let nb = [r0[j - 1], r0[j], r0[j + 1], r1[j - 1], r1[j + 1], r2[j - 1], r2[j], r2[j + 1]];
         if nb.iter().all(|v| v.is_finite()) {
-            sort8(&mut nb);
-            let med = 0.5 * (nb[3] + nb[4]);
-            let mut dev = nb.map(|v| (v - med).abs());
-            sort8(&mut dev);
-            return Some((c - med, MAD_NORMAL * (0.5 * (dev[3] + dev[4]))));
+            return Some(departure8(c, nb));
         }
     }
     let mut nb = [0.0f64; 8];
@@ -101,11 +99,7 @@ fn departure(z: &Band<'_, f64>, nx: usize, ny: usize, i: usize, j: usize) -> Opt
     if k == 8 {
         // All eight neighbours (every point the scan tests): the same order statistics from a sorting
         // network instead of a comparison sort.
-        sort8(&mut nb);
-        let med = 0.5 * (nb[3] + nb[4]);
-        let mut dev = nb.map(|v| (v - med).abs());
-        sort8(&mut dev);
-        return Some((c - med, MAD_NORMAL * (0.5 * (dev[3] + dev[4]))));
+        return Some(departure8(c, nb));
     }
     let nb = &mut nb[..k];
     nb.sort_by(|a, b| a.total_cmp(b));
@@ -118,6 +112,23 @@ fn departure(z: &Band<'_, f64>, nx: usize, ny: usize, i: usize, j: usize) -> Opt
     dev.sort_by(|a, b| a.total_cmp(b));
     let mad = if k % 2 == 1 { dev[k / 2] } else { 0.5 * (dev[k / 2 - 1] + dev[k / 2]) };
     Some((c - med, MAD_NORMAL * mad))
+}
+
+/// The departure and spread of a point `c` with all 8 neighbours `nb` valid (finite).
+#[inline(always)]
+fn departure8(c: f64, mut nb: [f64; 8]) -> (f64, f64) {
+    sort8(&mut nb);
+    let med = 0.5 * (nb[3] + nb[4]);
+    let mut dev = nb.map(|v| (v - med).abs());
+    sort8(&mut dev);
+    (c - med, MAD_NORMAL * (0.5 * (dev[3] + dev[4])))
+}
+
+/// [`departure`] of the middle of a 3 x 3 patch of an interior point (rows of 3 values).
+#[inline]
+fn patch_departure(p: &[[f64; 3]; 3]) -> Option<(f64, f64)> {
+    let nb = [p[0][0], p[0][1], p[0][2], p[1][0], p[1][2], p[2][0], p[2][1], p[2][2]];
+    (p[1][1].is_finite() && nb.iter().all(|v| v.is_finite())).then(|| departure8(p[1][1], nb))
 }
 
 /// The spike test of the interior point `j` of the middle row of `rows` ([`departure`] and the threshold,
@@ -269,42 +280,89 @@ fn sort8(v: &mut [f64; 8]) {
 /// Points sampled (strided) for the scan's typical departure, the spread floor.
 const FLOOR_SAMPLE: usize = 1 << 16;
 
+/// Sample strides from which the floor's sample takes each point's 3 x 3 patch of residuals alone
+/// (below, the sample is dense enough that whole residual bands cost less).
+const SPARSE_STRIDE: usize = 64;
+
 /// Mask the spikes of `hf` (module documentation). Returns the report; `Despike::None` does nothing.
 pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
-    let (spikes, report) = find_spikes(&*hf, how, hf.meta.height_quantum)?;
+    let (spikes, report) = find_spikes(&*hf, None, how, hf.meta.height_quantum)?;
     for k in spikes {
         hf.z[k] = f64::NAN;
     }
     Some(report)
 }
 
+/// The heights as read and the plane form that `src` of [`find_spikes`] subtracts from them. A plane
+/// cancels in the pair screen's sums of opposite neighbours, so the test screens the heights as read
+/// (no residual band is made) and computes residuals ([`FormModel::residual_at`], bit for bit those of
+/// `src`) only around the points the screen does not pass, and for the floor's sparse sample.
+#[derive(Clone, Copy)]
+pub struct RawPlane<'p> {
+    /// The heights as read.
+    pub raw: &'p Scan<'p>,
+    /// The plane (a [`FormModel`] of order 1).
+    pub form: &'p FormModel,
+}
+
+impl RawPlane<'_> {
+    /// The residuals of rows `i - 1 ..= i + 1`, columns `j - 1 ..= j + 1` (an interior point).
+    #[inline]
+    fn patch(&self, i: usize, j: usize) -> [[f64; 3]; 3] {
+        std::array::from_fn(|a| {
+            let (ii, row) = (i + a - 1, self.raw.row(i + a - 1));
+            std::array::from_fn(|b| self.form.residual_at(ii, j + b - 1, row[j + b - 1]))
+        })
+    }
+}
+
 /// The spikes of the heights `src` ([`despike`]) as sorted flat indices `i * nx + j`, with the report,
 /// without writing the heights: the heights are read in bands of rows (each with the rows around it),
-/// so they can be a mapped file or residuals computed band by band. `quantum`: the height quantum (a
-/// floor of the spread).
-pub fn find_spikes<S: BandSource<T = f64>>(src: &S, how: Despike, quantum: Option<f64>) -> Option<(Vec<usize>, DespikeReport)> {
+/// so they can be a mapped file or residuals computed band by band. `raw`: the same heights as read
+/// and the plane `src` subtracts, when it is one (then the residuals are mostly not made at all).
+/// `quantum`: the height quantum (a floor of the spread).
+pub fn find_spikes<S: BandSource<T = f64>>(
+    src: &S,
+    raw: Option<RawPlane<'_>>,
+    how: Despike,
+    quantum: Option<f64>,
+) -> Option<(Vec<usize>, DespikeReport)> {
     let shape = src.shape();
     let (nx, ny) = (shape.nx, shape.ny);
     if how == Despike::None || nx < 3 || ny < 3 {
         return None;
     }
+    let raw = raw.filter(|r| r.form.plane_magnitude().is_some() && (r.raw.nx, r.raw.ny) == (nx, ny));
     let bands: Vec<std::ops::Range<usize>> = bands_of(0..ny, src.band_rows()).collect();
     // The floor: the median departure (Gaussian-consistent) over a strided sample of the scan (its
     // relative standard error is about 1 / sqrt(2^16): the threshold moves by under 1%), and the quantum.
     let stride = ((nx * ny) / FLOOR_SAMPLE).max(1);
-    let mut all: Vec<f64> = bands
-        .par_iter()
-        .flat_map_iter(|b| {
-            let mut buf = Vec::new();
-            let z = src.band(b.start.saturating_sub(1), (b.end + 1).min(ny), &mut buf);
-            let first = (b.start * nx).next_multiple_of(stride);
-            (first..b.end * nx)
-                .step_by(stride)
-                .filter_map(|k| departure(&z, nx, ny, k / nx, k % nx))
-                .map(|d| d.0.abs())
-                .collect::<Vec<f64>>()
-        })
-        .collect();
+    let mut all: Vec<f64> = match raw {
+        // Not on a tiled scan: reading its rows outside a band would keep their pages.
+        Some(rp) if stride >= SPARSE_STRIDE && !rp.raw.is_tiled() => (0..(nx * ny).div_ceil(stride))
+            .into_par_iter()
+            .with_min_len(1024)
+            .filter_map(|s| {
+                let (i, j) = (s * stride / nx, s * stride % nx);
+                // Only an interior point has its 8 neighbours ([`departure`] gives `None` elsewhere).
+                let interior = i >= 1 && j >= 1 && i + 1 < ny && j + 1 < nx;
+                interior.then(|| patch_departure(&rp.patch(i, j))).flatten().map(|d| d.0.abs())
+            })
+            .collect(),
+        _ => bands
+            .par_iter()
+            .flat_map_iter(|b| {
+                let mut buf = Vec::new();
+                let z = src.band(b.start.saturating_sub(1), (b.end + 1).min(ny), &mut buf);
+                let first = (b.start * nx).next_multiple_of(stride);
+                (first..b.end * nx)
+                    .step_by(stride)
+                    .filter_map(|k| departure(&z, nx, ny, k / nx, k % nx))
+                    .map(|d| d.0.abs())
+                    .collect::<Vec<f64>>()
+            })
+            .collect(),
+    };
     let typical = if all.is_empty() {
         0.0
     } else {
@@ -313,45 +371,46 @@ pub fn find_spikes<S: BandSource<T = f64>>(src: &S, how: Despike, quantum: Optio
     };
     let floor = typical.max(quantum.unwrap_or(0.0));
     let limit = SPIKE_THRESHOLD * floor;
-    // Exact pre-screens, cheapest first: the sums of opposite neighbours ([`pair_screen`], which passes
-    // nearly every point of a smooth surface); the median lies between the neighbours' extremes, so a
-    // point within `limit` of both cannot depart by more than the threshold (which is at least `limit`);
-    // then [`near_median`].
     let spikes: Vec<(usize, bool)> = bands
         .par_iter()
         .flat_map_iter(|b| {
-            let mut out = Vec::new();
-            let mut buf = Vec::new();
-            let mut pass = Vec::new();
-            let z = src.band(b.start.saturating_sub(1), (b.end + 1).min(ny), &mut buf);
-            for i in b.start.max(1)..b.end.min(ny - 1) {
-                let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
-                pair_screen([r0, r1, r2], limit, &mut pass);
-                for j in 1..nx - 1 {
-                    let c = r1[j];
-                    // A hole is never tested (nor a point beside one, which the full test skips).
-                    if pass[j - 1] || !c.is_finite() {
-                        continue;
-                    }
-                    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-                    for r in [r0, r1, r2] {
-                        for v in &r[j - 1..j + 2] {
-                            lo = lo.min(*v);
-                            hi = hi.max(*v);
+            let (mut out, mut buf, mut pass) = (Vec::new(), Vec::new(), Vec::new());
+            let (lo, hi) = (b.start.saturating_sub(1), (b.end + 1).min(ny));
+            let rows = b.start.max(1)..b.end.min(ny - 1);
+            if let Some(rp) = raw {
+                let z = rp.raw.band(lo, hi, &mut buf);
+                if !raw_screen_holds(&rp, z.values(), limit) {
+                    return screen_band(src, lo, hi, rows, limit, floor);
+                }
+                // Screen the heights as read; test the few points it does not pass on their residual
+                // patches, or on the residual band when there are many.
+                let mut todo = Vec::new();
+                for i in rows.clone() {
+                    let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
+                    pair_screen([r0, r1, r2], limit, &mut pass);
+                    // A hole is never tested (the residual of a NaN is NaN).
+                    todo.extend((1..nx - 1).filter(|&j| !pass[j - 1] && !r1[j].is_nan()).map(|j| i * nx + j));
+                }
+                if todo.len() * 8 > rows.len() * nx {
+                    let mut rbuf = Vec::new();
+                    let z = src.band(lo, hi, &mut rbuf);
+                    for k in todo {
+                        let (i, j) = (k / nx, k % nx);
+                        if let Some(high) = tested([z.row(i - 1), z.row(i), z.row(i + 1)], j, limit, floor) {
+                            out.push((k, high));
                         }
                     }
-                    if c - lo <= limit && hi - c <= limit {
-                        continue;
-                    }
-                    if near_median([r0, r1, r2], j, 0.5 * limit) {
-                        continue;
-                    }
-                    if let Some(high) = interior_spike([r0, r1, r2], j, limit, floor) {
-                        out.push((i * nx + j, high));
+                } else {
+                    for k in todo {
+                        let p = rp.patch(k / nx, k % nx);
+                        if let Some(high) = tested([&p[0], &p[1], &p[2]], 1, limit, floor) {
+                            out.push((k, high));
+                        }
                     }
                 }
+                return out;
             }
-            out
+            screen_band(src, lo, hi, rows, limit, floor)
         })
         .collect();
     let high = spikes.iter().filter(|s| s.1).count();
@@ -365,6 +424,72 @@ pub fn find_spikes<S: BandSource<T = f64>>(src: &S, how: Despike, quantum: Optio
         floor,
     };
     Some((spikes.into_iter().map(|s| s.0).collect(), report))
+}
+
+/// The spikes `(flat index, above)` of `rows` of `src`, read as the band `lo..hi` (the rows and one more
+/// on either side within the grid): every point the pair screen does not pass is tested.
+fn screen_band<S: BandSource<T = f64>>(
+    src: &S,
+    lo: usize,
+    hi: usize,
+    rows: std::ops::Range<usize>,
+    limit: f64,
+    floor: f64,
+) -> Vec<(usize, bool)> {
+    let nx = src.shape().nx;
+    let (mut buf, mut pass, mut out) = (Vec::new(), Vec::new(), Vec::new());
+    let z = src.band(lo, hi, &mut buf);
+    for i in rows {
+        let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
+        pair_screen([r0, r1, r2], limit, &mut pass);
+        for j in 1..nx - 1 {
+            if !pass[j - 1] {
+                if let Some(high) = tested([r0, r1, r2], j, limit, floor) {
+                    out.push((i * nx + j, high));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Whether the pair screen of the heights as read, `z` (a band), clears the points it passes in the
+/// residual too: the plane cancels in each sum of opposite neighbours up to the rounding of the
+/// residuals, at most a few ulps of the band's largest height plus the plane's magnitude; with both
+/// below `2^36 limit` that is under `2^-13 limit`, far inside the screen's margin (a passed point
+/// departs by at most about `limit / 2`, the threshold is at least `limit`). A NaN height only makes
+/// the maximum smaller: the screen never passes a point beside one.
+fn raw_screen_holds(rp: &RawPlane<'_>, z: &[f64], limit: f64) -> bool {
+    let top = z.iter().fold(0.0f64, |m, v| if v.abs() > m { v.abs() } else { m });
+    let plane = rp.form.plane_magnitude().unwrap_or(f64::INFINITY);
+    top + plane < limit * (1u64 << 36) as f64
+}
+
+/// The exact tests of the interior point `j` of the middle row of `rows` after the pair screen, cheapest
+/// first: `Some(above)` for a spike. The median lies between the neighbours' extremes, so a point within
+/// `limit` of both cannot depart by more than the threshold (which is at least `limit`); then
+/// [`near_median`]; then the full test. A hole is never tested (nor a point beside one, which the full
+/// test skips).
+#[inline]
+fn tested(rows: [&[f64]; 3], j: usize, limit: f64, floor: f64) -> Option<bool> {
+    let c = rows[1][j];
+    if !c.is_finite() {
+        return None;
+    }
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for r in rows {
+        for v in &r[j - 1..j + 2] {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
+        }
+    }
+    if c - lo <= limit && hi - c <= limit {
+        return None;
+    }
+    if near_median(rows, j, 0.5 * limit) {
+        return None;
+    }
+    interior_spike(rows, j, limit, floor)
 }
 
 #[cfg(test)]
@@ -441,6 +566,51 @@ mod tests {
         assert!(want.len() > 20, "{} spikes found by the full test", want.len());
         assert_eq!(got, want);
         assert_eq!(rep.masked, want.len());
+    }
+
+    /// Screening the heights as read (the plane cancels in the pair sums) and sampling the floor from
+    /// residual patches find exactly the spikes, floor and report of the residual heights themselves:
+    /// a tilted, curved, noisy surface with spikes and holes, large enough for the sparse floor sample
+    /// (stride 64 and more); a large height offset (the screen of the heights as read is then refused
+    /// and the residual bands are made); a half-rough grid where most points of some bands fail the
+    /// screen (their bands are remade); 1- and 3-row bands.
+    #[test]
+    fn raw_screen_finds_the_residual_spikes() {
+        let cases = [
+            (2100, 2050, 4e-9, 0.0, false, None),
+            (2100, 2050, 4e-9, 5e4, false, None),
+            (301, 173, 1e-15, 0.0, true, Some(1)),
+            (97, 83, 4e-9, 0.0, false, Some(3)),
+        ];
+        for (nx, ny, noise, offset, half_rough, band) in cases {
+            let mut rnd = uniform(0x5851_f42d_4c95_7f2d ^ nx as u64);
+            let mut z = vec![0.0; nx * ny];
+            for i in 0..ny {
+                for j in 0..nx {
+                    let (u, v) = (j as f64 * 1e-6, i as f64 * 1e-6);
+                    let rough = if half_rough && j > nx / 3 && i % 40 < 25 { 1e-6 * rnd() } else { 0.0 };
+                    z[i * nx + j] = offset + 0.3 * u - 0.7 * v + 2e3 * (u - 4e-5) * (v - 3e-5) + noise * rnd() + rough;
+                }
+            }
+            for k in (0..nx * ny).step_by(211) {
+                let m = 5e-6 * (1 + k % 13) as f64;
+                z[k] += if k % 2 == 0 { m } else { -m };
+            }
+            for k in (0..nx * ny).step_by(389) {
+                z[k] = f64::NAN;
+            }
+            let raw = Scan::from_view(ndarray::ArrayView2::from_shape((ny, nx), &z).unwrap(), 1e-6, 1e-6).unwrap();
+            let form = super::super::form::fit_polynomial(&raw, 1).unwrap();
+            let residual =
+                Scan::from_view(ndarray::ArrayView2::from_shape((ny, nx), &form.residual(&raw)).unwrap(), 1e-6, 1e-6).unwrap().into_owned();
+            crate::ndf::bands::set_band_rows(band);
+            let want = find_spikes(&residual, None, Despike::Median, None).unwrap();
+            let got = find_spikes(&residual, Some(RawPlane { raw: &raw, form: &form }), Despike::Median, None).unwrap();
+            crate::ndf::bands::set_band_rows(None);
+            assert!(want.0.len() > 20, "{nx} x {ny}: {} spikes", want.0.len());
+            assert_eq!(got.0, want.0, "{nx} x {ny}, offset {offset}");
+            assert_eq!(got.1, want.1);
+        }
     }
 
     /// The bound [`pair_screen`] rests on, checked against sorting: the median of 4 pairs lies between

@@ -73,10 +73,16 @@ pub struct FormModel {
 
 #[derive(Debug, Clone, PartialEq)]
 enum FormKind {
-    /// `c0 + c1 u + c2 v` ([`plane_residual`]'s fit), `u` per column.
+    /// `c0 + c1 u + c2 v` ([`plane_fit`]'s fit), `u` per column.
     Plane { c: [f64; 3], u: Vec<f64>, ny: usize },
     /// `sum_k coef_k P_p(u) P_q(v)` over the terms `(p, q)`.
     Poly { coef: Vec<f64>, t: Vec<(usize, usize)>, lu: Vec<[f64; 4]>, lv: Vec<[f64; 4]> },
+}
+
+/// A plane's residual: the height less the mean, less the plane `base + c1 u` (`base = c0 + c2 v`).
+#[inline(always)]
+fn plane_residual(h: f64, mean: f64, base: f64, c1: f64, u: f64) -> f64 {
+    (h - mean) - (base + c1 * u)
 }
 
 impl FormModel {
@@ -87,17 +93,40 @@ impl FormModel {
         match &self.kind {
             FormKind::Plane { c, u, ny } => {
                 let base = c[0] + c[2] * scaled(i, *ny);
-                out.extend(h.iter().zip(u).map(|(&h, &x)| (h - mean) - (base + c[1] * x)));
+                out.extend(h.iter().zip(u).map(|(&h, &x)| plane_residual(h, mean, base, c[1], x)));
             }
-            FormKind::Poly { coef, t, lu, lv } => {
-                out.extend(h.iter().enumerate().map(|(j, &h)| {
-                    let mut f = 0.0;
-                    for (k, &(p, q)) in t.iter().enumerate() {
-                        f += coef[k] * lu[j][p] * lv[i][q];
-                    }
-                    (h - mean) - f
-                }));
-            }
+            FormKind::Poly { .. } => out.extend(h.iter().enumerate().map(|(j, &h)| (h - mean) - self.poly_at(i, j))),
+        }
+    }
+
+    /// The residual at row `i`, column `j` of the height `h` there: the value [`FormModel::residual_row`]
+    /// gives, bit for bit.
+    #[inline]
+    pub fn residual_at(&self, i: usize, j: usize, h: f64) -> f64 {
+        match &self.kind {
+            FormKind::Plane { c, u, ny } => plane_residual(h, self.mean, c[0] + c[2] * scaled(i, *ny), c[1], u[j]),
+            FormKind::Poly { .. } => (h - self.mean) - self.poly_at(i, j),
+        }
+    }
+
+    /// A polynomial form's value at row `i`, column `j` (less the mean).
+    #[inline(always)]
+    fn poly_at(&self, i: usize, j: usize) -> f64 {
+        let FormKind::Poly { coef, t, lu, lv } = &self.kind else { return 0.0 };
+        let mut f = 0.0;
+        for (k, &(p, q)) in t.iter().enumerate() {
+            f += coef[k] * lu[j][p] * lv[i][q];
+        }
+        f
+    }
+
+    /// For a plane, the sum of the magnitudes of its mean and coefficients (on the scaled axes `u`,
+    /// `v` in [-1, 1]): bounds the plane's value anywhere on the grid, and so the rounding a residual
+    /// carries. `None` for other forms.
+    pub fn plane_magnitude(&self) -> Option<f64> {
+        match &self.kind {
+            FormKind::Plane { c, .. } => Some(self.mean.abs() + c.iter().map(|v| v.abs()).sum::<f64>()),
+            FormKind::Poly { .. } => None,
         }
     }
 
@@ -481,7 +510,7 @@ mod tests {
     use super::*;
     use crate::scan::Heightfield;
 
-    /// The plane path (`plane_residual`) gives the residuals of the general term loop to rounding: on a
+    /// The plane path (`plane_fit`) gives the residuals of the general term loop to rounding: on a
     /// 76 mm stage height under a tilted plane and sub-micrometre roughness, with holes, on grids whose
     /// rows are not a multiple of the vector width or of the task's rows. Both are least squares on the
     /// same basis; the residuals agree to 1e-9 of the roughness (1e-16 m here), far below anything

@@ -12,7 +12,9 @@
 //! residual rows, in cache, just before it is binned. The counting pass goes further for a plane: it
 //! reads the heights as stored ([`RawMasked`]) and subtracts the plane's constant slope
 //! ([`BandSource::plane_folded`]), so no band is remade there; slopes then agree with the residual's
-//! to rounding (a normal on a cell edge may change cell). A cylinder form is removed into a residual buffer
+//! to rounding (a normal on a cell edge may change cell). The spike test screens the heights as read
+//! too (a plane cancels in its screen, [`despike::RawPlane`]) and makes residuals only around the
+//! points it must test, with the same arithmetic, so it finds the same spikes. A cylinder form is removed into a residual buffer
 //! as before (its fit holds every point anyway).
 
 use crate::error::Result;
@@ -59,7 +61,8 @@ pub fn prepare<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Prepared<'a>> {
         }
     };
     let mut p = Prepared { raw: hf, form, masked: Vec::new() };
-    if let Some((masked, report)) = despike::find_spikes(&p, pre.despike, p.raw.meta.height_quantum) {
+    let raw = p.form.as_ref().map(|form| despike::RawPlane { raw: &p.raw, form });
+    if let Some((masked, report)) = despike::find_spikes(&p, raw, pre.despike, p.raw.meta.height_quantum) {
         p.masked = masked;
         p.raw.meta.despike = Some(report);
     }
