@@ -210,7 +210,10 @@ impl RowTest {
             return false;
         }
         #[cfg(target_arch = "x86_64")]
-        let (all, bad, counted) = if std::arch::is_x86_feature_detected!("avx2") {
+        let (all, bad, counted) = if super::histogram::avx512() {
+            // SAFETY: the CPU supports these AVX-512 subsets (checked just above); the body is safe Rust.
+            unsafe { self.codes_avx512(hf, i, rs) }
+        } else if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
             unsafe { self.codes_avx2(hf, i, rs) }
         } else {
@@ -245,6 +248,12 @@ impl RowTest {
         if let Some(blk) = t.pending.as_mut() {
             blk.count_into(&self.frame, &self.grid, &mut t.cells);
         }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq")]
+    unsafe fn codes_avx512<H: HeightRows>(&self, hf: &H, i: usize, rs: &mut RowSlopes) -> (u64, u64, u64) {
+        self.codes(hf, i, rs)
     }
 
     #[cfg(target_arch = "x86_64")]

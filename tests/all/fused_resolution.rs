@@ -95,3 +95,21 @@ fn fused_resolution_test_equals_the_two_pass_form() {
     // Both branches were exercised: per-bin counts kept (some bins with unresolved normals) and dropped.
     assert!(kept >= 3 && dropped >= 1, "kept {kept}, dropped {dropped}");
 }
+
+/// A stencil of finite heights whose slopes overflow to `+inf` and `-inf` is valid for the resolution
+/// test (and unresolved) but not counted by the histogram (`sx + sy` is NaN): it is binned among the
+/// unresolved apart from the histogram's blocks, as the two-pass form bins it.
+#[test]
+fn overflowing_stencils_are_binned_as_the_two_pass_form_bins_them() {
+    let (nx, ny) = (157, 101);
+    let mut hf = bumps(nx, ny, 0.0);
+    for (i, j) in [(20, 30), (50, 61), (70, 12)] {
+        for (di, dj, v) in [(0, 1, 1e308), (0, -1, -1e308), (1, 0, -1e308), (-1, 0, 1e308)] {
+            hf.z[((i as i64 + di) as usize) * nx + (j as i64 + dj) as usize] = v;
+        }
+    }
+    let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
+    let want = reference(&hf, &ndf);
+    same(&ndf, &want, "overflowing stencils");
+    assert!(ndf.unresolved.iter().any(|&u| u > 0), "per-bin counts kept (share {:?})", ndf.unresolved_share);
+}
