@@ -191,14 +191,29 @@ fn near_median(rows: [&[f64]; 3], j: usize, half: f64) -> bool {
 /// point is passed only when its height is below `2^40 limit` (then the rounding stays far below
 /// `limit / 2`) and below `f64::MAX / 4`; non-finite values compare false and are left to the full test, as is every point of a
 /// scan whose `limit` is 0.
-/// The loop is compiled for AVX2 as well, selected at run time (the same IEEE operations: the binary
+/// The loop is compiled for AVX2 and AVX-512 as well, selected at run time (the same IEEE operations: the binary
 /// stays portable and the decisions do not change).
 fn pair_screen(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
-        return unsafe { pair_screen_avx2(rows, limit, pass) };
+    {
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512bw")
+        {
+            // SAFETY: the CPU supports these AVX-512 subsets (checked just above); the body is safe Rust.
+            return unsafe { pair_screen_avx512(rows, limit, pass) };
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+            return unsafe { pair_screen_avx2(rows, limit, pass) };
+        }
     }
+    pair_screen_body(rows, limit, pass)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx512bw")]
+unsafe fn pair_screen_avx512(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
     pair_screen_body(rows, limit, pass)
 }
 
@@ -284,6 +299,9 @@ const FLOOR_SAMPLE: usize = 1 << 16;
 /// (below, the sample is dense enough that whole residual bands cost less).
 const SPARSE_STRIDE: usize = 64;
 
+/// Samples ahead of the one being taken whose rows are prefetched.
+const PREFETCH_AHEAD: usize = 8;
+
 /// Mask the spikes of `hf` (module documentation). Returns the report; `Despike::None` does nothing.
 pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
     let (spikes, report) = find_spikes(&*hf, None, how, hf.meta.height_quantum)?;
@@ -306,6 +324,17 @@ pub struct RawPlane<'p> {
 }
 
 impl RawPlane<'_> {
+    /// Hint the cache to load rows `i - 1 ..= i + 1` (within the grid) around column `j`.
+    #[inline(always)]
+    fn prefetch(&self, i: usize, j: usize) {
+        #[cfg(target_arch = "x86_64")]
+        for ii in i.saturating_sub(1)..=i + 1 {
+            let p: *const f64 = &self.raw.row(ii)[j];
+            // SAFETY: a prefetch is a hint: it reads no data into the program and cannot fault.
+            unsafe { std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast()) };
+        }
+    }
+
     /// The residuals of rows `i - 1 ..= i + 1`, columns `j - 1 ..= j + 1` (an interior point).
     #[inline]
     fn patch(&self, i: usize, j: usize) -> [[f64; 3]; 3] {
@@ -343,6 +372,12 @@ pub fn find_spikes<S: BandSource<T = f64>>(
             .into_par_iter()
             .with_min_len(1024)
             .filter_map(|s| {
+                // The sample is sparse: its rows are far apart in memory, and the hardware prefetcher
+                // does not follow them. Ask for the rows of a sample some way ahead.
+                let ahead = (s + PREFETCH_AHEAD) * stride;
+                if ahead / nx + 1 < ny {
+                    rp.prefetch(ahead / nx, ahead % nx);
+                }
                 let (i, j) = (s * stride / nx, s * stride % nx);
                 // Only an interior point has its 8 neighbours ([`departure`] gives `None` elsewhere).
                 let interior = i >= 1 && j >= 1 && i + 1 < ny && j + 1 < nx;

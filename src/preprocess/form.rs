@@ -79,6 +79,86 @@ enum FormKind {
     Poly { coef: Vec<f64>, t: Vec<(usize, usize)>, lu: Vec<[f64; 4]>, lv: Vec<[f64; 4]> },
 }
 
+/// Independent partial sums per row in [`plane_row_sums`] (one 4-wide vector per sum).
+const PLANE_LANES: usize = 4;
+
+/// The plane fit's sums over one row of heights `h` at the scaled columns `u`: the count, `sum u`,
+/// `sum u^2`, `sum r` and `sum u r` over the valid heights (`r = h - mean`), each in
+/// [`PLANE_LANES`] partial sums by column (NaN heights masked by a select, so the loop vectorizes).
+/// Compiled for AVX2 as well, selected at run time (the same IEEE operations, the same sums).
+fn plane_row_sums(h: &[f64], u: &[f64], mean: f64) -> [f64; 5] {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+        return unsafe { plane_row_sums_avx2(h, u, mean) };
+    }
+    plane_row_sums_body(h, u, mean)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn plane_row_sums_avx2(h: &[f64], u: &[f64], mean: f64) -> [f64; 5] {
+    plane_row_sums_body(h, u, mean)
+}
+
+#[inline(always)]
+fn plane_row_sums_body(h: &[f64], u: &[f64], mean: f64) -> [f64; 5] {
+    const L: usize = PLANE_LANES;
+    let mut lanes = [[0.0f64; L]; 5];
+    let add = |lanes: &mut [[f64; L]; 5], k: usize, h: f64, x: f64| {
+        let ok = !h.is_nan();
+        let r = if ok { h - mean } else { 0.0 };
+        let (m, x) = (if ok { 1.0 } else { 0.0 }, if ok { x } else { 0.0 });
+        lanes[0][k] += m;
+        lanes[1][k] += x;
+        lanes[2][k] += x * x;
+        lanes[3][k] += r;
+        lanes[4][k] += x * r;
+    };
+    let (hc, uc) = (h.chunks_exact(L), u[..h.len()].chunks_exact(L));
+    let (hr, ur) = (hc.remainder(), uc.remainder());
+    for (h4, u4) in hc.zip(uc) {
+        for k in 0..L {
+            add(&mut lanes, k, h4[k], u4[k]);
+        }
+    }
+    for (k, (&h, &x)) in hr.iter().zip(ur).enumerate() {
+        add(&mut lanes, k, h, x);
+    }
+    lanes.map(|l| l.iter().sum::<f64>())
+}
+
+/// Blocks of rows whose sums the mean's pass takes side by side ([`counts_and_sums`] is written for four).
+const MEAN_CHAINS: usize = 4;
+const _: () = assert!(MEAN_CHAINS == 4);
+
+/// The count and the sum of the non-NaN values of each slice, as a serial `filter` and `fold` gives
+/// them (each sum in its own order, bit for bit). A serial sum waits on each addition; the sums of
+/// [`MEAN_CHAINS`] slices are taken side by side so that their additions overlap. A NaN adds `+0.0`,
+/// which leaves a sum that starts at `+0.0` unchanged (it is never `-0.0`).
+fn counts_and_sums(vals: &[&[f64]]) -> Vec<(usize, f64)> {
+    let mut out = vec![(0usize, 0.0f64); vals.len()];
+    let n = if vals.len() == MEAN_CHAINS { vals.iter().map(|v| v.len()).min().unwrap_or(0) } else { 0 };
+    if n > 0 {
+        let (mut k, mut s) = ([0usize; MEAN_CHAINS], [0.0f64; MEAN_CHAINS]);
+        let (a, b, c, d) = (&vals[0][..n], &vals[1][..n], &vals[2][..n], &vals[3][..n]);
+        for (((&a, &b), &c), &d) in a.iter().zip(b).zip(c).zip(d) {
+            for (q, v) in [a, b, c, d].into_iter().enumerate() {
+                let ok = !v.is_nan();
+                k[q] += ok as usize;
+                s[q] += if ok { v } else { 0.0 };
+            }
+        }
+        for (o, (k, s)) in out.iter_mut().zip(k.into_iter().zip(s)) {
+            *o = (k, s);
+        }
+    }
+    for (o, v) in out.iter_mut().zip(vals) {
+        *o = v[n..].iter().filter(|h| !h.is_nan()).fold(*o, |(c, s), h| (c + 1, s + h));
+    }
+    out
+}
+
 /// A plane's residual: the height less the mean, less the plane `base + c1 u` (`base = c0 + c2 v`).
 #[inline(always)]
 fn plane_residual(h: f64, mean: f64, base: f64, c1: f64, u: f64) -> f64 {
@@ -191,12 +271,13 @@ fn polynomial_fit<S: BandSource<T = f64>>(src: &S, order: usize, plane_path: boo
     let m = t.len();
     let starts: Vec<usize> = (0..ny).step_by(ROWS_PER_TASK).collect();
     let rows_of = |i0: usize| i0..(i0 + ROWS_PER_TASK).min(ny);
+    // Blocks taken MEAN_CHAINS at a time, their sums side by side (each in its own order).
     let sums: Vec<(usize, f64)> = starts
-        .par_iter()
-        .map(|&i0| {
-            let mut buf = Vec::new();
-            let band = src.band(i0, rows_of(i0).end, &mut buf);
-            band.values().iter().filter(|h| !h.is_nan()).fold((0usize, 0.0), |(c, s), h| (c + 1, s + h))
+        .par_chunks(MEAN_CHAINS)
+        .flat_map_iter(|group| {
+            let mut bufs: [Vec<f64>; MEAN_CHAINS] = Default::default();
+            let bands: Vec<_> = group.iter().zip(bufs.iter_mut()).map(|(&i0, buf)| src.band(i0, rows_of(i0).end, buf)).collect();
+            counts_and_sums(&bands.iter().map(|b| b.values()).collect::<Vec<_>>())
         })
         .collect();
     let valid: usize = sums.iter().map(|p| p.0).sum();
@@ -267,7 +348,6 @@ fn polynomial_fit<S: BandSource<T = f64>>(src: &S, order: usize, plane_path: boo
 /// Normal equations: a row `i` at `v_i` contributes `n, sum u, sum u^2, sum r, sum u r` over its valid
 /// points (`r = h - mean`), and the `v` entries are those times `v_i` or `v_i^2`.
 fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64, valid: usize) -> Result<FormModel> {
-    const L: usize = 4;
     let shape = src.shape();
     let (nx, ny) = (shape.nx, shape.ny);
     let u: Vec<f64> = (0..nx).map(|j| scaled(j, nx)).collect();
@@ -282,27 +362,7 @@ fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64, valid: usize) -> Result
             let band = src.band(i0, i1, &mut buf);
             for i in i0..i1 {
                 let v = scaled(i, ny);
-                let mut lanes = [[0.0f64; L]; 5];
-                let row = band.row(i);
-                let (hc, uc) = (row.chunks_exact(L), u.chunks_exact(L));
-                let (hr, ur) = (hc.remainder(), uc.remainder());
-                let mut add = |h: &[f64], uu: &[f64]| {
-                    for k in 0..h.len() {
-                        let ok = !h[k].is_nan();
-                        let r = if ok { h[k] - mean } else { 0.0 };
-                        let (m, x) = (if ok { 1.0 } else { 0.0 }, if ok { uu[k] } else { 0.0 });
-                        lanes[0][k] += m;
-                        lanes[1][k] += x;
-                        lanes[2][k] += x * x;
-                        lanes[3][k] += r;
-                        lanes[4][k] += x * r;
-                    }
-                };
-                for (h4, u4) in hc.zip(uc) {
-                    add(h4, u4);
-                }
-                add(hr, ur);
-                let [n, su, suu, sr, sur] = lanes.map(|l| l.iter().sum::<f64>());
+                let [n, su, suu, sr, sur] = plane_row_sums(band.row(i), &u, mean);
                 for (a, b) in acc.iter_mut().zip([n, su, suu, v * n, v * su, v * v * n, sr, sur, v * sr]) {
                     *a += b;
                 }
@@ -509,6 +569,60 @@ pub fn remove_cylinder(hf: &Scan) -> Result<CylinderFit> {
 mod tests {
     use super::*;
     use crate::scan::Heightfield;
+
+    /// Values of many magnitudes and signs, with NaN holes (a deterministic sequence).
+    fn values(n: usize, seed: u64) -> Vec<f64> {
+        let mut x = seed;
+        (0..n)
+            .map(|k| {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let u = (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+                if k % 17 == 3 {
+                    f64::NAN
+                } else {
+                    u * 10f64.powi((k % 7) as i32 - 3) + 0.076
+                }
+            })
+            .collect()
+    }
+
+    /// The mean's sums taken side by side are the serial filter-and-fold of each slice, bit for bit:
+    /// equal and unequal lengths, a group shorter than [`MEAN_CHAINS`], empty slices.
+    #[test]
+    fn side_by_side_sums_equal_the_serial_ones() {
+        let v = values(4000, 7);
+        let serial = |s: &[f64]| s.iter().filter(|h| !h.is_nan()).fold((0usize, 0.0f64), |(c, t), h| (c + 1, t + h));
+        for lens in [[500, 500, 500, 500], [500, 499, 37, 1000], [0, 10, 20, 30]] {
+            let mut at = 0;
+            let slices: Vec<&[f64]> = lens
+                .iter()
+                .map(|&l| {
+                    at += l;
+                    &v[at - l..at]
+                })
+                .collect();
+            for group in [&slices[..], &slices[..3]] {
+                let got = counts_and_sums(group);
+                for (g, s) in got.iter().zip(group.iter()) {
+                    let want = serial(s);
+                    assert_eq!((g.0, g.1.to_bits()), (want.0, want.1.to_bits()), "{lens:?}");
+                }
+            }
+        }
+    }
+
+    /// The plane's row sums compiled for AVX2 (where the CPU has it) equal the portable loop's, bit for
+    /// bit, on rows of every length modulo the lane count, with holes.
+    #[test]
+    fn plane_row_sums_match_the_portable_loop() {
+        let v = values(1030, 11);
+        let u: Vec<f64> = (0..1030).map(|j| scaled(j, 1030)).collect();
+        for n in [0, 1, 3, 4, 5, 1027, 1030] {
+            let got = plane_row_sums(&v[..n], &u[..n], 0.07);
+            let want = plane_row_sums_body(&v[..n], &u[..n], 0.07);
+            assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "{n}");
+        }
+    }
 
     /// The plane path (`plane_fit`) gives the residuals of the general term loop to rounding: on a
     /// 76 mm stage height under a tilted plane and sub-micrometre roughness, with holes, on grids whose
