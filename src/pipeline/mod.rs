@@ -128,7 +128,9 @@ impl Pipeline {
         let scan = read_prepared(path, &self.options.read, &self.options.preprocess())?;
         let ndf_opts = self.ndf_options_of(&scan);
         let read_ms = ms(t0);
-        self.finish(scan, ndf_opts, path, read_ms)
+        let (ndf, input, ndf_ms) = self.ndf_timed(&scan, ndf_opts, path)?;
+        release(scan);
+        self.finish(ndf, input, path, read_ms, ndf_ms)
     }
 
     /// [`Pipeline::run_path`] for a scan in memory (preprocessing included); `label` stands for the path
@@ -139,7 +141,9 @@ impl Pipeline {
         let scan = crate::preprocess::prepare(scan, &self.options.preprocess()).map_err(|e| e.with_path(path))?;
         let ndf_opts = self.ndf_options_of(&scan);
         let read_ms = ms(t0);
-        self.finish(scan, ndf_opts, path, read_ms)
+        let (ndf, input, ndf_ms) = self.ndf_timed(&scan, ndf_opts, path)?;
+        drop(scan);
+        self.finish(ndf, input, path, read_ms, ndf_ms)
     }
 
     /// Read `path`, preprocess and build the NDF only (`ndfit ndf`); the scan is described by the
@@ -147,7 +151,9 @@ impl Pipeline {
     pub fn ndf_path(&self, path: &Path) -> Result<(InputInfo, EmpiricalNdf)> {
         let scan = read_prepared(path, &self.options.read, &self.options.preprocess())?;
         let ndf = ndf_prepared(&scan, &self.ndf_options_of(&scan)).map_err(|e| e.with_path(path))?;
-        Ok((scan.input_info(path), ndf))
+        let input = scan.input_info(path);
+        release(scan);
+        Ok((input, ndf))
     }
 
     /// Preprocess a scan in memory and build its NDF only.
@@ -160,18 +166,28 @@ impl Pipeline {
         self.options.ndf_options_with(|| (scan.raw().nx * scan.raw().ny - scan.invalid_count()) as u64)
     }
 
-    fn finish(&self, scan: Prepared<'_>, ndf_opts: NdfOptions, path: &Path, read_ms: f64) -> Result<Outcome> {
+    /// The NDF of `scan`, its description and the time taken (ms).
+    fn ndf_timed(&self, scan: &Prepared<'_>, ndf_opts: NdfOptions, path: &Path) -> Result<(EmpiricalNdf, InputInfo, f64)> {
         let t1 = Instant::now();
-        let ndf = ndf_prepared(&scan, &ndf_opts).map_err(|e| e.with_path(path))?;
+        let ndf = ndf_prepared(scan, &ndf_opts).map_err(|e| e.with_path(path))?;
         let ndf_ms = ms(t1);
-        let input = scan.input_info(path);
-        drop(scan);
+        Ok((ndf, scan.input_info(path), ndf_ms))
+    }
+
+    fn finish(&self, ndf: EmpiricalNdf, input: InputInfo, path: &Path, read_ms: f64, ndf_ms: f64) -> Result<Outcome> {
         let mut report = fit(&ndf, self.options.model, &self.options.fit_options()).map_err(|e| e.with_path(path))?;
         report.input = Some(input);
         report.timings.read_ms = Some(read_ms);
         report.timings.ndf_ms = Some(ndf_ms);
         Ok(Outcome { ndf, fit: report })
     }
+}
+
+/// Drop a scan read from a file on a thread of its own: unmapping (or freeing) hundreds of MiB of
+/// heights is kernel work of several ms that the caller need not wait for (it writes the NDF or fits
+/// meanwhile). When no thread can be started, the failed spawn drops the scan here.
+fn release(scan: Prepared<'static>) {
+    let _ = std::thread::Builder::new().name("ndfit-release".into()).spawn(move || drop(scan));
 }
 
 fn ms(t: Instant) -> f64 {
