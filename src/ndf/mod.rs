@@ -45,6 +45,7 @@ use nalgebra::Vector3;
 pub use normals::{HeightRows, NormalScheme};
 pub use precision::{F32Storage, HeightsF32, Precision};
 pub use quantum::{HeightQuantum, SlopeLattice};
+use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::scan::Scan;
@@ -365,15 +366,22 @@ fn subsample<S: BandSource>(src: &S, scheme: NormalScheme, target: usize) -> (Ve
     let rows = scheme.rows(hf);
     let total = rows.len() * scheme.per_row(hf);
     let stride = ((total as f64 / target as f64).sqrt().floor() as usize).max(1);
-    let mut out = Vec::with_capacity(target.min(total) + 16);
-    let mut visited = 0u64;
     let per_row = scheme.per_row(hf) as u64;
     let per_visit = if scheme == NormalScheme::Triangles { 2 } else { 1 };
-    for i in rows.step_by(stride) {
-        let (lo, hi) = scheme.stencil_rows(i, hf.ny());
-        scheme.row_slopes(&src.band(lo, hi, &mut buf), i, stride, |sx, sy| out.push([sx, sy]));
-        visited += (per_row / per_visit).div_ceil(stride as u64) * per_visit;
-    }
+    // The sampled rows on every thread (each row's band is made apart), joined in row order.
+    let sampled: Vec<usize> = rows.step_by(stride).collect();
+    let mut visited = sampled.len() as u64 * (per_row / per_visit).div_ceil(stride as u64) * per_visit;
+    let per_row_slopes: Vec<Vec<[f64; 2]>> = sampled
+        .par_iter()
+        .map_init(Vec::new, |buf: &mut Vec<S::T>, &i| {
+            let (lo, hi) = scheme.stencil_rows(i, hf.ny());
+            let mut row = Vec::new();
+            scheme.row_slopes(&src.band(lo, hi, buf), i, stride, |sx, sy| row.push([sx, sy]));
+            row
+        })
+        .collect();
+    let mut out = Vec::with_capacity(target.min(total) + 16);
+    per_row_slopes.iter().for_each(|r| out.extend_from_slice(r));
     if out.is_empty() && stride > 1 {
         // Sparse valid data can fall between the strided rows: take every stencil instead (none of the
         // visited ones was valid, so this collects only the few valid ones there are).
