@@ -228,8 +228,8 @@ impl RowTest {
         bad > 0 && self.bad.fetch_add(bad, Ordering::Relaxed) as f64 <= self.cap
     }
 
-    /// Bin one unresolved sample that the histogram does not count (its slopes overflow), as the
-    /// histogram would have binned it.
+    /// Bin one unresolved sample that the histogram does not count (its slopes overflow) through the
+    /// same blocked mapping, apart from the histogram's blocks.
     pub(super) fn bin_apart(&self, sx: f64, sy: f64, t: &mut Tally) {
         if t.cells.is_empty() {
             t.cells = vec![0; self.grid.cells()];

@@ -183,10 +183,15 @@ impl Pipeline {
     }
 }
 
-/// Drop a scan read from a file on a thread of its own: unmapping (or freeing) hundreds of MiB of
-/// heights is kernel work of several ms that the caller need not wait for (it writes the NDF or fits
-/// meanwhile). When no thread can be started, the failed spawn drops the scan here.
+/// Drop a scan read from a file. Heights that are the mapped file are unmapped on a thread of its own:
+/// unmapping hundreds of MiB is kernel work of several ms that the caller need not wait for (it writes
+/// the NDF or fits meanwhile), and it frees no memory the caller could allocate next. Heights in memory
+/// are freed here, before the caller goes on (a batch reads the next scan into that memory). When no
+/// thread can be started, the failed spawn drops the scan here.
 fn release(scan: Prepared<'static>) {
+    if !scan.raw().z.is_mapped() {
+        return drop(scan);
+    }
     let _ = std::thread::Builder::new().name("ndfit-release".into()).spawn(move || drop(scan));
 }
 

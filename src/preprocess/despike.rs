@@ -304,14 +304,14 @@ const PREFETCH_AHEAD: usize = 8;
 
 /// Mask the spikes of `hf` (module documentation). Returns the report; `Despike::None` does nothing.
 pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
-    let (spikes, report) = find_spikes(&*hf, None, how, hf.meta.height_quantum)?;
+    let (spikes, report) = find_spikes(&*hf, how, hf.meta.height_quantum)?;
     for k in spikes {
         hf.z[k] = f64::NAN;
     }
     Some(report)
 }
 
-/// The heights as read and the plane form that `src` of [`find_spikes`] subtracts from them. A plane
+/// The heights as read and the plane form that `src` of [`find_spikes_over`] subtracts from them. A plane
 /// cancels in the pair screen's sums of opposite neighbours, so the test screens the heights as read
 /// (no residual band is made) and computes residuals ([`FormModel::residual_at`], bit for bit those of
 /// `src`) only around the points the screen does not pass, and for the floor's sparse sample.
@@ -347,10 +347,15 @@ impl RawPlane<'_> {
 
 /// The spikes of the heights `src` ([`despike`]) as sorted flat indices `i * nx + j`, with the report,
 /// without writing the heights: the heights are read in bands of rows (each with the rows around it),
-/// so they can be a mapped file or residuals computed band by band. `raw`: the same heights as read
-/// and the plane `src` subtracts, when it is one (then the residuals are mostly not made at all).
-/// `quantum`: the height quantum (a floor of the spread).
-pub fn find_spikes<S: BandSource<T = f64>>(
+/// so they can be a mapped file or residuals computed band by band. `quantum`: the height quantum (a
+/// floor of the spread).
+pub fn find_spikes<S: BandSource<T = f64>>(src: &S, how: Despike, quantum: Option<f64>) -> Option<(Vec<usize>, DespikeReport)> {
+    find_spikes_over(src, None, how, quantum)
+}
+
+/// [`find_spikes`] of residual heights `src` that are `raw`'s heights as read less its plane: the same
+/// spikes and report, with the residuals mostly not made at all.
+pub fn find_spikes_over<S: BandSource<T = f64>>(
     src: &S,
     raw: Option<RawPlane<'_>>,
     how: Despike,
@@ -636,15 +641,25 @@ mod tests {
             }
             let raw = Scan::from_view(ndarray::ArrayView2::from_shape((ny, nx), &z).unwrap(), 1e-6, 1e-6).unwrap();
             let form = super::super::form::fit_polynomial(&raw, 1).unwrap();
-            let residual =
-                Scan::from_view(ndarray::ArrayView2::from_shape((ny, nx), &form.residual(&raw)).unwrap(), 1e-6, 1e-6).unwrap().into_owned();
+            let rz = form.residual(&raw);
+            let residual = Scan::from_view(ndarray::ArrayView2::from_shape((ny, nx), &rz).unwrap(), 1e-6, 1e-6).unwrap();
             crate::ndf::bands::set_band_rows(band);
-            let want = find_spikes(&residual, None, Despike::Median, None).unwrap();
-            let got = find_spikes(&residual, Some(RawPlane { raw: &raw, form: &form }), Despike::Median, None).unwrap();
+            let want = find_spikes(&residual, Despike::Median, None).unwrap();
+            let got = find_spikes_over(&residual, Some(RawPlane { raw: &raw, form: &form }), Despike::Median, None).unwrap();
             crate::ndf::bands::set_band_rows(None);
             assert!(want.0.len() > 20, "{nx} x {ny}: {} spikes", want.0.len());
             assert_eq!(got.0, want.0, "{nx} x {ny}, offset {offset}");
             assert_eq!(got.1, want.1);
+            // And against the full test of every interior point of the residual, no screen at all.
+            let brute: Vec<usize> = (1..ny - 1)
+                .flat_map(|i| (1..nx - 1).map(move |j| (i, j)))
+                .filter(|&(i, j)| {
+                    departure(&whole(&rz, nx, ny), nx, ny, i, j)
+                        .is_some_and(|(d, s)| d.abs() > SPIKE_THRESHOLD * s.max(got.1.floor) && d.abs() > 0.0)
+                })
+                .map(|(i, j)| i * nx + j)
+                .collect();
+            assert_eq!(got.0, brute, "{nx} x {ny}, offset {offset}: against the full test");
         }
     }
 

@@ -14,8 +14,8 @@
 //! ([`BandSource::plane_folded`]), so no band is remade there; slopes then agree with the residual's
 //! to rounding (a normal on a cell edge may change cell). The spike test screens the heights as read
 //! too (a plane cancels in its screen, [`despike::RawPlane`]) and makes residuals only around the
-//! points it must test, with the same arithmetic, so it finds the same spikes. A cylinder form is removed into a residual buffer
-//! as before (its fit holds every point anyway).
+//! points it must test, with the same arithmetic, so it finds the same spikes. A cylinder form is
+//! removed into a residual buffer as before (its fit holds every point anyway).
 
 use crate::error::Result;
 use crate::ndf::bands::{Band, BandSource, GridShape};
@@ -62,7 +62,7 @@ pub fn prepare<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Prepared<'a>> {
     };
     let mut p = Prepared { raw: hf, form, masked: Vec::new() };
     let raw = p.form.as_ref().map(|form| despike::RawPlane { raw: &p.raw, form });
-    if let Some((masked, report)) = despike::find_spikes(&p, raw, pre.despike, p.raw.meta.height_quantum) {
+    if let Some((masked, report)) = despike::find_spikes_over(&p, raw, pre.despike, p.raw.meta.height_quantum) {
         p.masked = masked;
         p.raw.meta.despike = Some(report);
     }
