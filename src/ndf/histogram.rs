@@ -98,6 +98,9 @@ impl Acc {
 /// the compiler vectorizes its square roots and divisions; counting follows in a scalar loop.
 const BLOCK: usize = 256;
 
+/// Slopes whose unresolved flags [`Block::flush`] tests at once.
+const UNRESOLVED_RUN: usize = 32;
+
 /// Independent partial sums of the slope moments in a block (a multiple of the widest vector, 4 f64).
 const LANES: usize = 8;
 
@@ -284,9 +287,16 @@ impl Block {
             if cells.is_empty() {
                 *cells = vec![0; grid.cells()];
             }
-            for k in 0..n {
-                if self.u[k] != 0 {
-                    cells[self.cell_at(k, frame, grid)] += 1;
+            // Few slopes are unresolved (the rim of each row, as a rule): runs without one are skipped
+            // after one branch-free test of the whole run.
+            for (q, run) in self.u[..n].chunks(UNRESOLVED_RUN).enumerate() {
+                if run.iter().fold(0, |any, &u| any | u) == 0 {
+                    continue;
+                }
+                for (k, &u) in run.iter().enumerate() {
+                    if u != 0 {
+                        cells[self.cell_at(q * UNRESOLVED_RUN + k, frame, grid)] += 1;
+                    }
                 }
             }
             self.nu = 0;

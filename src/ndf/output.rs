@@ -21,46 +21,62 @@ pub fn write_csv(path: &Path, ndf: &EmpiricalNdf) -> Result<()> {
 /// The CSV of [`write_csv`] into any writer (standard output).
 ///
 /// Formatting the shortest round-trip decimals of ten numbers per bin dominates for large grids, so
-/// blocks of rows are formatted in parallel and written in order (the same bytes). Floats go through
-/// `ryu` (shortest round-trip digits, like `core::fmt` but several times faster; it writes an exponent
-/// for very small or large magnitudes, e.g. `7.4e-6`, which every CSV reader parses).
+/// blocks of rows are formatted on the thread pool, in order, and written here as each is ready (the
+/// same bytes; the writes overlap the formatting). Floats go through `ryu` (shortest round-trip digits,
+/// like `core::fmt` but several times faster; it writes an exponent for very small or large magnitudes,
+/// e.g. `7.4e-6`, which every CSV reader parses).
 pub fn write_csv_to<W: std::io::Write + ?Sized>(w: &mut W, ndf: &EmpiricalNdf) -> Result<()> {
-    use rayon::prelude::*;
-    const ROWS: usize = 2048;
+    // About 50 kB a block: below the allocator's mapping threshold, so blocks reuse freed heap memory.
+    const ROWS: usize = 256;
     writeln!(w, "{CSV_HEADER}")?;
-    let blocks: Vec<Vec<u8>> = ndf
-        .bins
-        .par_chunks(ROWS)
-        .enumerate()
-        .map(|(q, chunk)| {
-            let mut out = Vec::with_capacity(chunk.len() * 200);
-            let mut fb = ryu::Buffer::new();
-            let mut ib = itoa::Buffer::new();
-            for (k, b) in chunk.iter().enumerate() {
-                let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
-                for v in [b.m.x, b.m.y, b.m.z, b.d, b.stderr] {
-                    out.extend_from_slice(fb.format(v).as_bytes());
-                    out.push(b',');
+    let (tx, rx) = std::sync::mpsc::channel::<(usize, Vec<u8>)>();
+    std::thread::scope(|s| {
+        s.spawn(move || {
+            rayon::scope_fifo(|pool| {
+                for (q, chunk) in ndf.bins.chunks(ROWS).enumerate() {
+                    let tx = tx.clone();
+                    // A send fails only when the writer has stopped on an error: the block is dropped.
+                    pool.spawn_fifo(move |_| drop(tx.send((q, csv_rows(ndf, q * ROWS, chunk)))));
                 }
-                out.extend_from_slice(ib.format(b.count).as_bytes());
-                for v in [b.solid_angle, b.proj_solid_angle, sx, sy] {
-                    out.push(b',');
-                    out.extend_from_slice(fb.format(v).as_bytes());
-                }
-                out.push(b',');
-                // Not assessed (triangle normals): an empty field.
-                if let Some(&u) = ndf.unresolved.get(q * ROWS + k) {
-                    out.extend_from_slice(ib.format(u).as_bytes());
-                }
-                out.push(b'\n');
+            })
+        });
+        // Blocks may arrive out of order: each waits until those before it are written.
+        let (mut waiting, mut next) = (std::collections::BTreeMap::new(), 0);
+        for (q, block) in rx {
+            waiting.insert(q, block);
+            while let Some(block) = waiting.remove(&next) {
+                w.write_all(&block)?;
+                next += 1;
             }
-            out
-        })
-        .collect();
-    for b in &blocks {
-        w.write_all(b)?;
+        }
+        Ok(())
+    })
+}
+
+/// The CSV rows of `bins`, the bins of `ndf` from index `first` on.
+fn csv_rows(ndf: &EmpiricalNdf, first: usize, bins: &[super::NdfBin]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(bins.len() * 200);
+    let mut fb = ryu::Buffer::new();
+    let mut ib = itoa::Buffer::new();
+    for (k, b) in bins.iter().enumerate() {
+        let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
+        for v in [b.m.x, b.m.y, b.m.z, b.d, b.stderr] {
+            out.extend_from_slice(fb.format(v).as_bytes());
+            out.push(b',');
+        }
+        out.extend_from_slice(ib.format(b.count).as_bytes());
+        for v in [b.solid_angle, b.proj_solid_angle, sx, sy] {
+            out.push(b',');
+            out.extend_from_slice(fb.format(v).as_bytes());
+        }
+        out.push(b',');
+        // Not assessed (triangle normals): an empty field.
+        if let Some(&u) = ndf.unresolved.get(first + k) {
+            out.extend_from_slice(ib.format(u).as_bytes());
+        }
+        out.push(b'\n');
     }
-    Ok(())
+    out
 }
 
 /// The NDF as a JSON value (`ndfit.ndf/1`); `input` describes the scan (path, format, grid).

@@ -256,6 +256,18 @@ fn pair_screen_body(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
     }
 }
 
+/// The positions that `pass` marks false, in order. Most points pass: a run of [`PASS_RUN`] passed
+/// points is skipped after one branch-free test of the whole run.
+fn not_passed(pass: &[bool]) -> impl Iterator<Item = usize> + '_ {
+    pass.chunks(PASS_RUN)
+        .enumerate()
+        .filter(|(_, run)| !run.iter().fold(true, |all, &p| all & p))
+        .flat_map(|(k, run)| run.iter().enumerate().filter(|&(_, &p)| !p).map(move |(j, _)| k * PASS_RUN + j))
+}
+
+/// Points [`not_passed`] tests at once.
+const PASS_RUN: usize = 64;
+
 /// Sort 8 finite values ascending with the optimal 19-comparator network (Knuth, TAOCP vol. 3, 5.3.4).
 #[inline(always)]
 fn sort8(v: &mut [f64; 8]) {
@@ -429,7 +441,7 @@ pub fn find_spikes_over<S: BandSource<T = f64>>(
                     let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
                     pair_screen([r0, r1, r2], limit, &mut pass);
                     // A hole is never tested (the residual of a NaN is NaN).
-                    todo.extend((1..nx - 1).filter(|&j| !pass[j - 1] && !r1[j].is_nan()).map(|j| i * nx + j));
+                    todo.extend(not_passed(&pass).map(|p| p + 1).filter(|&j| !r1[j].is_nan()).map(|j| i * nx + j));
                 }
                 if todo.len() * 8 > rows.len() * nx {
                     let mut rbuf = Vec::new();
@@ -482,11 +494,9 @@ fn screen_band<S: BandSource<T = f64>>(
     for i in rows {
         let (r0, r1, r2) = (z.row(i - 1), z.row(i), z.row(i + 1));
         pair_screen([r0, r1, r2], limit, &mut pass);
-        for j in 1..nx - 1 {
-            if !pass[j - 1] {
-                if let Some(high) = tested([r0, r1, r2], j, limit, floor) {
-                    out.push((i * nx + j, high));
-                }
+        for j in not_passed(&pass).map(|p| p + 1) {
+            if let Some(high) = tested([r0, r1, r2], j, limit, floor) {
+                out.push((i * nx + j, high));
             }
         }
     }
@@ -500,9 +510,23 @@ fn screen_band<S: BandSource<T = f64>>(
 /// departs by at most about `limit / 2`, the threshold is at least `limit`). A NaN height only makes
 /// the maximum smaller: the screen never passes a point beside one.
 fn raw_screen_holds(rp: &RawPlane<'_>, z: &[f64], limit: f64) -> bool {
-    let top = z.iter().fold(0.0f64, |m, v| if v.abs() > m { v.abs() } else { m });
+    let top = largest_magnitude(z);
     let plane = rp.form.plane_magnitude().unwrap_or(f64::INFINITY);
     top + plane < limit * (1u64 << 36) as f64
+}
+
+/// The largest `|v|` of the non-NaN values of `z` (0 for none), in lanes that vectorize: a maximum
+/// taken in any order is the same value, and `max` skips a NaN.
+fn largest_magnitude(z: &[f64]) -> f64 {
+    const L: usize = 8;
+    let mut lanes = [0.0f64; L];
+    let chunks = z.chunks_exact(L);
+    for q in chunks.clone() {
+        for l in 0..L {
+            lanes[l] = lanes[l].max(q[l].abs());
+        }
+    }
+    chunks.remainder().iter().chain(&lanes).fold(0.0, |m, v| m.max(v.abs()))
 }
 
 /// The exact tests of the interior point `j` of the middle row of `rows` after the pair screen, cheapest
@@ -725,6 +749,33 @@ mod tests {
             }
         }
         assert!(passed * 10 > total * 8, "{passed} of {total} passed");
+    }
+
+    /// [`not_passed`] lists exactly the positions a plain filter finds, in order, on rows of every
+    /// length around the run size, sparse and dense failures, all passed and none passed.
+    #[test]
+    fn not_passed_lists_every_failed_position() {
+        let mut rnd = uniform(0x9e37_79b9_7f4a_7c15);
+        for n in [0, 1, 63, 64, 65, 127, 128, 129, 1000] {
+            for share in [0.0, 0.002, 0.3, 1.0] {
+                let pass: Vec<bool> = (0..n).map(|_| rnd() + 0.5 >= share).collect();
+                let want: Vec<usize> = (0..n).filter(|&j| !pass[j]).collect();
+                assert_eq!(not_passed(&pass).collect::<Vec<_>>(), want, "n {n}, share {share}");
+            }
+        }
+    }
+
+    /// The lanes' largest magnitude is the serial maximum of `|v|` over the non-NaN values, whatever the
+    /// length, the signs and the holes.
+    #[test]
+    fn largest_magnitude_is_the_serial_maximum() {
+        let mut rnd = uniform(0x1234_5678_9abc_def1);
+        for n in [0, 1, 7, 8, 9, 17, 100] {
+            let z: Vec<f64> = (0..n).map(|k| if k % 5 == 3 { f64::NAN } else { (rnd() - 0.1) * 10f64.powi(k % 7 - 3) }).collect();
+            let want = z.iter().filter(|v| !v.is_nan()).fold(0.0f64, |m, v| if v.abs() > m { v.abs() } else { m });
+            assert_eq!(largest_magnitude(&z).to_bits(), want.to_bits(), "n {n}");
+        }
+        assert_eq!(largest_magnitude(&[f64::NAN, -3.0, f64::NAN, 2.0, -0.0, 1.0, 0.5, 0.25, -7.5]), 7.5);
     }
 
     /// An interior point's departure and spread from the network agree bit for bit with the median and

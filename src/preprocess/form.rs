@@ -84,46 +84,82 @@ const PLANE_LANES: usize = 4;
 
 /// The plane fit's sums over one row of heights `h` at the scaled columns `u`: the count, `sum u`,
 /// `sum u^2`, `sum r` and `sum u r` over the valid heights (`r = h - mean`), each in
-/// [`PLANE_LANES`] partial sums by column (NaN heights masked by a select, so the loop vectorizes).
-/// Compiled for AVX2 as well, selected at run time (the same IEEE operations, the same sums).
+/// [`PLANE_LANES`] partial sums by column (a NaN height adds `+0.0` to each).
+/// On CPUs with AVX2 the lanes are one vector register per sum (the same IEEE operations, the same sums).
 fn plane_row_sums(h: &[f64], u: &[f64], mean: f64) -> [f64; 5] {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+        // SAFETY: the CPU supports AVX2 (checked just above).
         return unsafe { plane_row_sums_avx2(h, u, mean) };
     }
     plane_row_sums_body(h, u, mean)
 }
 
+/// [`plane_row_sums_body`] with the lanes in AVX2 registers. The compiler turns the body's selects into
+/// a branch per point; here a valid height's terms are kept by an AND with its ordered-compare mask
+/// (all ones, or zero for a NaN: `+0.0`, as the select gives). Multiplications and additions stay
+/// separate (no FMA), so every lane is the body's, bit for bit.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn plane_row_sums_avx2(h: &[f64], u: &[f64], mean: f64) -> [f64; 5] {
-    plane_row_sums_body(h, u, mean)
+    use std::arch::x86_64::*;
+    const L: usize = PLANE_LANES;
+    const _: () = assert!(L == 4);
+    let u = &u[..h.len()];
+    let (hc, uc) = (h.chunks_exact(L), u.chunks_exact(L));
+    let (hr, ur) = (hc.remainder(), uc.remainder());
+    let (one, mv) = (_mm256_set1_pd(1.0), _mm256_set1_pd(mean));
+    let mut acc = [_mm256_setzero_pd(); 5];
+    for (h4, u4) in hc.zip(uc) {
+        // SAFETY: each chunk holds 4 f64 (`chunks_exact`); the loads are unaligned.
+        let (hv, xv) = unsafe { (_mm256_loadu_pd(h4.as_ptr()), _mm256_loadu_pd(u4.as_ptr())) };
+        let keep = _mm256_cmp_pd::<_CMP_ORD_Q>(hv, hv);
+        let m = _mm256_and_pd(keep, one);
+        let x = _mm256_and_pd(keep, xv);
+        let r = _mm256_and_pd(keep, _mm256_sub_pd(hv, mv));
+        acc[0] = _mm256_add_pd(acc[0], m);
+        acc[1] = _mm256_add_pd(acc[1], x);
+        acc[2] = _mm256_add_pd(acc[2], _mm256_mul_pd(x, x));
+        acc[3] = _mm256_add_pd(acc[3], r);
+        acc[4] = _mm256_add_pd(acc[4], _mm256_mul_pd(x, r));
+    }
+    let mut lanes = [[0.0f64; L]; 5];
+    for (l, a) in lanes.iter_mut().zip(acc) {
+        // SAFETY: `l` is 4 f64; the store is unaligned.
+        unsafe { _mm256_storeu_pd(l.as_mut_ptr(), a) };
+    }
+    for (k, (&h, &x)) in hr.iter().zip(ur).enumerate() {
+        plane_add(&mut lanes, k, h, x, mean);
+    }
+    lanes.map(|l| l.iter().sum::<f64>())
 }
 
+/// Add one point (height `h` at column `x`) to lane `k` of the plane's sums; a NaN height adds `+0.0`.
 #[inline(always)]
+fn plane_add(lanes: &mut [[f64; PLANE_LANES]; 5], k: usize, h: f64, x: f64, mean: f64) {
+    let ok = !h.is_nan();
+    let r = if ok { h - mean } else { 0.0 };
+    let (m, x) = (if ok { 1.0 } else { 0.0 }, if ok { x } else { 0.0 });
+    lanes[0][k] += m;
+    lanes[1][k] += x;
+    lanes[2][k] += x * x;
+    lanes[3][k] += r;
+    lanes[4][k] += x * r;
+}
+
+/// The portable loop of [`plane_row_sums`].
 fn plane_row_sums_body(h: &[f64], u: &[f64], mean: f64) -> [f64; 5] {
     const L: usize = PLANE_LANES;
     let mut lanes = [[0.0f64; L]; 5];
-    let add = |lanes: &mut [[f64; L]; 5], k: usize, h: f64, x: f64| {
-        let ok = !h.is_nan();
-        let r = if ok { h - mean } else { 0.0 };
-        let (m, x) = (if ok { 1.0 } else { 0.0 }, if ok { x } else { 0.0 });
-        lanes[0][k] += m;
-        lanes[1][k] += x;
-        lanes[2][k] += x * x;
-        lanes[3][k] += r;
-        lanes[4][k] += x * r;
-    };
     let (hc, uc) = (h.chunks_exact(L), u[..h.len()].chunks_exact(L));
     let (hr, ur) = (hc.remainder(), uc.remainder());
     for (h4, u4) in hc.zip(uc) {
         for k in 0..L {
-            add(&mut lanes, k, h4[k], u4[k]);
+            plane_add(&mut lanes, k, h4[k], u4[k], mean);
         }
     }
     for (k, (&h, &x)) in hr.iter().zip(ur).enumerate() {
-        add(&mut lanes, k, h, x);
+        plane_add(&mut lanes, k, h, x, mean);
     }
     lanes.map(|l| l.iter().sum::<f64>())
 }
