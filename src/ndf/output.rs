@@ -22,9 +22,9 @@ pub fn write_csv(path: &Path, ndf: &EmpiricalNdf) -> Result<()> {
 ///
 /// Formatting the shortest round-trip decimals of ten numbers per bin dominates for large grids, so
 /// blocks of rows are formatted on the thread pool, in order, and written here as each is ready (the
-/// same bytes; the writes overlap the formatting). Floats go through `ryu` (shortest round-trip digits,
+/// same bytes; the writes overlap the formatting). Floats go through `zmij` (shortest round-trip digits,
 /// like `core::fmt` but several times faster; it writes an exponent for very small or large magnitudes,
-/// e.g. `7.4e-6`, which every CSV reader parses).
+/// e.g. `7.4e-6` or `1e+17`, which every CSV reader parses).
 pub fn write_csv_to<W: std::io::Write + ?Sized>(w: &mut W, ndf: &EmpiricalNdf) -> Result<()> {
     // About 50 kB a block: below the allocator's mapping threshold, so blocks reuse freed heap memory.
     const ROWS: usize = 256;
@@ -56,7 +56,7 @@ pub fn write_csv_to<W: std::io::Write + ?Sized>(w: &mut W, ndf: &EmpiricalNdf) -
 /// The CSV rows of `bins`, the bins of `ndf` from index `first` on.
 fn csv_rows(ndf: &EmpiricalNdf, first: usize, bins: &[super::NdfBin]) -> Vec<u8> {
     let mut out = Vec::with_capacity(bins.len() * 200);
-    let mut fb = ryu::Buffer::new();
+    let mut fb = zmij::Buffer::new();
     let mut ib = itoa::Buffer::new();
     for (k, b) in bins.iter().enumerate() {
         let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
