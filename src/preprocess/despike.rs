@@ -331,7 +331,7 @@ pub fn despike(hf: &mut Scan<'_>, how: Despike) -> Option<DespikeReport> {
 pub struct RawPlane<'p> {
     /// The heights as read.
     pub raw: &'p Scan<'p>,
-    /// The plane (a [`FormModel`] of order 1).
+    /// The plane fitted to `raw` (a [`FormModel`] of order 1).
     pub form: &'p FormModel,
 }
 
@@ -510,9 +510,11 @@ fn screen_band<S: BandSource<T = f64>>(
 /// departs by at most about `limit / 2`, the threshold is at least `limit`). A NaN height only makes
 /// the maximum smaller: the screen never passes a point beside one.
 fn raw_screen_holds(rp: &RawPlane<'_>, z: &[f64], limit: f64) -> bool {
-    let top = largest_magnitude(z);
     let plane = rp.form.plane_magnitude().unwrap_or(f64::INFINITY);
-    top + plane < limit * (1u64 << 36) as f64
+    let bound = limit * (1u64 << 36) as f64;
+    // The scan's largest height (the fit's first pass found it) bounds the band's: when it holds, so
+    // does the band, with no pass over the band.
+    rp.form.largest_height() + plane < bound || largest_magnitude(z) + plane < bound
 }
 
 /// The largest `|v|` of the non-NaN values of `z` (0 for none), in lanes that vectorize: a maximum

@@ -68,6 +68,8 @@ pub struct FormModel {
     mean: f64,
     /// How many heights were valid (not NaN) in the fit.
     valid: usize,
+    /// The largest magnitude of the valid heights.
+    top: f64,
     kind: FormKind,
 }
 
@@ -168,29 +170,31 @@ fn plane_row_sums_body(h: &[f64], u: &[f64], mean: f64) -> [f64; 5] {
 const MEAN_CHAINS: usize = 4;
 const _: () = assert!(MEAN_CHAINS == 4);
 
-/// The count and the sum of the non-NaN values of each slice, as a serial `filter` and `fold` gives
-/// them (each sum in its own order, bit for bit). A serial sum waits on each addition; the sums of
-/// [`MEAN_CHAINS`] slices are taken side by side so that their additions overlap. A NaN adds `+0.0`,
-/// which leaves a sum that starts at `+0.0` unchanged (it is never `-0.0`).
-fn counts_and_sums(vals: &[&[f64]]) -> Vec<(usize, f64)> {
-    let mut out = vec![(0usize, 0.0f64); vals.len()];
+/// The count, the sum and the largest magnitude of the non-NaN values of each slice, as a serial
+/// `filter` and `fold` gives them (each sum in its own order, bit for bit). A serial sum waits on each
+/// addition; the sums of [`MEAN_CHAINS`] slices are taken side by side so that their additions overlap.
+/// A NaN adds `+0.0`, which leaves a sum that starts at `+0.0` unchanged (it is never `-0.0`), and
+/// `max` skips it.
+fn counts_and_sums(vals: &[&[f64]]) -> Vec<(usize, f64, f64)> {
+    let mut out = vec![(0usize, 0.0f64, 0.0f64); vals.len()];
     let n = if vals.len() == MEAN_CHAINS { vals.iter().map(|v| v.len()).min().unwrap_or(0) } else { 0 };
     if n > 0 {
-        let (mut k, mut s) = ([0usize; MEAN_CHAINS], [0.0f64; MEAN_CHAINS]);
+        let (mut k, mut s, mut m) = ([0usize; MEAN_CHAINS], [0.0f64; MEAN_CHAINS], [0.0f64; MEAN_CHAINS]);
         let (a, b, c, d) = (&vals[0][..n], &vals[1][..n], &vals[2][..n], &vals[3][..n]);
         for (((&a, &b), &c), &d) in a.iter().zip(b).zip(c).zip(d) {
             for (q, v) in [a, b, c, d].into_iter().enumerate() {
                 let ok = !v.is_nan();
                 k[q] += ok as usize;
                 s[q] += if ok { v } else { 0.0 };
+                m[q] = m[q].max(v.abs());
             }
         }
-        for (o, (k, s)) in out.iter_mut().zip(k.into_iter().zip(s)) {
-            *o = (k, s);
+        for (q, o) in out.iter_mut().enumerate() {
+            *o = (k[q], s[q], m[q]);
         }
     }
     for (o, v) in out.iter_mut().zip(vals) {
-        *o = v[n..].iter().filter(|h| !h.is_nan()).fold(*o, |(c, s), h| (c + 1, s + h));
+        *o = v[n..].iter().filter(|h| !h.is_nan()).fold(*o, |(c, s, m), h| (c + 1, s + h, m.max(h.abs())));
     }
     out
 }
@@ -244,6 +248,11 @@ impl FormModel {
             FormKind::Plane { c, .. } => Some(self.mean.abs() + c.iter().map(|v| v.abs()).sum::<f64>()),
             FormKind::Poly { .. } => None,
         }
+    }
+
+    /// The largest magnitude of the fitted grid's valid heights, found by the fit's first pass.
+    pub fn largest_height(&self) -> f64 {
+        self.top
     }
 
     /// How many heights of the fitted grid are valid (not NaN), counted by the fit's first pass.
@@ -308,7 +317,7 @@ fn polynomial_fit<S: BandSource<T = f64>>(src: &S, order: usize, plane_path: boo
     let starts: Vec<usize> = (0..ny).step_by(ROWS_PER_TASK).collect();
     let rows_of = |i0: usize| i0..(i0 + ROWS_PER_TASK).min(ny);
     // Blocks taken MEAN_CHAINS at a time, their sums side by side (each in its own order).
-    let sums: Vec<(usize, f64)> = starts
+    let sums: Vec<(usize, f64, f64)> = starts
         .par_chunks(MEAN_CHAINS)
         .flat_map_iter(|group| {
             let mut bufs: [Vec<f64>; MEAN_CHAINS] = Default::default();
@@ -321,8 +330,9 @@ fn polynomial_fit<S: BandSource<T = f64>>(src: &S, order: usize, plane_path: boo
         return Err(Error::new(ErrorKind::BadData, format!("{valid} valid points cannot determine a {m}-term form of order {order}")));
     }
     let mean = sums.iter().map(|p| p.1).sum::<f64>() / valid as f64;
+    let top = sums.iter().fold(0.0f64, |m, p| m.max(p.2));
     if plane_path && t == [(0, 0), (1, 0), (0, 1)] {
-        return plane_fit(src, mean, valid);
+        return plane_fit(src, mean, valid, top);
     }
     let lu: Vec<[f64; 4]> = (0..nx).map(|j| legendre(scaled(j, nx))).collect();
     let lv: Vec<[f64; 4]> = (0..ny).map(|i| legendre(scaled(i, ny))).collect();
@@ -374,7 +384,7 @@ fn polynomial_fit<S: BandSource<T = f64>>(src: &S, order: usize, plane_path: boo
     let svd = ata.svd(true, true);
     let smax = svd.singular_values.max();
     let coef = svd.solve(&atb, smax * 1e-12).map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
-    Ok(FormModel { mean, valid, kind: FormKind::Poly { coef: coef.iter().copied().collect(), t, lu, lv } })
+    Ok(FormModel { mean, valid, top, kind: FormKind::Poly { coef: coef.iter().copied().collect(), t, lu, lv } })
 }
 
 /// The plane case of [`fit_polynomial`] (basis `1, u, v`, both axes longer than one sample), the
@@ -383,7 +393,7 @@ fn polynomial_fit<S: BandSource<T = f64>>(src: &S, order: usize, plane_path: boo
 ///
 /// Normal equations: a row `i` at `v_i` contributes `n, sum u, sum u^2, sum r, sum u r` over its valid
 /// points (`r = h - mean`), and the `v` entries are those times `v_i` or `v_i^2`.
-fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64, valid: usize) -> Result<FormModel> {
+fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64, valid: usize, top: f64) -> Result<FormModel> {
     let shape = src.shape();
     let (nx, ny) = (shape.nx, shape.ny);
     let u: Vec<f64> = (0..nx).map(|j| scaled(j, nx)).collect();
@@ -420,7 +430,7 @@ fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64, valid: usize) -> Result
     let svd = ata.svd(true, true);
     let smax = svd.singular_values.max();
     let c = svd.solve(&atb, smax * 1e-12).map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
-    Ok(FormModel { mean, valid, kind: FormKind::Plane { c: [c[0], c[1], c[2]], u, ny } })
+    Ok(FormModel { mean, valid, top, kind: FormKind::Plane { c: [c[0], c[1], c[2]], u, ny } })
 }
 
 /// Residuals after removing the least-squares plane (order 1).
@@ -627,7 +637,10 @@ mod tests {
     #[test]
     fn side_by_side_sums_equal_the_serial_ones() {
         let v = values(4000, 7);
-        let serial = |s: &[f64]| s.iter().filter(|h| !h.is_nan()).fold((0usize, 0.0f64), |(c, t), h| (c + 1, t + h));
+        let serial = |s: &[f64]| {
+            let (c, t) = s.iter().filter(|h| !h.is_nan()).fold((0usize, 0.0f64), |(c, t), h| (c + 1, t + h));
+            (c, t, s.iter().filter(|h| !h.is_nan()).fold(0.0f64, |m, h| if h.abs() > m { h.abs() } else { m }))
+        };
         for lens in [[500, 500, 500, 500], [500, 499, 37, 1000], [0, 10, 20, 30]] {
             let mut at = 0;
             let slices: Vec<&[f64]> = lens
@@ -641,7 +654,7 @@ mod tests {
                 let got = counts_and_sums(group);
                 for (g, s) in got.iter().zip(group.iter()) {
                     let want = serial(s);
-                    assert_eq!((g.0, g.1.to_bits()), (want.0, want.1.to_bits()), "{lens:?}");
+                    assert_eq!((g.0, g.1.to_bits(), g.2.to_bits()), (want.0, want.1.to_bits(), want.2.to_bits()), "{lens:?}");
                 }
             }
         }
@@ -690,9 +703,11 @@ mod tests {
                     z.push(if (i * nx + j) % 11 == 3 { f64::NAN } else { h });
                 }
             }
+            let top = z.iter().filter(|h| !h.is_nan()).fold(0.0f64, |m, h| if h.abs() > m { h.abs() } else { m });
             let hf = Heightfield::new(nx, ny, 1e-6, 1e-6, z).expect("grid");
-            let fast = polynomial_fit(&hf, 1, true).expect("plane path").residual(&hf);
-            let general = polynomial_fit(&hf, 1, false).expect("general path").residual(&hf);
+            let (fast, general) = (polynomial_fit(&hf, 1, true).expect("plane path"), polynomial_fit(&hf, 1, false).expect("general path"));
+            assert_eq!((fast.largest_height(), general.largest_height()), (top, top), "{nx}x{ny}");
+            let (fast, general) = (fast.residual(&hf), general.residual(&hf));
             for (k, (a, b)) in fast.iter().zip(&general).enumerate() {
                 if b.is_nan() {
                     assert!(a.is_nan(), "{nx}x{ny} point {k}: hole must stay NaN");
