@@ -21,36 +21,34 @@ pub fn write_csv(path: &Path, ndf: &EmpiricalNdf) -> Result<()> {
 /// The CSV of [`write_csv`] into any writer (standard output).
 ///
 /// Formatting the shortest round-trip decimals of ten numbers per bin dominates for large grids, so
-/// blocks of rows are formatted on the thread pool, in order, and written here as each is ready (the
-/// same bytes; the writes overlap the formatting). Floats go through `zmij` (shortest round-trip digits,
+/// blocks of rows are formatted on the thread pool, a wave of blocks while the previous wave is written
+/// here (the same bytes). The writing stays on the calling thread and the pool's work is scoped to it,
+/// so a call from inside the pool cannot deadlock. Floats go through `zmij` (shortest round-trip digits,
 /// like `core::fmt` but several times faster; it writes an exponent for very small or large magnitudes,
 /// e.g. `7.4e-6` or `1e+17`, which every CSV reader parses).
 pub fn write_csv_to<W: std::io::Write + ?Sized>(w: &mut W, ndf: &EmpiricalNdf) -> Result<()> {
+    use rayon::prelude::*;
     // About 50 kB a block: below the allocator's mapping threshold, so blocks reuse freed heap memory.
     const ROWS: usize = 256;
+    const WAVE: usize = 16 * ROWS;
     writeln!(w, "{CSV_HEADER}")?;
-    let (tx, rx) = std::sync::mpsc::channel::<(usize, Vec<u8>)>();
-    std::thread::scope(|s| {
-        s.spawn(move || {
-            rayon::scope_fifo(|pool| {
-                for (q, chunk) in ndf.bins.chunks(ROWS).enumerate() {
-                    let tx = tx.clone();
-                    // A send fails only when the writer has stopped on an error: the block is dropped.
-                    pool.spawn_fifo(move |_| drop(tx.send((q, csv_rows(ndf, q * ROWS, chunk)))));
-                }
-            })
+    let mut done: Vec<Vec<u8>> = Vec::new();
+    for (q, wave) in ndf.bins.chunks(WAVE).enumerate() {
+        let mut next = Vec::new();
+        let mut wrote = Ok(());
+        rayon::in_place_scope(|s| {
+            s.spawn(|_| {
+                next = wave.par_chunks(ROWS).enumerate().map(|(k, rows)| csv_rows(ndf, q * WAVE + k * ROWS, rows)).collect();
+            });
+            wrote = done.iter().try_for_each(|b| w.write_all(b));
         });
-        // Blocks may arrive out of order: each waits until those before it are written.
-        let (mut waiting, mut next) = (std::collections::BTreeMap::new(), 0);
-        for (q, block) in rx {
-            waiting.insert(q, block);
-            while let Some(block) = waiting.remove(&next) {
-                w.write_all(&block)?;
-                next += 1;
-            }
-        }
-        Ok(())
-    })
+        wrote?;
+        done = next;
+    }
+    for b in &done {
+        w.write_all(b)?;
+    }
+    Ok(())
 }
 
 /// The CSV rows of `bins`, the bins of `ndf` from index `first` on.
@@ -150,4 +148,39 @@ pub fn write_exr(path: &Path, ndf: &EmpiricalNdf, res: usize) -> Result<()> {
     let mut buf = std::io::Cursor::new(Vec::new());
     image.write().to_buffered(&mut buf).map_err(|e| Error::new(ErrorKind::Io, format!("EXR encoding failed: {e}")).with_path(path))?;
     write_bytes_atomic(path, buf.get_ref())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ndf::NdfBin;
+
+    /// The CSV is the same, row for row in bin order, whether written from outside the pool or from
+    /// every thread of the pool at once (each call scopes its formatting: none waits on another's).
+    #[test]
+    fn csv_is_the_same_from_inside_the_pool() {
+        use rayon::prelude::*;
+        let bins: Vec<NdfBin> = (0..9000)
+            .map(|k| {
+                let t = k as f64 * 1e-4;
+                let m = Vector3::new(0.5 * t.sin(), 0.5 * t.cos(), (1.0 - 0.25f64).sqrt());
+                NdfBin { m, d: 1.0 / (1.0 + t), stderr: 1e-3 * t, count: k as u64, solid_angle: 1e-4 + t, proj_solid_angle: 1e-4 * t }
+            })
+            .collect();
+        let ndf = EmpiricalNdf::from_bins(bins, 9000);
+        let mut alone = Vec::new();
+        write_csv_to(&mut alone, &ndf).unwrap();
+        let want = [format!("{CSV_HEADER}\n").into_bytes(), csv_rows(&ndf, 0, &ndf.bins)].concat();
+        assert!(alone == want);
+        let calls = 2 * rayon::current_num_threads() + 1;
+        let outs: Vec<Vec<u8>> = (0..calls)
+            .into_par_iter()
+            .map(|_| {
+                let mut out = Vec::new();
+                write_csv_to(&mut out, &ndf).unwrap();
+                out
+            })
+            .collect();
+        assert!(outs.iter().all(|o| *o == want));
+    }
 }
