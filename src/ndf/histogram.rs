@@ -436,6 +436,9 @@ pub(super) fn histogram<S: BandSource>(
         // are merged pairwise, and there is at least one chunk (the caller checked for stencils).
         .reduce_with(Acc::merge)
         .unwrap_or_else(|| Acc::new(cells));
+    if let Some(t) = res {
+        t.bin_deferred(src, &mut acc.res);
+    }
     // Nothing counted anywhere: no fold made the counts.
     if acc.counts.is_empty() {
         (acc.counts, acc.odd) = (vec![0; cells], vec![0; cells]);

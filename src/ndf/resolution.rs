@@ -103,7 +103,19 @@ pub(super) struct RowTest {
     cap: f64,
     /// Unresolved samples found so far by every task.
     bad: AtomicU64,
+    /// Valid samples tested so far by every task.
+    seen: AtomicU64,
+    /// Samples tested before the share so far may defer binning ([`SKIP_AFTER`] of the stencils).
+    warm: f64,
 }
+
+/// Share of the stencils tested before the share so far may defer binning ([`RowTest::row`]).
+const SKIP_AFTER: f64 = 1.0 / 64.0;
+
+/// Share so far above which a row's unresolved slopes are not binned in the pass: at twice
+/// [`MAX_UNRESOLVED_SHARE`], the share nearly always ends above it and the counts are dropped. When it
+/// does not, the deferred rows are binned after the pass ([`RowTest::bin_deferred`]).
+const SKIP_SHARE: f64 = 2.0 * MAX_UNRESOLVED_SHARE;
 
 /// Per-task tallies of [`RowTest`].
 #[derive(Default)]
@@ -116,6 +128,8 @@ pub(super) struct Tally {
     pub(super) cells: Vec<u64>,
     /// Unresolved slopes the histogram does not count (an overflowing difference), binned apart.
     pending: Option<Box<super::histogram::Block>>,
+    /// Rows whose unresolved slopes were not binned while the share so far was high.
+    deferred: Vec<usize>,
 }
 
 /// The central-difference samples of one row (column `j` at `j - 1`): slopes and per-sample codes, made
@@ -175,7 +189,14 @@ impl Tally {
             self.cells.resize(o.cells.len(), 0);
         }
         self.cells.iter_mut().zip(&o.cells).for_each(|(a, b)| *a += b);
+        self.deferred.extend(o.deferred);
         self
+    }
+
+    /// Whether the share of unresolved samples is within [`MAX_UNRESOLVED_SHARE`] (the per-bin counts
+    /// are kept), as [`RowTest::finish`] decides it.
+    pub(super) fn within_cap(&self) -> bool {
+        self.bad as f64 / self.all.max(1) as f64 <= MAX_UNRESOLVED_SHARE
     }
 }
 
@@ -192,6 +213,8 @@ impl RowTest {
             dy: shape.dy,
             cap: MAX_UNRESOLVED_SHARE * stencils as f64 + 1.0,
             bad: AtomicU64::new(0),
+            seen: AtomicU64::new(0),
+            warm: SKIP_AFTER * stencils as f64,
         }
     }
 
@@ -202,12 +225,35 @@ impl RowTest {
 
     /// Take the slopes of row `i` (`1 <= i < ny - 1`) of `hf`, which holds rows `i - 2 ..= i + 2`, and
     /// test every sample, into `rs`. Returns whether the row's unresolved samples are to be binned
-    /// (not while the share is already certain to exceed [`MAX_UNRESOLVED_SHARE`]).
+    /// now: not while the share is already certain to exceed [`MAX_UNRESOLVED_SHARE`], and not while
+    /// the share so far is above [`SKIP_SHARE`] (the row is then deferred, in `t`).
     pub(super) fn row<H: HeightRows>(&self, hf: &H, i: usize, t: &mut Tally, rs: &mut RowSlopes) -> bool {
+        let (all, bad) = self.test_row(hf, i, rs);
+        t.all += all;
+        t.bad += bad;
+        let seen = self.seen.fetch_add(all, Ordering::Relaxed) + all;
+        if bad == 0 {
+            return false;
+        }
+        let before = self.bad.fetch_add(bad, Ordering::Relaxed);
+        // Past the cap the share is above the limit whatever the remaining rows hold: stop binning.
+        if before as f64 > self.cap {
+            return false;
+        }
+        if seen as f64 >= self.warm && (before + bad) as f64 > SKIP_SHARE * seen as f64 {
+            t.deferred.push(i);
+            return false;
+        }
+        true
+    }
+
+    /// The slopes and codes of row `i` into `rs` (as [`RowTest::row`], without the tallies): the valid
+    /// and the unresolved samples.
+    fn test_row<H: HeightRows>(&self, hf: &H, i: usize, rs: &mut RowSlopes) -> (u64, u64) {
         rs.resize(self.nx.saturating_sub(2));
         if self.nx < 3 {
             rs.counted = 0;
-            return false;
+            return (0, 0);
         }
         #[cfg(target_arch = "x86_64")]
         let (all, bad, counted) = if super::histogram::avx512() {
@@ -221,11 +267,41 @@ impl RowTest {
         };
         #[cfg(not(target_arch = "x86_64"))]
         let (all, bad, counted) = self.codes(hf, i, rs);
-        t.all += all;
-        t.bad += bad;
         rs.counted = counted;
-        // Past the cap the share is above the limit whatever the remaining rows hold: stop binning.
-        bad > 0 && self.bad.fetch_add(bad, Ordering::Relaxed) as f64 <= self.cap
+        (all, bad)
+    }
+
+    /// After the pass: when the share ends within the cap after all, bin the unresolved slopes of the
+    /// rows deferred while it seemed high (read again from `src`), so that every unresolved slope is
+    /// binned, as if none had been deferred (the same slopes, the same map: counts add in any order).
+    pub(super) fn bin_deferred<S: BandSource>(&self, src: &S, t: &mut Tally) {
+        let rows = std::mem::take(&mut t.deferred);
+        if rows.is_empty() || !t.within_cap() {
+            return;
+        }
+        let parts: Vec<Tally> = rows
+            .par_chunks(16)
+            .map(|rows| {
+                let (mut part, mut rs, mut buf) = (Tally::default(), RowSlopes::default(), Vec::new());
+                for &i in rows {
+                    let (lo, hi) = self.stencil_rows(i);
+                    self.test_row(&src.band(lo, hi, &mut buf), i, &mut rs);
+                    for ((&c, &sx), &sy) in rs.code.iter().zip(&rs.sx).zip(&rs.sy) {
+                        if c & (VALID | UNRESOLVED) == VALID | UNRESOLVED {
+                            self.bin_apart(sx, sy, &mut part);
+                        }
+                    }
+                }
+                self.settle(&mut part);
+                part
+            })
+            .collect();
+        for part in parts {
+            if t.cells.len() < part.cells.len() {
+                t.cells.resize(part.cells.len(), 0);
+            }
+            t.cells.iter_mut().zip(&part.cells).for_each(|(a, b)| *a += b);
+        }
     }
 
     /// Bin one unresolved sample that the histogram does not count (its slopes overflow) through the
@@ -332,7 +408,7 @@ impl RowTest {
         let share = t.bad as f64 / t.all.max(1) as f64;
         ndf.unresolved_share = Some(share);
         ndf.unresolved = Vec::new();
-        if !(share <= MAX_UNRESOLVED_SHARE) {
+        if !t.within_cap() {
             return;
         }
         ndf.unresolved = ndf.bin_cells.iter().map(|&c| t.cells.get(c as usize).copied().unwrap_or(0)).collect();

@@ -113,3 +113,31 @@ fn overflowing_stencils_are_binned_as_the_two_pass_form_bins_them() {
     same(&ndf, &want, "overflowing stencils");
     assert!(ndf.unresolved.iter().any(|&u| u > 0), "per-bin counts kept (share {:?})", ndf.unresolved_share);
 }
+
+/// Rows whose unresolved normals are deferred while the share so far is high (the pass starts in rough
+/// rows: every chunk of rows begins with them on one or two threads) are binned after the pass when the
+/// share ends within [`MAX_UNRESOLVED_SHARE`]: the same per-bin counts as the two-pass form, in memory and
+/// through the lazily formed scan. Rough rows: white noise at the sampling step (unresolved); the rest a
+/// long wave (resolved).
+#[test]
+fn deferred_rows_are_binned_when_the_share_ends_within_the_cap() {
+    let (nx, ny) = (300, 400);
+    let z: Vec<f64> = (0..nx * ny)
+        .map(|k| {
+            let (i, j) = (k / nx, k % nx);
+            let rough = i < ny / 10 || (ny / 2..ny / 2 + ny / 10).contains(&i);
+            let noise = ((k as u64).wrapping_mul(2_654_435_761) % 1000) as f64 / 500.0 - 1.0;
+            1e-6 * (0.02 * j as f64 + 0.01 * i as f64).sin() + if rough { 3e-7 * noise } else { 0.0 }
+        })
+        .collect();
+    let hf = Heightfield::new(nx, ny, 1e-6, 1e-6, z).expect("grid");
+    let opts = NdfOptions::default();
+    let ndf = empirical_ndf(&hf, &opts).expect("ndf");
+    let share = ndf.unresolved_share.expect("assessed");
+    assert!(share > 0.1 && share <= MAX_UNRESOLVED_SHARE, "share {share}");
+    assert!(ndf.unresolved.iter().sum::<u64>() as f64 > 0.1 * ndf.n_samples as f64, "per-bin counts kept");
+    same(&ndf, &reference(&hf, &ndf), "in memory");
+    let p = prepare(hf, &Preprocess::default()).expect("prepare");
+    let ndf = ndf_prepared(&p, &opts).expect("ndf of the bands");
+    same(&ndf, &reference(&p, &ndf), "prepared");
+}
