@@ -90,7 +90,9 @@ fn fold_samples<S: BandSource, A: Send>(
 /// The resolution test run row by row inside the histogram's pass ([`super::histogram`]), on the rows
 /// already in cache: the same samples, slopes and decisions as [`assess`], bit for bit, without its two
 /// further passes over the scan. Unresolved normals are binned only while the share can still end at
-/// or below [`MAX_UNRESOLVED_SHARE`] (past that the per-bin counts are dropped anyway).
+/// or below [`MAX_UNRESOLVED_SHARE`] (past that the per-bin counts are dropped anyway); rows tested while
+/// the share so far is above [`SKIP_SHARE`] are binned after the pass, if at all
+/// ([`RowTest::bin_deferred`]).
 pub(super) struct RowTest {
     frame: SlopeFrame,
     tol: f64,
