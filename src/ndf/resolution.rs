@@ -281,11 +281,12 @@ impl RowTest {
         if rows.is_empty() || !t.within_cap() {
             return;
         }
-        let parts: Vec<Tally> = rows
-            .par_chunks(16)
-            .map(|rows| {
-                let (mut part, mut rs, mut buf) = (Tally::default(), RowSlopes::default(), Vec::new());
-                for &i in rows {
+        // One tally per thread (a tally holds a counter per cell), merged at the end.
+        let part = rows
+            .par_iter()
+            .fold(
+                || (Tally::default(), RowSlopes::default(), Vec::new()),
+                |(mut part, mut rs, mut buf), &i| {
                     let (lo, hi) = self.stencil_rows(i);
                     self.test_row(&src.band(lo, hi, &mut buf), i, &mut rs);
                     for ((&c, &sx), &sy) in rs.code.iter().zip(&rs.sx).zip(&rs.sy) {
@@ -293,17 +294,16 @@ impl RowTest {
                             self.bin_apart(sx, sy, &mut part);
                         }
                     }
-                }
+                    (part, rs, buf)
+                },
+            )
+            .map(|(mut part, _, _)| {
                 self.settle(&mut part);
                 part
             })
-            .collect();
-        for part in parts {
-            if t.cells.len() < part.cells.len() {
-                t.cells.resize(part.cells.len(), 0);
-            }
-            t.cells.iter_mut().zip(&part.cells).for_each(|(a, b)| *a += b);
-        }
+            .reduce(Tally::default, Tally::merge);
+        // Binning tallies no samples (`all`, `bad`): only the cells add.
+        *t = std::mem::take(t).merge(part);
     }
 
     /// Bin one unresolved sample that the histogram does not count (its slopes overflow) through the

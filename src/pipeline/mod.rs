@@ -193,18 +193,11 @@ fn release(scan: Prepared<'static>) {
         return drop(scan);
     }
     let _ = std::thread::Builder::new().name("ndfit-release".into()).spawn(move || {
-        // The pages go back a few MiB at a time before the unmap: one unmap of the whole range holds
-        // the process's memory map locked throughout, stalling every allocation of the caller that
-        // needs the kernel; each release holds it only shared, and briefly.
-        for part in scan.raw().z.chunks(RELEASE_VALUES) {
-            crate::scan::heights::release_pages(part.as_ptr().cast(), std::mem::size_of_val(part));
-        }
+        // In pieces first, so that the caller's allocations do not wait on one long unmap.
+        scan.raw().z.release_mapped();
         drop(scan)
     });
 }
-
-/// Heights (4 MiB of f64) whose pages [`release`] gives back at a time.
-const RELEASE_VALUES: usize = 1 << 19;
 
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3

@@ -56,6 +56,19 @@ impl<'a> Heights<'a> {
         matches!(self.0, Repr::Borrowed(_))
     }
 
+    /// Give the pages of mapped heights back to the page cache ([`release_pages`]), [`RELEASE_VALUES`]
+    /// heights at a time, before the map is dropped: one unmap of the whole range holds the process's
+    /// memory map locked throughout, stalling every allocation of other threads that needs the kernel;
+    /// each release holds it only shared, and briefly. Reading the heights afterwards faults them back in
+    /// from the unchanged file. Owned or borrowed heights: nothing to do.
+    pub(crate) fn release_mapped(&self) {
+        if self.is_mapped() {
+            for part in self.chunks(RELEASE_VALUES) {
+                release_pages(part.as_ptr().cast(), std::mem::size_of_val(part));
+            }
+        }
+    }
+
     /// The heights as an owned vector (a copy when mapped or borrowed).
     pub fn into_vec(self) -> Vec<f64> {
         match self.0 {
@@ -187,6 +200,9 @@ fn advise_huge(start: usize, bytes: usize) {
         let _ = unsafe { libc::madvise(lo as *mut libc::c_void, hi - lo, libc::MADV_HUGEPAGE) };
     }
 }
+
+/// Heights (4 MiB of f64) whose pages [`Heights::release_mapped`] gives back at a time.
+const RELEASE_VALUES: usize = 1 << 19;
 
 /// Give the pages of `[start, start + bytes)` of a read-only file mapping back to the page cache
 /// (`MADV_DONTNEED`): the process's resident memory drops, and a later read faults the same bytes back

@@ -115,8 +115,8 @@ fn overflowing_stencils_are_binned_as_the_two_pass_form_bins_them() {
 }
 
 /// Rows whose unresolved normals are deferred while the share so far is high (the pass starts in rough
-/// rows: every chunk of rows begins with them on one or two threads) are binned after the pass when the
-/// share ends within [`MAX_UNRESOLVED_SHARE`]: the same per-bin counts as the two-pass form, in memory and
+/// rows: the row chunks that begin at rows 0 and `ny / 2` begin with them, whatever the thread count) are
+/// binned after the pass when the share ends within [`MAX_UNRESOLVED_SHARE`]: the same per-bin counts as the two-pass form, in memory and
 /// through the lazily formed scan. Rough rows: white noise at the sampling step (unresolved); the rest a
 /// long wave (resolved).
 #[test]
