@@ -6,28 +6,45 @@
 //! - A symlink is followed: its final target is replaced the same way, the link stays.
 //! - A device or FIFO (`/dev/null`, `/dev/stdout`, a named pipe) is written directly, once the whole
 //!   output is ready in memory.
-//! - A path that is an input of this process ([`protect_input`]) is refused.
+//! - A path that is an input of this process ([`protect_input`]) is refused, while the input's name
+//!   still names that file.
 //! - Temporary files of a run that was killed (`.NAME.XXXXXX.tmp`, no longer locked by a writer) are
 //!   removed by the next write of the same name.
 
+use std::collections::HashMap;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use crate::error::{Error, ErrorKind, Result};
 
-/// The files this process reads as inputs, by (device, inode), with the name they were given.
-static INPUTS: Mutex<Vec<(u64, u64, PathBuf)>> = Mutex::new(Vec::new());
+/// The files this process reads as inputs, by (device, inode), with the name they were given. A map:
+/// a batch or a long-lived Python process records every scan it reads.
+static INPUTS: Mutex<Option<HashMap<(u64, u64), PathBuf>>> = Mutex::new(None);
 
-/// Record `path` as an input: any later write whose target is the same file is refused.
+/// Record `path` as an input: any later write whose target is the same file is refused, as long as
+/// `path` still names that file.
 pub fn protect_input(path: &Path) {
     if let Some(id) = file_id(path) {
         if let Ok(mut v) = INPUTS.lock() {
-            if !v.iter().any(|(d, i, _)| (*d, *i) == id) {
-                v.push((id.0, id.1, path.to_path_buf()));
-            }
+            v.get_or_insert_with(HashMap::new).entry(id).or_insert_with(|| path.to_path_buf());
         }
     }
+}
+
+/// The input of this process that `target` is, if any. An entry whose name no longer names that file
+/// (the input was deleted or replaced since) is dropped instead: its inode number may have been reused
+/// by the file at `target`, and replacing `target` cannot touch the input under its name.
+fn input_at(target: &Path) -> Option<PathBuf> {
+    let id = file_id(target)?;
+    let mut v = INPUTS.lock().ok()?;
+    let inputs = v.as_mut()?;
+    let input = inputs.get(&id)?;
+    if file_id(input) == Some(id) {
+        return Some(input.clone());
+    }
+    inputs.remove(&id);
+    None
 }
 
 #[cfg(unix)]
@@ -71,16 +88,12 @@ pub fn check_output(path: &Path) -> Result<()> {
     if target.is_dir() {
         return Err(Error::new(ErrorKind::InvalidInput, "is a directory, not a file to write").with_path(path));
     }
-    if let Some(id) = file_id(&target) {
-        if let Ok(v) = INPUTS.lock() {
-            if let Some((_, _, input)) = v.iter().find(|(d, i, _)| (*d, *i) == id) {
-                return Err(Error::new(
-                    ErrorKind::InvalidInput,
-                    format!("is the input {}; refusing to overwrite it with an output", input.display()),
-                )
-                .with_path(path));
-            }
-        }
+    if let Some(input) = input_at(&target) {
+        return Err(Error::new(
+            ErrorKind::InvalidInput,
+            format!("is the input {}; refusing to overwrite it with an output", input.display()),
+        )
+        .with_path(path));
     }
     Ok(())
 }
@@ -295,8 +308,7 @@ mod tests {
     use std::os::unix::fs::PermissionsExt;
 
     /// Outputs of several MiB, written in pieces of every size (so that writeback starts mid-write and
-    /// at uneven offsets), arrive whole, durable or not. (New names: a file made here could reuse the
-    /// inode of an input another test of this process protected.)
+    /// at uneven offsets), arrive whole, durable or not.
     #[test]
     fn large_outputs_arrive_whole_through_the_writeback() {
         let d = tempfile::tempdir().unwrap();
@@ -343,6 +355,20 @@ mod tests {
         let e = write_bytes_atomic(&input, b"json").unwrap_err();
         assert!(e.to_string().contains("refusing to overwrite"), "{e}");
         assert_eq!(std::fs::read_to_string(&input).unwrap(), "scan");
+
+        // Another name of the input (a hard link) is refused while the input's name names the file; once
+        // the input is replaced under its name, the old file is no longer an input: writing the link
+        // (which could as well be a new file that reuses a deleted input's inode) is allowed.
+        let alias = d.path().join("alias.x3p");
+        std::fs::hard_link(&input, &alias).unwrap();
+        assert!(write_bytes_atomic(&alias, b"json").unwrap_err().to_string().contains("is the input"));
+        let newer = d.path().join("newer.x3p");
+        std::fs::write(&newer, "scan 2").unwrap();
+        std::fs::rename(&newer, &input).unwrap();
+        write_bytes_atomic(&alias, b"json").unwrap();
+        assert_eq!((std::fs::read_to_string(&alias).unwrap(), std::fs::read_to_string(&input).unwrap()), ("json".into(), "scan 2".into()));
+        protect_input(&input);
+        assert!(write_bytes_atomic(&input, b"json").is_err(), "the new file under the name, read again, is protected");
 
         // A replaced file keeps its mode.
         std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o640)).unwrap();

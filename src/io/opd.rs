@@ -37,7 +37,7 @@ pub fn read_opd(bytes: &[u8]) -> Result<Heightfield> {
     if name != "Directory" {
         return Err(Error::corrupt(format!("OPD directory block is named {name:?}, not \"Directory\"")));
     }
-    if dirlen <= 0 || dirlen as usize % ENTRY != 0 {
+    if dirlen <= 0 || !(dirlen as usize).is_multiple_of(ENTRY) {
         return Err(Error::corrupt(format!("OPD directory length {dirlen} is not a positive multiple of {ENTRY}")));
     }
     let count = dirlen as usize / ENTRY;

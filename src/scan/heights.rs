@@ -34,7 +34,7 @@ impl<'a> Heights<'a> {
         let bytes = len.checked_mul(8)?;
         let end = offset.checked_add(bytes)?;
         let start = map.as_ptr() as usize + offset;
-        (cfg!(target_endian = "little") && end <= map.len() && start % std::mem::align_of::<f64>() == 0).then_some(Heights(Repr::Mapped {
+        (cfg!(target_endian = "little") && end <= map.len() && start.is_multiple_of(std::mem::align_of::<f64>())).then_some(Heights(Repr::Mapped {
             map,
             offset,
             len,
