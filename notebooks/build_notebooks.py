@@ -203,6 +203,7 @@ def ladder(scan, name, bins, one="ggx-aniso", two=("ggx2", "ellipsoid+ggx")):
     assert max(r[4] for r in rows) <= 1e-3, "Rust and nlopt mixtures differ by more than 0.1% in NDF"
     residual_maps(bins, fits, name)
     # A slice through the peak along the core's alpha_x axis: data (bins near the slice) against each model.
+    # Walter et al.'s A = S Rz(theta_z) puts the alpha_x axis along (cos theta_z, -sin theta_z).
     tz = fits[two[0]]["params"]["theta_z"]
     ax_dir = np.array([math.cos(tz), -math.sin(tz)])
     b = bins.used()
@@ -547,7 +548,8 @@ def describe(rows, name):
 '''
 
 SCALE_SYNTH = r"""
-# Synthetic Gaussian surface with known truth: RMS slopes 0.2 and 0.1 (theta_z 0.3), correlation length 6 um,
+# Synthetic Gaussian surface with known truth: RMS slopes 0.2 and 0.1 (theta_z 0.3: the larger along
+# (cos 0.3, -sin 0.3), Walter et al.'s A = S Rz(theta_z)), correlation length 6 um,
 # 256 x 256 samples of 1 um. Its slopes are Gaussian, so at every footprint the NDF is anisotropic Beckmann
 # with alpha = sqrt(2) * RMS slope = (0.283, 0.141) (data_formats/scale.md S3: filtering moves slope
 # variance into the NDF, it creates none). A GGX-shaped lobe (the ellipsoid) fitted to a Gaussian has

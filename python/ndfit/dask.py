@@ -71,6 +71,7 @@ def fit_many(
     ``theta_x``, ``theta_y``; for the mixtures ``alpha_x1``, ``alpha_y1``, ``alpha_x2``, ``alpha_y2`` or ``alpha2``,
     ``theta_z`` and ``weight``; NaN where a model has none), ``verdict``, ``reduced_chi2``, ``n_samples``,
     ``error_kind`` and ``error``. These are the fits ``ndfit batch`` makes with the same model and options.
+    The ``alpha_x`` axis lies along ``(cos theta_z, -sin theta_z)`` in the scan frame (azimuth ``-theta_z``).
 
     ``client``: None starts a ``dask.distributed.LocalCluster`` on this machine with ``n_workers`` worker
     processes of one thread each (default: one per core) and closes it afterwards; a

@@ -54,7 +54,7 @@ pub struct Args {
     /// Ellipsoid: theta_y (rad).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     theta_y: f64,
-    /// Ellipsoid and gaussian: theta_z (rad).
+    /// Ellipsoid and gaussian: theta_z (rad); the alpha_x axis lies along (cos theta_z, -sin theta_z).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     theta_z: f64,
     /// Ellipsoid: fraction of the grid the footprint fills.

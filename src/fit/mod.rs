@@ -392,7 +392,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
                 .push(format!("{id}: {name} is not determined by the data (a null direction of the Jacobian; its standard error is null)"));
         } else if *u {
             warnings.push(format!(
-                "{id}: {name} is not identified: its standard error {:.3} rad exceeds 1/6 (the anisotropy that locates the axes is below 3 standard errors: a nearly isotropic lobe); reported as null",
+                "{id}: {name} is not identified: its standard error {:.3} rad exceeds 1/6 (the anisotropy that locates the axes is below 3 standard errors: a nearly isotropic lobe); the value is kept, its standard error is reported as null",
                 tz_se[a]
             ));
         }
