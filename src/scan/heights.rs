@@ -34,11 +34,8 @@ impl<'a> Heights<'a> {
         let bytes = len.checked_mul(8)?;
         let end = offset.checked_add(bytes)?;
         let start = map.as_ptr() as usize + offset;
-        (cfg!(target_endian = "little") && end <= map.len() && start.is_multiple_of(std::mem::align_of::<f64>())).then_some(Heights(Repr::Mapped {
-            map,
-            offset,
-            len,
-        }))
+        (cfg!(target_endian = "little") && end <= map.len() && start.is_multiple_of(std::mem::align_of::<f64>()))
+            .then_some(Heights(Repr::Mapped { map, offset, len }))
     }
 
     /// Heights borrowed from the caller, read in place until first written.
