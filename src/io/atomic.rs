@@ -63,6 +63,14 @@ fn file_id(path: &Path) -> Option<(u64, u64)> {
     Some((0, h.finish()))
 }
 
+/// The folder that holds `target` (`.` for a bare file name).
+fn folder_of(target: &Path) -> &Path {
+    match target.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    }
+}
+
 /// The file a write to `path` lands in: `path` itself, or the final target of a chain of symlinks.
 fn resolve(path: &Path) -> Result<PathBuf> {
     let mut p = path.to_path_buf();
@@ -81,12 +89,18 @@ fn resolve(path: &Path) -> Result<PathBuf> {
     Err(Error::new(ErrorKind::Io, "too many levels of symbolic links").with_path(path))
 }
 
-/// Check that `path` can take an output: not a directory, not an input of this process. Commands
-/// call this before their work so a wrong `-o` fails at once; every write checks again.
+/// Check that `path` can take an output: not a directory, in a folder that exists, not an input of
+/// this process. Commands call this before their work so a wrong `-o` fails at once; every write
+/// checks again.
 pub fn check_output(path: &Path) -> Result<()> {
     let target = resolve(path)?;
     if target.is_dir() {
         return Err(Error::new(ErrorKind::InvalidInput, "is a directory, not a file to write").with_path(path));
+    }
+    let dir = folder_of(&target);
+    if !dir.is_dir() {
+        let why = if dir.exists() { "is not a folder" } else { "does not exist" };
+        return Err(Error::new(ErrorKind::InvalidInput, format!("the folder {} {why}", dir.display())).with_path(path));
     }
     if let Some(input) = input_at(&target) {
         return Err(Error::new(
@@ -131,10 +145,7 @@ where
     if let Some(md) = existing.as_ref().filter(|m| !m.is_file()) {
         return write_direct(path, &target, md, fill);
     }
-    let dir = match target.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
+    let dir = folder_of(&target);
     let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     remove_stale_temps(dir, &name);
     let prefix = format!(".{name}.");
@@ -146,7 +157,11 @@ where
         // Created with 0666: the kernel applies the umask, as for any file a command creates.
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    let tmp = builder.tempfile_in(dir).map_err(|e| Error::io(e).with_path(path))?;
+    let tmp = builder.tempfile_in(dir).map_err(|e| {
+        // tempfile's error names the random temporary path; the user knows the output and its folder.
+        let why = e.raw_os_error().map(std::io::Error::from_raw_os_error).unwrap_or_else(|| e.kind().into());
+        Error::new(ErrorKind::Io, format!("cannot create a file in {}: {why}", dir.display())).with_path(path)
+    })?;
     lock_exclusive(tmp.as_file());
     if let Some(md) = &existing {
         // A replaced file keeps its mode.
@@ -369,6 +384,11 @@ mod tests {
         assert_eq!((std::fs::read_to_string(&alias).unwrap(), std::fs::read_to_string(&input).unwrap()), ("json".into(), "scan 2".into()));
         protect_input(&input);
         assert!(write_bytes_atomic(&input, b"json").is_err(), "the new file under the name, read again, is protected");
+
+        // An output in a folder that does not exist fails before anything is made.
+        let lost = d.path().join("no such folder").join("fit.json");
+        let e = write_atomic(&lost, |_| panic!("nothing is written")).unwrap_err().to_string();
+        assert!(e.contains("no such folder/fit.json") && e.contains("does not exist"), "{e}");
 
         // A replaced file keeps its mode.
         std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o640)).unwrap();
