@@ -233,8 +233,12 @@ impl Model {
         if p.len() != id.n_params() {
             return Err(Error::invalid(format!("model {id} takes {} parameters, got {}", id.n_params(), p.len())));
         }
-        if let Some(bad) = p.iter().find(|v| !v.is_finite()) {
-            return Err(Error::invalid(format!("model {id}: parameter {bad} is not finite")));
+        if let Some((name, bad)) = id.param_names().iter().zip(p).find(|(_, v)| !v.is_finite()) {
+            return Err(Error::invalid(format!("model {id}: {name} = {bad} is not finite")));
+        }
+        // The isotropic models' one roughness is `alpha`: checked under that name.
+        if matches!(id, ModelId::Ggx | ModelId::Beckmann) {
+            checked_alpha("alpha", p[0])?;
         }
         Ok(match id {
             ModelId::Ggx => Model::Ggx(Ggx::new(p[0], p[0], 0.0)?),

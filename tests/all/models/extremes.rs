@@ -213,3 +213,19 @@ fn near_singular_matrices_are_refused_or_finite() {
     assert!(Beckmann::new(0.1, 1e300, 0.0).is_err());
     assert!(Ggx::new(0.1, 0.1, f64::NAN).is_err());
 }
+
+/// Parameters out of range are refused under the name the model's JSON gives them (`alpha` for the
+/// isotropic models, not the internal `alpha_x`), including a non-finite one.
+#[test]
+fn out_of_range_parameters_are_named_as_the_model_names_them() {
+    use ndfit::models::ModelId;
+    let msg = |id: ModelId, p: &[f64]| Model::from_params(id, p).unwrap_err().to_string();
+    for id in [ModelId::Ggx, ModelId::Beckmann] {
+        let e = msg(id, &[-1.0]);
+        assert!(e.contains("alpha must be finite and positive, got -1"), "{e}");
+    }
+    let e = msg(ModelId::BeckmannAniso, &[0.2, -0.1, 0.0]);
+    assert!(e.contains("alpha_y must be finite and positive"), "{e}");
+    let e = msg(ModelId::GgxAniso, &[0.2, 0.1, f64::NAN]);
+    assert!(e.contains("theta_z = NaN is not finite"), "{e}");
+}
