@@ -18,30 +18,37 @@ use std::sync::Mutex;
 
 use crate::error::{Error, ErrorKind, Result};
 
-/// The files this process reads as inputs, by (device, inode), with the name they were given. A map:
-/// a batch or a long-lived Python process records every scan it reads.
-static INPUTS: Mutex<Option<HashMap<(u64, u64), PathBuf>>> = Mutex::new(None);
+/// An input of this process: the name it was given (for messages) and its canonical path (absolute,
+/// without links: it keeps naming the file when the working directory changes).
+struct Input {
+    given: PathBuf,
+    canonical: PathBuf,
+}
+
+/// The files this process reads as inputs, by (device, inode). A map: a batch or a long-lived Python
+/// process records every scan it reads.
+static INPUTS: Mutex<Option<HashMap<(u64, u64), Input>>> = Mutex::new(None);
 
 /// Record `path` as an input: any later write whose target is the same file is refused, as long as
-/// `path` still names that file.
+/// the file is still at the path `path` resolved to.
 pub fn protect_input(path: &Path) {
-    if let Some(id) = file_id(path) {
+    if let (Some(id), Ok(canonical)) = (file_id(path), std::fs::canonicalize(path)) {
         if let Ok(mut v) = INPUTS.lock() {
-            v.get_or_insert_with(HashMap::new).entry(id).or_insert_with(|| path.to_path_buf());
+            v.get_or_insert_with(HashMap::new).entry(id).or_insert_with(|| Input { given: path.to_path_buf(), canonical });
         }
     }
 }
 
-/// The input of this process that `target` is, if any. An entry whose name no longer names that file
-/// (the input was deleted or replaced since) is dropped instead: its inode number may have been reused
-/// by the file at `target`, and replacing `target` cannot touch the input under its name.
+/// The input of this process that `target` is, if any (the name it was given). An entry whose file is no
+/// longer at its canonical path (deleted or replaced since) is dropped instead: its inode number may have
+/// been reused by the file at `target`, and replacing `target` cannot touch the input at its path.
 fn input_at(target: &Path) -> Option<PathBuf> {
     let id = file_id(target)?;
     let mut v = INPUTS.lock().ok()?;
     let inputs = v.as_mut()?;
     let input = inputs.get(&id)?;
-    if file_id(input) == Some(id) {
-        return Some(input.clone());
+    if file_id(&input.canonical) == Some(id) {
+        return Some(input.given.clone());
     }
     inputs.remove(&id);
     None
@@ -384,6 +391,17 @@ mod tests {
         assert_eq!((std::fs::read_to_string(&alias).unwrap(), std::fs::read_to_string(&input).unwrap()), ("json".into(), "scan 2".into()));
         protect_input(&input);
         assert!(write_bytes_atomic(&input, b"json").is_err(), "the new file under the name, read again, is protected");
+
+        // An input read through a name that later stops resolving (a folder on the way removed; a
+        // relative name after the working directory changes) is still the same file: still refused.
+        let via = d.path().join("via");
+        std::fs::create_dir(&via).unwrap();
+        let kept = d.path().join("kept.x3p");
+        std::fs::write(&kept, "scan 3").unwrap();
+        protect_input(&via.join("..").join("kept.x3p"));
+        std::fs::remove_dir(&via).unwrap();
+        assert!(write_bytes_atomic(&kept, b"json").unwrap_err().to_string().contains("refusing to overwrite"));
+        assert_eq!(std::fs::read_to_string(&kept).unwrap(), "scan 3");
 
         // An output in a folder that does not exist fails before anything is made.
         let lost = d.path().join("no such folder").join("fit.json");
