@@ -36,9 +36,8 @@ pub struct Args {
     /// Output folder: summary.json, summary.csv, fits/, scans/ (per-scan records), optional ndf/.
     #[arg(short = 'o', long = "out", required_unless_present = "worker")]
     pub out: Option<PathBuf>,
-    /// Model to fit: ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid or auto (as `ndfit fit`: the
-    /// nested models, chosen by information criterion). A manifest's `model` column overrides it per scan.
-    #[arg(long, default_value = "auto")]
+    /// Model to fit, as `ndfit fit --model`. A manifest's `model` column overrides it per scan.
+    #[arg(long, default_value = "auto", help = format!("{} A manifest's `model` column overrides it per scan.", super::model_help()))]
     pub model: String,
     /// Scans fitted at once (default: the number of cores). Results do not depend on it.
     #[arg(long, short = 'j')]

@@ -13,10 +13,8 @@ use super::fit_args::{parse_model, FitArgs};
 pub struct Args {
     #[command(flatten)]
     fit: FitArgs,
-    /// Model id (ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid; two-lobe mixtures ggx2, beckmann2,
-    /// ellipsoid+ggx) or `auto` (fit the nested models, choose by the quasi-likelihood BIC, then keep one lobe
-    /// or take two by the same criterion with the data's own overdispersion).
-    #[arg(long, default_value = "auto")]
+    /// Model id (the model table's names) or `auto`.
+    #[arg(long, default_value = "auto", help = super::model_help())]
     model: String,
     /// Output JSON (written atomically); standard output when absent.
     #[arg(short = 'o', long)]

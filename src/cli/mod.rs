@@ -182,3 +182,13 @@ fn usage_error(e: clap::Error) -> ExitCode {
         }
     }
 }
+
+/// The `--model` help, from the model table: every id with its one-line description, and `auto`.
+pub(crate) fn model_help() -> String {
+    let ids: Vec<String> = ndfit::models::ModelId::EVERY.iter().map(|id| format!("{} ({})", id.as_str(), id.spec().about)).collect();
+    format!(
+        "Model id: {}; or `auto` (fit the nested models, choose by the quasi-likelihood BIC, then keep one lobe or take two \
+         by the same criterion with the data's own overdispersion).",
+        ids.join(", ")
+    )
+}

@@ -79,7 +79,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         anyhow::bail!("give --footprint METRES[,METRES...] or --scene");
     }
     let models: Vec<ModelId> = if args.models.is_empty() {
-        ModelId::ALL.iter().chain(&ModelId::MIXTURES).copied().collect()
+        ModelId::EVERY.to_vec()
     } else {
         args.models.iter().map(|s| s.trim().parse::<ModelId>()).collect::<Result<_, _>>().map_err(|e| anyhow!("--models: {e}"))?
     };

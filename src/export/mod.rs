@@ -91,24 +91,7 @@ impl std::str::FromStr for Target {
     }
 }
 
-/// The microfacet distribution of a renderer lobe.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Distribution {
-    /// GGX / Trowbridge-Reitz.
-    Ggx,
-    /// Beckmann.
-    Beckmann,
-}
-
-impl Distribution {
-    /// `ggx` or `beckmann`, as Mitsuba spells it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Distribution::Ggx => "ggx",
-            Distribution::Beckmann => "beckmann",
-        }
-    }
-}
+pub use crate::models::Distribution;
 
 /// An axis-aligned lobe in a renderer's shading frame: `alpha_u` along the tangent `u`, which points at
 /// azimuth `tangent_angle` (radians, counter-clockwise from the scan's `+x`), `alpha_v` along `n x u`.
@@ -241,8 +224,9 @@ pub fn export(model: &Model, target: Target, max_theta_deg: f64) -> Result<Expor
         return Ok(Export { target, lobe: l, approximation: None, note: None });
     }
     // Not representable: why, then the nearest representable lobe, fitted.
-    let why = match (&model, exact) {
-        (Model::Ellipsoid(_), None) => {
+    let spec = model.id().spec();
+    let why = match (spec.lobes[0].form, exact) {
+        (crate::models::table::Form::Full, None) => {
             "the ellipsoid's skew (theta_x, theta_y) has no counterpart in an axis-aligned renderer lobe".to_string()
         }
         (_, Some(l)) if l.distribution == Distribution::Beckmann => format!("{} has no Beckmann lobe", target.as_str()),
@@ -250,16 +234,14 @@ pub fn export(model: &Model, target: Target, max_theta_deg: f64) -> Result<Expor
         (_, Some(l)) => format!("Blender's anisotropy is at most 10:1, the fit has {:.2}:1", l.alpha_u / l.alpha_v),
         _ => "the model is not representable".to_string(),
     };
-    let distribution = match (&model, target.has_beckmann()) {
-        (Model::Beckmann(_) | Model::BeckmannAniso(_), true) => Distribution::Beckmann,
-        _ => Distribution::Ggx,
-    };
+    let beckmann_model = spec.lobes[0].kernel == crate::models::table::Kernel::Beckmann && !spec.is_mixture();
+    let distribution = if beckmann_model && target.has_beckmann() { Distribution::Beckmann } else { Distribution::Ggx };
     let region = RegionNodes::new(&model, max_theta_deg);
     let lobe = fit_lobe(&model, &region, distribution, target == Target::Blender, exact)?;
     let approx = lobe.to_model()?;
     // A GGX lobe against a Beckmann reference: D_ggx / D_beckmann grows like exp(tan^2 theta / alpha^2), so the
     // expectation has no useful finite value (any quadrature returns an astronomically large number).
-    let beckmann_ref = matches!(model, Model::Beckmann(_) | Model::BeckmannAniso(_)) && lobe.distribution == Distribution::Ggx;
+    let beckmann_ref = beckmann_model && lobe.distribution == Distribution::Ggx;
     let delta = crate::fit::metric::delta(|m| approx.d(*m), |m| model.d(*m), region.nodes.iter().copied())
         .filter(|d| d.is_finite() && !beckmann_ref);
     let delta_reverse =
@@ -281,24 +263,22 @@ pub fn export(model: &Model, target: Target, max_theta_deg: f64) -> Result<Expor
     })
 }
 
-/// The lobe that equals a canonical model exactly, if it is axis-aligned (every model but a skewed ellipsoid).
+/// The lobe that equals a canonical single-lobe model exactly, if its kernel is a renderer's and it is
+/// axis-aligned (every such model but a skewed ellipsoid). A mixture is exported lobe by lobe
+/// (export/mixture.rs).
 fn exact_lobe(model: &Model) -> Option<RendererLobe> {
-    let aligned = |d: Distribution, ax: f64, ay: f64, tz: f64| RendererLobe {
-        distribution: d,
-        alpha_u: ax,
-        alpha_v: ay,
-        tangent_angle: crate::models::canonical::fold_half_turn(-tz),
-    };
-    match *model {
-        Model::Ggx(g) | Model::GgxAniso(g) => Some(aligned(Distribution::Ggx, g.alpha_x, g.alpha_y, g.theta_z)),
-        Model::Beckmann(b) | Model::BeckmannAniso(b) => Some(aligned(Distribution::Beckmann, b.alpha_x, b.alpha_y, b.theta_z)),
-        Model::Ellipsoid(e) => {
-            let [ax, ay, tx, ty, tz] = e.params();
-            (tx == 0.0 && ty == 0.0).then(|| aligned(Distribution::Ggx, ax, ay, tz))
-        }
-        // A mixture is exported lobe by lobe (export/mixture.rs).
-        Model::Mixture(_) => None,
+    let spec = model.id().spec();
+    if spec.is_mixture() {
+        return None;
     }
+    let distribution = spec.lobes[0].kernel.renderer()?;
+    let g = spec.parts(&model.params(), 0);
+    (g.theta_x == 0.0 && g.theta_y == 0.0).then(|| RendererLobe {
+        distribution,
+        alpha_u: g.alpha_x,
+        alpha_v: g.alpha_y,
+        tangent_angle: crate::models::canonical::fold_half_turn(-g.theta_z),
+    })
 }
 
 /// Quadrature nodes `(m_k, W_k)` over the fit region, on a grid that follows the model's lobe.

@@ -16,20 +16,14 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::params::{alpha_of, bounded_alpha_du, bounded_alpha_of};
 use crate::models::ellipsoid::rotation_xyz;
+use crate::models::table::{Form, Kernel};
 use crate::models::ModelId;
 
 const LN_PI: f64 = 1.144_729_885_849_400_2;
 
-/// Which internal parameters an ellipsoid-family evaluation exposes.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) enum Shape {
-    /// One roughness for both axes (`ggx`, `beckmann`).
-    Iso,
-    /// `[u_x, u_y, theta_z]`.
-    Aniso,
-    /// `[u_x, u_y, theta_x, theta_y, theta_z]`.
-    Full,
-}
+/// Which internal parameters a lobe's evaluation exposes (the table's [`Form`]): `[u]` (one roughness for
+/// both axes), `[u_x, u_y, theta_z]`, or the ellipsoid's `[u_x, u_y, theta_x, theta_y, theta_z]`.
+pub(crate) type Shape = Form;
 
 /// A model frozen at one internal parameter vector: one lobe ([`LobeLnD`]) or a two-lobe mixture
 /// ([`super::lnd_mixture`]).
@@ -47,9 +41,10 @@ pub enum LnD {
 impl LnD {
     /// Freeze model `id` at internal vector `x` (length [`ModelId::n_params`]).
     pub fn new(id: ModelId, x: &[f64]) -> LnD {
-        match id {
-            ModelId::Ggx2 | ModelId::Beckmann2 | ModelId::EllipsoidGgx => LnD::Two(super::lnd_mixture::MixtureLnD::new(id, x)),
-            _ => LnD::One(LobeLnD::new(id, x)),
+        if id.is_mixture() {
+            LnD::Two(super::lnd_mixture::MixtureLnD::new(id, x))
+        } else {
+            LnD::One(LobeLnD::new(id, x))
         }
     }
 
@@ -115,19 +110,14 @@ impl LobeLnD {
     /// Freeze single-lobe model `id` at internal vector `x` (length [`ModelId::n_params`]). A mixture id
     /// gives its first lobe's kind ([`super::lnd_mixture`] builds mixtures lobe by lobe).
     pub fn new(id: ModelId, x: &[f64]) -> LobeLnD {
-        let (shape, beckmann) = match id {
-            ModelId::Ggx => (Shape::Iso, false),
-            ModelId::Beckmann => (Shape::Iso, true),
-            ModelId::GgxAniso | ModelId::Ggx2 => (Shape::Aniso, false),
-            ModelId::BeckmannAniso | ModelId::Beckmann2 => (Shape::Aniso, true),
-            ModelId::Ellipsoid | ModelId::EllipsoidGgx => (Shape::Full, false),
-        };
-        Self::with_shape(shape, beckmann, false, x)
+        let lobe = id.spec().lobes[0];
+        Self::with_shape(lobe.form, lobe.kernel, false, x)
     }
 
     /// Freeze a lobe of `shape` at its internal vector `x` (`[u]`, `[u_x, u_y, theta_z]` or the
     /// ellipsoid's five); `bounded`: a mixture lobe's roughness map ([`super::params::bounded_alpha_of`]).
-    pub(crate) fn with_shape(shape: Shape, beckmann: bool, bounded: bool, x: &[f64]) -> LobeLnD {
+    pub(crate) fn with_shape(shape: Shape, kernel: Kernel, bounded: bool, x: &[f64]) -> LobeLnD {
+        let beckmann = kernel == Kernel::Beckmann;
         let (ux, uy, tx, ty, tz) = match shape {
             Shape::Iso => (x[0], x[0], 0.0, 0.0, 0.0),
             Shape::Aniso => (x[0], x[1], 0.0, 0.0, x[2]),

@@ -16,8 +16,8 @@
 
 use nalgebra::Vector3;
 
-use super::lnd::{LobeLnD, Shape};
-use crate::models::ModelId;
+use super::lnd::LobeLnD;
+use crate::models::{ModelId, Role};
 
 /// `ln(1 + exp(x))` without overflow.
 #[inline]
@@ -32,9 +32,12 @@ pub fn softplus(x: f64) -> f64 {
 /// A mixture frozen at one internal vector.
 #[derive(Debug, Clone)]
 pub struct MixtureLnD {
-    id: ModelId,
     lobe1: LobeLnD,
     lobe2: LobeLnD,
+    /// Each lobe's slots in the internal vector (the table's roles), and how many.
+    slots: [([usize; 6], usize); 2],
+    /// The weight's slot.
+    wi: usize,
     /// `w`, `ln w`, `ln(1 - w)`.
     w: f64,
     ln_w: f64,
@@ -42,21 +45,25 @@ pub struct MixtureLnD {
 }
 
 impl MixtureLnD {
-    /// Freeze mixture `id` at internal vector `x` (module docs).
+    /// Freeze mixture `id` at internal vector `x` (module docs): each lobe reads its own slots.
     pub fn new(id: ModelId, x: &[f64]) -> MixtureLnD {
-        let (lobe1, lobe2, v) = match id {
-            ModelId::Ggx2 | ModelId::Beckmann2 => {
-                let b = id == ModelId::Beckmann2;
-                (
-                    LobeLnD::with_shape(Shape::Aniso, b, true, &[x[0], x[1], x[4]]),
-                    LobeLnD::with_shape(Shape::Aniso, b, true, &[x[2], x[3], x[4]]),
-                    x[5],
-                )
+        let spec = id.spec();
+        let mut slots = [([0usize; 6], 0usize); 2];
+        let lobe = |k: usize, slots: &mut [([usize; 6], usize); 2]| {
+            let mut xl = [0.0; 6];
+            for (j, i) in spec.lobe_slots(k).enumerate() {
+                slots[k].0[j] = i;
+                xl[j] = x[i];
+                slots[k].1 = j + 1;
             }
-            // ellipsoid+ggx (the only other id LnD::new sends here).
-            _ => (LobeLnD::with_shape(Shape::Full, false, true, &x[..5]), LobeLnD::with_shape(Shape::Iso, false, true, &x[5..6]), x[6]),
+            let l = spec.lobes[k];
+            LobeLnD::with_shape(l.form, l.kernel, true, &xl[..slots[k].1])
         };
-        MixtureLnD { id, lobe1, lobe2, w: 1.0 / (1.0 + (-v).exp()), ln_w: -softplus(-v), ln_1w: -softplus(v) }
+        let lobe1 = lobe(0, &mut slots);
+        let lobe2 = lobe(1, &mut slots);
+        let wi = spec.slot_any(Role::Weight).unwrap_or(x.len() - 1);
+        let v = x[wi];
+        MixtureLnD { lobe1, lobe2, slots, wi, w: 1.0 / (1.0 + (-v).exp()), ln_w: -softplus(-v), ln_1w: -softplus(v) }
     }
 
     /// `(ln D, p1)`.
@@ -75,33 +82,20 @@ impl MixtureLnD {
         self.parts(m).0
     }
 
-    /// The gradient of `ln D(m)` with respect to the internal vector.
+    /// The gradient of `ln D(m)` with respect to the internal vector: each lobe's gradient weighted by its
+    /// responsibility, added into its slots (a shared `theta_z` gets both terms).
     #[inline]
     pub fn grad(&self, m: &Vector3<f64>, grad: &mut [f64]) {
         let (_, p1) = self.parts(m);
         let p2 = 1.0 - p1;
-        let mut g1 = [0.0; 5];
-        let mut g2 = [0.0; 3];
-        match self.id {
-            ModelId::Ggx2 | ModelId::Beckmann2 => {
-                self.lobe1.grad(m, &mut g1[..3]);
-                self.lobe2.grad(m, &mut g2);
-                grad[0] = p1 * g1[0];
-                grad[1] = p1 * g1[1];
-                grad[2] = p2 * g2[0];
-                grad[3] = p2 * g2[1];
-                grad[4] = p1 * g1[2] + p2 * g2[2];
-                grad[5] = p1 - self.w;
-            }
-            _ => {
-                self.lobe1.grad(m, &mut g1);
-                self.lobe2.grad(m, &mut g2[..1]);
-                for j in 0..5 {
-                    grad[j] = p1 * g1[j];
-                }
-                grad[5] = p2 * g2[0];
-                grad[6] = p1 - self.w;
+        grad.fill(0.0);
+        let mut g = [0.0; 6];
+        for (lobe, p, (idx, n)) in [(&self.lobe1, p1, &self.slots[0]), (&self.lobe2, p2, &self.slots[1])] {
+            lobe.grad(m, &mut g[..*n]);
+            for j in 0..*n {
+                grad[idx[j]] += p * g[j];
             }
         }
+        grad[self.wi] = p1 - self.w;
     }
 }

@@ -4,17 +4,50 @@
 
 use super::{fit_chain, fit_from, public, FitOptions, Fitted, Session};
 use crate::error::Result;
-use crate::models::ModelId;
+use crate::models::table::{Parts, L1};
+use crate::models::{ModelId, Role};
 
 /// The single-lobe model a mixture extends (its first stage, and its parent in the selection report):
-/// `ggx2` -> `ggx-aniso`, `beckmann2` -> `beckmann-aniso`, `ellipsoid+ggx` -> `ellipsoid`.
+/// the table's parent of a mixture (`ggx2` -> `ggx-aniso`, `beckmann2` -> `beckmann-aniso`, `ellipsoid+ggx`
+/// -> `ellipsoid`).
 pub fn parent_of(id: ModelId) -> Option<ModelId> {
-    match id {
-        ModelId::Ggx2 => Some(ModelId::GgxAniso),
-        ModelId::Beckmann2 => Some(ModelId::BeckmannAniso),
-        ModelId::EllipsoidGgx => Some(ModelId::Ellipsoid),
-        _ => None,
-    }
+    id.parent().filter(|_| id.is_mixture())
+}
+
+/// Whether the second lobe has the parent's own shape, so that two copies of the parent are the parent
+/// (`ggx2`, `beckmann2`); otherwise the core is the parent and the tail a lobe of another shape
+/// (`ellipsoid+ggx`).
+fn twin_lobes(id: ModelId) -> bool {
+    let l = id.spec().lobes;
+    l.len() == 2 && l[0] == l[1]
+}
+
+/// Mixture `id`'s parameters from its parent's geometry `g`: each role of the first lobe takes the
+/// parent's value (roughnesses times `kc`), the second lobe's roughnesses `kt` times the parent's (an
+/// isotropic tail `kt sqrt(alpha_x alpha_y)`), the weight `w`.
+fn grow(id: ModelId, g: &Parts, kc: f64, kt: f64, w: f64) -> Vec<f64> {
+    id.spec()
+        .roles
+        .iter()
+        .map(|&(role, lobes)| {
+            let k = if lobes == L1 { kc } else { kt };
+            match role {
+                Role::Alpha => k * (g.alpha_x * g.alpha_y).sqrt(),
+                Role::AlphaX => k * g.alpha_x,
+                Role::AlphaY => k * g.alpha_y,
+                Role::ThetaX => g.theta_x,
+                Role::ThetaY => g.theta_y,
+                Role::ThetaZ => g.theta_z,
+                Role::Gamma => g.gamma.unwrap_or(2.0),
+                Role::Weight => w,
+            }
+        })
+        .collect()
+}
+
+/// The parent's geometry (contract parameters `parent`) of mixture `id`.
+fn parent_parts(id: ModelId, parent: &[f64]) -> Parts {
+    parent_of(id).map_or_else(|| id.spec().parts(parent, 0), |p| p.spec().parts(parent, 0))
 }
 
 /// The (core scale, tail scale, core weight) of each start: the core narrower and the tail wider than
@@ -25,19 +58,8 @@ const SPLITS: [(f64, f64, f64); 4] = [(0.7, 3.0, 0.7), (0.9, 2.0, 0.5), (0.85, 5
 /// Starting points (contract parameters) of mixture `id` from its parent's fit (contract parameters);
 /// `ellipsoid+ggx` adds [`residual_starts`].
 pub fn starts(id: ModelId, parent: &[f64]) -> Vec<Vec<f64>> {
-    SPLITS
-        .iter()
-        .map(|&(kc, kt, w)| match id {
-            ModelId::EllipsoidGgx => {
-                let (ax, ay) = (parent[0], parent[1]);
-                vec![kc * ax, kc * ay, parent[2], parent[3], parent[4], kt * (ax * ay).sqrt(), w]
-            }
-            _ => {
-                let (ax, ay, tz) = (parent[0], parent[1], parent[2]);
-                vec![kc * ax, kc * ay, kt * ax, kt * ay, tz, w]
-            }
-        })
-        .collect()
+    let g = parent_parts(id, parent);
+    SPLITS.iter().map(|&(kc, kt, w)| grow(id, &g, kc, kt, w)).collect()
 }
 
 /// The core's weight when an `ellipsoid+ggx` stands for its parent: the isotropic tail cannot copy a
@@ -54,9 +76,10 @@ pub const PARENT_CORE_WEIGHT: f64 = 1.0 - 1e-13;
 /// specular patch that the splits of the one lobe, all centred on its peak, do not reach. The core's
 /// tilt puts its peak, the third row of `R` (Walter et al. eq. 1-3: `D ~ |S^-1 R m|^-4` peaks at
 /// `R m = z`), on that direction.
-pub fn residual_starts(data: &super::objective::FitData, parent: &[f64]) -> Vec<Vec<f64>> {
+pub fn residual_starts(data: &super::objective::FitData, id: ModelId, parent: &[f64]) -> Vec<Vec<f64>> {
     use crate::models::Ndf;
-    let Ok(model) = crate::models::Model::from_params(ModelId::Ellipsoid, parent) else { return Vec::new() };
+    let Some(pid) = parent_of(id) else { return Vec::new() };
+    let Ok(model) = crate::models::Model::from_params(pid, parent) else { return Vec::new() };
     let d: Vec<f64> = data.bins.iter().map(|b| model.d(b.m)).collect();
     let norm: f64 = data.bins.iter().zip(&d).map(|(b, d)| d * b.w).sum();
     if !(norm > 0.0 && norm.is_finite() && data.n > 0.0) {
@@ -103,7 +126,7 @@ pub fn residual_starts(data: &super::objective::FitData, parent: &[f64]) -> Vec<
 /// scan frame (azimuth `-theta_z`).
 pub fn ridge_starts(data: &super::objective::FitData, id: ModelId, parent: &[f64]) -> Vec<Vec<f64>> {
     use crate::models::Ndf;
-    let Some(pid) = parent_of(id).filter(|p| *p != ModelId::Ellipsoid) else { return Vec::new() };
+    let Some(pid) = parent_of(id).filter(|_| twin_lobes(id)) else { return Vec::new() };
     let Ok(model) = crate::models::Model::from_params(pid, parent) else { return Vec::new() };
     let d: Vec<f64> = data.bins.iter().map(|b| model.d(b.m)).collect();
     let norm: f64 = data.bins.iter().zip(&d).map(|(b, d)| d * b.w).sum();
@@ -143,15 +166,11 @@ pub fn ridge_starts(data: &super::objective::FitData, id: ModelId, parent: &[f64
 }
 
 /// The parent written as the mixture: two copies of itself at weight one half (`ggx2`, `beckmann2`), or
-/// the ellipsoid core holding all but [`PARENT_CORE_WEIGHT`]'s remainder (`ellipsoid+ggx`). The same D (to
-/// that remainder), so the same objective.
+/// the core holding all but [`PARENT_CORE_WEIGHT`]'s remainder when the tail cannot copy it (`ellipsoid+ggx`).
+/// The same D (to that remainder), so the same objective.
 pub fn degenerate(id: ModelId, parent: &[f64]) -> Vec<f64> {
-    match id {
-        ModelId::EllipsoidGgx => {
-            vec![parent[0], parent[1], parent[2], parent[3], parent[4], (parent[0] * parent[1]).sqrt(), PARENT_CORE_WEIGHT]
-        }
-        _ => vec![parent[0], parent[1], parent[0], parent[1], parent[2], 0.5],
-    }
+    let w = if twin_lobes(id) { 0.5 } else { PARENT_CORE_WEIGHT };
+    grow(id, &parent_parts(id, parent), 1.0, 1.0, w)
 }
 
 /// The deviance a second lobe must remove to be reported: its added parameters' price in the ladder,
@@ -180,10 +199,10 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
     let mut o = *opts;
     o.tolerances.max_iter = o.tolerances.max_iter.min(MIXTURE_PATIENCE);
     let mut st = starts(id, &p);
-    if id == ModelId::EllipsoidGgx {
-        st.extend(residual_starts(&s.data, &p));
-    } else {
+    if twin_lobes(id) {
         st.extend(ridge_starts(&s.data, id, &p));
+    } else {
+        st.extend(residual_starts(&s.data, id, &p));
     }
     let mut fit = fit_from(s, id, &st, &o);
     // The best start, stopped by the patience before it converged, is carried to the optimum with the
@@ -229,7 +248,7 @@ pub(super) fn fit_mixture(s: &Session, id: ModelId, parent: &Fitted, opts: &FitO
         Err(e) => format!("no start gave a usable fit ({})", e.message()),
     };
     let mut warnings = fit.as_ref().map(|g| g.warnings.clone()).unwrap_or_default();
-    let as_what = if id == ModelId::EllipsoidGgx { "the ellipsoid core alone" } else { "two equal lobes" };
+    let as_what = if twin_lobes(id) { "two equal lobes" } else { "the ellipsoid core alone" };
     warnings.push(format!("{id}: {why}; reported as the one-lobe {} fit ({as_what}: the data show no second lobe it can fit)", parent.id));
     let local = super::solve::Local {
         x: x.clone(),
@@ -267,10 +286,12 @@ fn to_bound(s: &Session, id: ModelId, f: &Fitted, opts: &FitOptions) -> Option<F
     let s_max = s.data.bins.iter().map(|b| (1.0 - b.m.z * b.m.z).max(0.0).sqrt() / b.m.z).fold(0.0, f64::max);
     let flat = FLAT_LOBE * s_max;
     let mut moved = false;
-    for &i in super::params::alpha_slots(id) {
+    for i in super::params::alpha_slots(id) {
         if q[i] >= flat && !super::params::at_lobe_bound(q[i]) {
-            let first = i < 2;
-            let axes = if id == ModelId::EllipsoidGgx && !first { 2.0 } else { 1.0 };
+            let (role, lobes) = id.spec().roles[i];
+            let first = lobes == crate::models::table::L1;
+            // An isotropic lobe's one roughness spans both axes.
+            let axes = if role == crate::models::Role::Alpha { 2.0 } else { 1.0 };
             let shift = axes * (max / q[i]).ln();
             v += if first { shift } else { -shift };
             q[i] = max;
@@ -296,9 +317,8 @@ fn to_bound(s: &Session, id: ModelId, f: &Fitted, opts: &FitOptions) -> Option<F
 pub fn bound_notes(id: ModelId, p: &[f64]) -> Vec<String> {
     let names = id.param_names();
     super::params::alpha_slots(id)
-        .iter()
-        .filter(|&&i| super::params::at_lobe_bound(p[i]))
-        .map(|&i| {
+        .filter(|&i| super::params::at_lobe_bound(p[i]))
+        .map(|i| {
             format!(
                 "{id}: {} = {:.4} is at the mixture lobes' bound {}: that lobe is flat along this axis over the fitted slopes \
                  (a background; its weight and width are not told apart, the bound fixes the width)",

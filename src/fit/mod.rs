@@ -41,7 +41,8 @@ pub use report::{Candidate, FitReport, InputInfo, Quality, Selection, SolverInfo
 pub use solve::{Solver, Tolerances};
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::models::{Model, ModelId};
+use crate::models::table::Form;
+use crate::models::{Model, ModelId, Role};
 use crate::ndf::EmpiricalNdf;
 
 /// Largest standard error of `theta_z` (radians) reported as a number. The axes of a lobe are located by
@@ -215,17 +216,24 @@ fn fit_from(s: &Session, id: ModelId, starts: &[Vec<f64>], opts: &FitOptions) ->
 
 /// The fit of a delta NDF (every sample in one bin, e.g. a plane after form removal): no lobe width can
 /// be measured, so the alphas are the models' floor [`crate::models::ALPHA_MIN`] and the lobe points at
-/// the bin (for the ellipsoid through its skew; the other models are centred on n by definition).
+/// the bin (for the ellipsoid through its skew; the other models are centred on n by definition); a tail
+/// is GGX's, a mixture's weight one half.
 fn delta_fit(s: &Session, id: ModelId) -> Fitted {
     let (tx, ty) = start::skew_start(&s.summary, 0.0);
     let a = crate::models::ALPHA_MIN;
-    let p = match id {
-        ModelId::Ggx | ModelId::Beckmann => vec![a],
-        ModelId::GgxAniso | ModelId::BeckmannAniso => vec![a, a, 0.0],
-        ModelId::Ellipsoid => vec![a, a, tx, ty, 0.0],
-        ModelId::Ggx2 | ModelId::Beckmann2 => vec![a, a, a, a, 0.0, 0.5],
-        ModelId::EllipsoidGgx => vec![a, a, tx, ty, 0.0, a, 0.5],
-    };
+    let p: Vec<f64> = id
+        .spec()
+        .roles
+        .iter()
+        .map(|&(role, _)| match role {
+            Role::Alpha | Role::AlphaX | Role::AlphaY => a,
+            Role::ThetaX => tx,
+            Role::ThetaY => ty,
+            Role::ThetaZ => 0.0,
+            Role::Gamma => 2.0,
+            Role::Weight => 0.5,
+        })
+        .collect();
     let x = params::to_internal(id, &p);
     let mut r = vec![0.0; s.data.bins.len()];
     let f = problem::residuals_into(&s.data, id, &x, &mut r);
@@ -244,24 +252,44 @@ fn fit_iso(s: &Session, id: ModelId, opts: &FitOptions) -> Result<Fitted> {
     fit_from(s, id, &[start::closed_form(id, &s.summary)], opts)
 }
 
-/// Fit an anisotropic model from its closed-form start and from its isotropic fit.
-fn fit_aniso(s: &Session, id: ModelId, iso: Option<&Fitted>, opts: &FitOptions) -> Result<Fitted> {
-    let mut starts = vec![start::closed_form(id, &s.summary)];
-    if let Some(iso) = iso {
-        let a = public(iso)[0];
-        starts.push(vec![a, a, s.summary.theta_z]);
+/// Fit a model from its closed-form start and, given its parent's fit, from the parent's optimum: each
+/// parameter the parent has (an isotropic `alpha` stands for both axes) at the parent's value, the others at
+/// their closed-form start (`theta_z` from the slopes, a tail at GGX's `gamma = 2`).
+fn fit_grown(s: &Session, id: ModelId, parent: Option<&Fitted>, opts: &FitOptions) -> Result<Fitted> {
+    let closed = start::closed_form(id, &s.summary);
+    let mut starts = vec![closed.clone()];
+    if let Some(parent) = parent {
+        let ps = parent.id.spec();
+        let g = ps.parts(&public(parent), 0);
+        let has = |r: Role| ps.slot(r, 0).is_some() || (matches!(r, Role::AlphaX | Role::AlphaY) && ps.slot(Role::Alpha, 0).is_some());
+        let grown = id
+            .spec()
+            .roles
+            .iter()
+            .zip(&closed)
+            .map(|(&(role, _), &c)| match role {
+                Role::Alpha | Role::AlphaX if has(role) => g.alpha_x,
+                Role::AlphaY if has(role) => g.alpha_y,
+                Role::ThetaX if has(role) => g.theta_x,
+                Role::ThetaY if has(role) => g.theta_y,
+                Role::ThetaZ if has(role) => g.theta_z,
+                Role::Gamma if has(role) => g.gamma.unwrap_or(c),
+                _ => c,
+            })
+            .collect();
+        starts.push(grown);
     }
     fit_from(s, id, &starts, opts)
 }
 
 /// Fit the ellipsoid from the GTR2aniso optimum with zero skew, with the mean normal's skew, and the
 /// requested extra skews.
-fn fit_ellipsoid(s: &Session, aniso: &Fitted, opts: &FitOptions) -> Result<Fitted> {
+fn fit_ellipsoid(s: &Session, id: ModelId, aniso: &Fitted, opts: &FitOptions) -> Result<Fitted> {
     // A GTR2aniso optimum outside the model's domain (a lobe whose peak lies outside the region, which the
     // centred model can only flatten) starts nothing: the closed-form start from the slopes does.
     let mut p = public(aniso);
     if Model::from_params(aniso.id, &p).is_err() {
-        p = start::closed_form(ModelId::GgxAniso, &s.summary);
+        p = start::closed_form(aniso.id, &s.summary);
     }
     let (ax, ay, tz) = (p[0], p[1], p[2]);
     let (tx, ty) = start::skew_start(&s.summary, tz);
@@ -273,7 +301,7 @@ fn fit_ellipsoid(s: &Session, aniso: &Fitted, opts: &FitOptions) -> Result<Fitte
     for (sx, sy) in [(0.3, 0.0), (-0.3, 0.0), (0.0, 0.3), (0.0, -0.3)].into_iter().take(opts.extra_starts) {
         starts.push(vec![ax, ay, sx, sy, tz]);
     }
-    fit_from(s, ModelId::Ellipsoid, &starts, opts)
+    fit_from(s, id, &starts, opts)
 }
 
 /// Relative tolerance of the GTR2aniso pass that only starts the ellipsoid (`aniso_start`): measured
@@ -288,9 +316,8 @@ pub const START_PASS_REL_TOL: f64 = 1e-6;
 /// ellipsoid's fitted parameters by at most 6e-9 relative over the synthetic and real scans.
 /// `None` without merged bins or when that pass gives no usable optimum (the caller then runs the full
 /// GTR2aniso fit).
-fn aniso_start(s: &Session, opts: &FitOptions) -> Result<Option<Fitted>> {
+fn aniso_start(s: &Session, id: ModelId, opts: &FitOptions) -> Result<Option<Fitted>> {
     let Some(coarse) = &s.coarse else { return Ok(None) };
-    let id = ModelId::GgxAniso;
     let mut evaluations = 0;
     // Only a start: converged to START_PASS_REL_TOL (or the caller's looser tolerance).
     let mut o = *opts;
@@ -310,25 +337,27 @@ fn aniso_start(s: &Session, opts: &FitOptions) -> Result<Option<Fitted>> {
     }))
 }
 
-/// Fit `id` with the chain of simpler fits it starts from.
+/// Fit `id` with the chain of simpler fits it starts from (the table's parents).
 fn fit_chain(s: &Session, id: ModelId, opts: &FitOptions) -> Result<Fitted> {
     if s.data.k_nonzero == 1 {
         return Ok(delta_fit(s, id));
     }
-    match id {
-        ModelId::Ggx | ModelId::Beckmann => fit_iso(s, id, opts),
-        ModelId::GgxAniso => fit_aniso(s, id, Some(&fit_iso(s, ModelId::Ggx, opts)?), opts),
-        ModelId::BeckmannAniso => fit_aniso(s, id, Some(&fit_iso(s, ModelId::Beckmann, opts)?), opts),
-        ModelId::Ellipsoid => {
-            // The closed-form GTR2aniso start suffices here (the isotropic pre-fit only matters when the
-            // anisotropic start is poor, and the ellipsoid stage has its own starts).
-            let aniso = match aniso_start(s, opts)? {
+    let spec = id.spec();
+    if spec.is_mixture() {
+        return mixture::fit_mixture_chain(s, id, opts);
+    }
+    match (spec.lobes[0].form, spec.parent) {
+        (_, None) => fit_iso(s, id, opts),
+        (Form::Full, Some(parent)) => {
+            // The closed-form start of the parent suffices here (its own pre-fit only matters when its
+            // start is poor, and the ellipsoid stage has its own starts).
+            let aniso = match aniso_start(s, parent, opts)? {
                 Some(a) => a,
-                None => fit_aniso(s, ModelId::GgxAniso, None, opts)?,
+                None => fit_grown(s, parent, None, opts)?,
             };
-            fit_ellipsoid(s, &aniso, opts)
+            fit_ellipsoid(s, id, &aniso, opts)
         }
-        ModelId::Ggx2 | ModelId::Beckmann2 | ModelId::EllipsoidGgx => mixture::fit_mixture_chain(s, id, opts),
+        (_, Some(parent)) => fit_grown(s, id, Some(&fit_chain(s, parent, opts)?), opts),
     }
 }
 
@@ -529,16 +558,16 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, prune: bool) -> Re
         let (g, b) = rayon::join(
             || {
                 let ggx = candidate(fit_iso(&s, ModelId::Ggx, opts));
-                let ggx_a = candidate(fit_aniso(&s, ModelId::GgxAniso, ggx.0.as_ref(), opts));
+                let ggx_a = candidate(fit_grown(&s, ModelId::GgxAniso, ggx.0.as_ref(), opts));
                 let ell = match &ggx_a.0 {
-                    Some(a) => candidate(fit_ellipsoid(&s, a, opts)),
+                    Some(a) => candidate(fit_ellipsoid(&s, ModelId::Ellipsoid, a, opts)),
                     None => (None, None),
                 };
                 [ggx, ggx_a, ell]
             },
             || {
                 let beck = candidate(fit_iso(&s, ModelId::Beckmann, opts));
-                let beck_a = candidate(fit_aniso(&s, ModelId::BeckmannAniso, beck.0.as_ref(), opts));
+                let beck_a = candidate(fit_grown(&s, ModelId::BeckmannAniso, beck.0.as_ref(), opts));
                 [beck, beck_a]
             },
         );
@@ -601,12 +630,7 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, prune: bool) -> Re
     let crit: Vec<f64> = crit.into_iter().chain(fits[n_single..].iter().map(|f| qbic::qbic(f.f, c, f.id.n_params(), s.data.n))).collect();
     let ladder = mixture::Ladder::new(ndf, &s, &fits, n_single, chosen, c);
     let chosen = ladder.chosen;
-    let parent = |id: ModelId| match id {
-        ModelId::GgxAniso => Some(ModelId::Ggx),
-        ModelId::Ellipsoid => Some(ModelId::GgxAniso),
-        ModelId::BeckmannAniso => Some(ModelId::Beckmann),
-        _ => mixture::parent_of(id),
-    };
+    let parent = |id: ModelId| id.parent();
     let deltas: Vec<Option<f64>> =
         fits.iter().map(|f| Model::from_params(f.id, &public(f)).ok().and_then(|m| metric::delta_to_data(&m, ndf))).collect();
     let idx = |id: ModelId| fits.iter().position(|f| f.id == id);

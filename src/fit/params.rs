@@ -18,7 +18,7 @@
 //! near the floor this is the single lobes' map scaled (`ALPHA_MIN + (LOBE_ALPHA_MAX - ALPHA_MIN) exp(u)`),
 //! and the single lobes keep theirs, so their fits do not move.
 
-use crate::models::{ModelId, ALPHA_MIN};
+use crate::models::{ModelId, Role, ALPHA_MIN};
 
 /// The largest roughness of a mixture lobe (`ggx2`, `beckmann2`, `ellipsoid+ggx`), on every axis; the
 /// Python cross-check bounds its search by the same value. Beyond it a lobe is flat over the fitted slopes:
@@ -33,7 +33,7 @@ pub const LOBE_ALPHA_MAX: f64 = 1e3;
 /// Whether model `id`'s roughnesses use the bounded map ([`bounded_alpha_of`]): the mixtures'.
 #[inline]
 pub fn bounded(id: ModelId) -> bool {
-    matches!(id, ModelId::Ggx2 | ModelId::Beckmann2 | ModelId::EllipsoidGgx)
+    id.is_mixture()
 }
 
 /// `u -> alpha` of a mixture lobe: `ALPHA_MIN + (LOBE_ALPHA_MAX - ALPHA_MIN) / (1 + exp(-u))`, in
@@ -90,23 +90,14 @@ pub fn u_of(alpha: f64) -> f64 {
     (alpha - ALPHA_MIN).max(ALPHA_MIN * 1e-12).ln()
 }
 
-/// Indices of the roughness entries (`u`) in a model's internal vector.
-pub fn alpha_slots(id: ModelId) -> &'static [usize] {
-    match id {
-        ModelId::Ggx | ModelId::Beckmann => &[0],
-        ModelId::Ggx2 | ModelId::Beckmann2 => &[0, 1, 2, 3],
-        ModelId::EllipsoidGgx => &[0, 1, 5],
-        _ => &[0, 1],
-    }
+/// Indices of the roughness entries (`u`) in a model's internal vector (the table's alpha roles).
+pub fn alpha_slots(id: ModelId) -> impl Iterator<Item = usize> {
+    id.spec().roles.iter().enumerate().filter(|(_, (r, _))| r.is_alpha()).map(|(i, _)| i)
 }
 
 /// Index of a mixture's weight (`v`) in its internal vector.
 pub fn weight_slot(id: ModelId) -> Option<usize> {
-    match id {
-        ModelId::Ggx2 | ModelId::Beckmann2 => Some(5),
-        ModelId::EllipsoidGgx => Some(6),
-        _ => None,
-    }
+    id.spec().slot_any(Role::Weight)
 }
 
 /// `v -> w`: `1 / (1 + exp(-v))`.
@@ -125,7 +116,7 @@ pub fn v_of(w: f64) -> f64 {
 /// The contract's parameters (order of [`ModelId::param_names`]) from an internal vector.
 pub fn to_public(id: ModelId, x: &[f64]) -> Vec<f64> {
     let mut p = x.to_vec();
-    for &i in alpha_slots(id) {
+    for i in alpha_slots(id) {
         p[i] = alpha_of_model(id, x[i]);
     }
     if let Some(i) = weight_slot(id) {
@@ -137,7 +128,7 @@ pub fn to_public(id: ModelId, x: &[f64]) -> Vec<f64> {
 /// The internal vector for the contract's parameters.
 pub fn to_internal(id: ModelId, p: &[f64]) -> Vec<f64> {
     let mut x = p.to_vec();
-    for &i in alpha_slots(id) {
+    for i in alpha_slots(id) {
         x[i] = if bounded(id) { bounded_u_of(p[i]) } else { u_of(p[i]) };
     }
     if let Some(i) = weight_slot(id) {
@@ -150,7 +141,7 @@ pub fn to_internal(id: ModelId, p: &[f64]) -> Vec<f64> {
 /// for a mixture's), `w (1 - w)` for a weight, 1 for angles.
 pub fn public_derivative(id: ModelId, x: &[f64]) -> Vec<f64> {
     let mut g = vec![1.0; x.len()];
-    for &i in alpha_slots(id) {
+    for i in alpha_slots(id) {
         g[i] = if bounded(id) { bounded_alpha_du(x[i]) } else { x[i].exp() };
     }
     if let Some(i) = weight_slot(id) {

@@ -215,7 +215,7 @@ fn nelder_mead(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Resu
         let mut simplex = vec![x.to_vec()];
         for i in 0..x.len() {
             let mut v = x.to_vec();
-            v[i] += if super::params::alpha_slots(id).contains(&i) { 0.1 } else { 0.05 };
+            v[i] += if super::params::alpha_slots(id).any(|a| a == i) { 0.1 } else { 0.05 };
             simplex.push(v);
         }
         let evals = cost.evals;

@@ -13,7 +13,8 @@
 //! ellipsoid's third axis, row 3 of R in Walter et al. eq. 3).
 
 use super::objective::FitData;
-use crate::models::ModelId;
+use crate::models::table::{Kernel, L1};
+use crate::models::{ModelId, Role};
 
 /// Median `|t|` of the unit Beckmann marginal: `0.6744898 / sqrt(2)`.
 const BECKMANN_MEDIAN: f64 = 0.476_936_276_204_47;
@@ -120,10 +121,13 @@ pub fn summarize(data: &FitData) -> SlopeSummary {
     }
 }
 
-/// The closed-form starting point (contract parameters) of a one- or three-parameter model.
-/// For the ellipsoid it gives the GTR2aniso start with zero skew; see [`skew_start`].
+/// The closed-form starting point (contract parameters) of any model, by its parameters' roles: the
+/// first lobe's kernel sets the medians' constant, the skew angles start at 0 (see [`skew_start`]), a
+/// Student-t tail at GGX's `gamma = 2`; a mixture starts with a core a little narrower than the median slopes
+/// say and a tail three times wider, weighted 0.7 : 0.3.
 pub fn closed_form(id: ModelId, s: &SlopeSummary) -> Vec<f64> {
-    let beck = matches!(id, ModelId::Beckmann | ModelId::BeckmannAniso);
+    let spec = id.spec();
+    let beck = spec.lobes[0].kernel == Kernel::Beckmann;
     let k = if beck { 1.0 / BECKMANN_MEDIAN } else { 1.0 / GGX_MEDIAN };
     // Radial median: GGX P(|s| < R) = 1 - 1/(1 + R^2/a^2) gives R = a; Beckmann 1 - exp(-R^2/a^2)
     // gives R = a sqrt(ln 2).
@@ -133,14 +137,27 @@ pub fn closed_form(id: ModelId, s: &SlopeSummary) -> Vec<f64> {
     let (ax, ay) = (k * s.median_abs[0], k * s.median_abs[1]);
     let lift = (START_ALPHA_MIN / ax.min(ay)).max(1.0);
     let (ax, ay) = if lift.is_finite() { (ax * lift, ay * lift) } else { (START_ALPHA_MIN, START_ALPHA_MIN) };
-    match id {
-        ModelId::Ggx | ModelId::Beckmann => vec![iso.max(START_ALPHA_MIN)],
-        ModelId::GgxAniso | ModelId::BeckmannAniso => vec![ax, ay, s.theta_z],
-        ModelId::Ellipsoid => vec![ax, ay, 0.0, 0.0, s.theta_z],
-        // A core a little narrower than the median slopes say and a tail three times wider.
-        ModelId::Ggx2 | ModelId::Beckmann2 => vec![0.7 * ax, 0.7 * ay, 3.0 * ax, 3.0 * ay, s.theta_z, 0.7],
-        ModelId::EllipsoidGgx => vec![0.7 * ax, 0.7 * ay, 0.0, 0.0, s.theta_z, 3.0 * (ax * ay).sqrt(), 0.7],
-    }
+    let two = spec.is_mixture();
+    spec.roles
+        .iter()
+        .map(|&(role, lobes)| {
+            let scale = match (two, lobes) {
+                (false, _) => 1.0,
+                (true, L1) => 0.7,
+                (true, _) => 3.0,
+            };
+            match role {
+                Role::Alpha if two => scale * (ax * ay).sqrt(),
+                Role::Alpha => iso.max(START_ALPHA_MIN),
+                Role::AlphaX => scale * ax,
+                Role::AlphaY => scale * ay,
+                Role::ThetaX | Role::ThetaY => 0.0,
+                Role::ThetaZ => s.theta_z,
+                Role::Gamma => 2.0,
+                Role::Weight => 0.7,
+            }
+        })
+        .collect()
 }
 
 /// `(theta_x, theta_y)` that put the ellipsoid's third axis along the mean normal, given `theta_z`:

@@ -14,7 +14,7 @@ use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Poisson};
 
-use crate::models::{Model, ModelId, Ndf};
+use crate::models::{Model, Ndf};
 use crate::ndf::{EmpiricalNdf, NdfBin};
 
 /// The binning grid: `n x n` cells of the equal-area map of `s' = L^-1 (s - mean)`.
@@ -32,15 +32,10 @@ impl Grid {
     /// A grid matched to `model`: centred on the slope of its peak (the ellipsoid's third axis, row 3 of
     /// R in Walter et al. eq. 3) and stretched by its alphas along its principal axes.
     pub fn for_model(model: &Model, n: usize) -> Grid {
-        let p = model.params();
-        let (ax, ay, tx, ty, tz) = match model.id() {
-            ModelId::Ggx | ModelId::Beckmann => (p[0], p[0], 0.0, 0.0, 0.0),
-            ModelId::GgxAniso | ModelId::BeckmannAniso => (p[0], p[1], 0.0, 0.0, p[2]),
-            ModelId::Ellipsoid => (p[0], p[1], p[2], p[3], p[4]),
-            // A grid for the wider (second) lobe, which spans the core too.
-            ModelId::Ggx2 | ModelId::Beckmann2 => (p[2], p[3], 0.0, 0.0, p[4]),
-            ModelId::EllipsoidGgx => (p[5], p[5], 0.0, 0.0, 0.0),
-        };
+        // A mixture's grid follows its wider (last) lobe, which spans the core too.
+        let spec = model.id().spec();
+        let g = spec.parts(&model.params(), spec.lobes.len() - 1);
+        let (ax, ay, tx, ty, tz) = (g.alpha_x, g.alpha_y, g.theta_x, g.theta_y, g.theta_z);
         let r = crate::models::ellipsoid::rotation_xyz(tx, ty, tz);
         let axis = r.row(2);
         let mean = [-axis[0] / axis[2], -axis[1] / axis[2]];

@@ -17,6 +17,7 @@
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
 use super::ellipsoid::rotation_xyz;
+use super::table::Form;
 use super::Model;
 
 /// The axes of an anisotropic lobe, in the scan frame (`+z` the macro normal).
@@ -89,20 +90,16 @@ impl LobeAxes {
 }
 
 impl Model {
-    /// The axes of the anisotropic models (`ggx-aniso`, `beckmann-aniso`, `ellipsoid`) as parameterized
-    /// (call on [`Model::canonical`] for the canonical labeling); `None` for the isotropic ids.
+    /// The axes of the anisotropic models as parameterized (call on [`Model::canonical`] for the canonical
+    /// labeling), read from the first lobe's geometry ([`super::table`]; a mixture's frame is its first
+    /// lobe's, shared by both lobes of `ggx2` and `beckmann2`); `None` when that lobe is isotropic.
     pub fn axes(&self) -> Option<LobeAxes> {
-        match self {
-            Model::Ggx(_) | Model::Beckmann(_) => None,
-            Model::GgxAniso(g) => Some(LobeAxes::aligned(g.alpha_x, g.alpha_y, g.theta_z)),
-            Model::BeckmannAniso(b) => Some(LobeAxes::aligned(b.alpha_x, b.alpha_y, b.theta_z)),
-            Model::Ellipsoid(e) => Some(LobeAxes::ellipsoid(e.params())),
-            // A mixture's frame is its first lobe's (shared by both lobes of ggx2 and beckmann2).
-            Model::Mixture(x) => match x.lobe1 {
-                super::Lobe::Ggx(g) => Some(LobeAxes::aligned(g.alpha_x, g.alpha_y, g.theta_z)),
-                super::Lobe::Beckmann(b) => Some(LobeAxes::aligned(b.alpha_x, b.alpha_y, b.theta_z)),
-                super::Lobe::Ellipsoid(e) => Some(LobeAxes::ellipsoid(e.params())),
-            },
+        let spec = self.id().spec();
+        let g = spec.parts(&self.params(), 0);
+        match spec.lobes[0].form {
+            Form::Iso => None,
+            Form::Aniso => Some(LobeAxes::aligned(g.alpha_x, g.alpha_y, g.theta_z)),
+            Form::Full => Some(LobeAxes::ellipsoid([g.alpha_x, g.alpha_y, g.theta_x, g.theta_y, g.theta_z])),
         }
     }
 }

@@ -37,6 +37,7 @@ pub mod roughness_matrix;
 pub mod sampling;
 pub mod sel;
 pub mod spec;
+pub mod table;
 
 pub use axes::LobeAxes;
 pub use beckmann::Beckmann;
@@ -47,6 +48,7 @@ pub use ggx::Ggx;
 pub use mixture::{Lobe, Mixture, MixtureKind};
 pub use roughness_matrix::{disk_to_slope_jacobian, GgxMatrix};
 pub use sel::SquaredEllipsoidalLobe;
+pub use table::{ModelId, ModelSpec, Role};
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -61,92 +63,77 @@ pub const ALPHA_MIN: f64 = 1e-4;
 /// hemisphere (nothing left to fit), and `alpha^4` still sits far inside the f64 range.
 pub const ALPHA_MAX: f64 = 1e6;
 
-/// The model ids of the contract.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
-pub enum ModelId {
-    /// Isotropic GGX / Trowbridge-Reitz: `alpha`.
-    #[serde(rename = "ggx")]
+/// The microfacet distribution of a renderer lobe: the analytic families renderers implement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Distribution {
+    /// GGX / Trowbridge-Reitz.
     Ggx,
-    /// GTR2aniso rotated by `theta_z`: `alpha_x`, `alpha_y`, `theta_z`.
-    #[serde(rename = "ggx-aniso")]
-    GgxAniso,
-    /// Isotropic Beckmann: `alpha`.
-    #[serde(rename = "beckmann")]
+    /// Beckmann.
     Beckmann,
-    /// Anisotropic Beckmann rotated by `theta_z`: `alpha_x`, `alpha_y`, `theta_z`.
-    #[serde(rename = "beckmann-aniso")]
-    BeckmannAniso,
-    /// The ellipsoid NDF, A = S R (Walter et al. eq. 2-3): `alpha_x`, `alpha_y`, `theta_x`, `theta_y`, `theta_z`.
-    #[serde(rename = "ellipsoid")]
-    Ellipsoid,
-    /// Two GTR2aniso lobes sharing `theta_z` ([`mixture`]): `alpha_x1`, `alpha_y1`, `alpha_x2`, `alpha_y2`,
-    /// `theta_z`, `weight`.
-    #[serde(rename = "ggx2")]
-    Ggx2,
-    /// Two anisotropic Beckmann lobes sharing `theta_z`, parameters as `ggx2`.
-    #[serde(rename = "beckmann2")]
-    Beckmann2,
-    /// An ellipsoid core and an isotropic GGX tail ([`mixture`]): `alpha_x1`, `alpha_y1`, `theta_x`, `theta_y`,
-    /// `theta_z`, `alpha2`, `weight`.
-    #[serde(rename = "ellipsoid+ggx")]
-    EllipsoidGgx,
+}
+
+impl Distribution {
+    /// `ggx` or `beckmann`, as Mitsuba spells it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Distribution::Ggx => "ggx",
+            Distribution::Beckmann => "beckmann",
+        }
+    }
 }
 
 impl ModelId {
-    /// Every single-lobe model id, simplest first.
-    pub const ALL: [ModelId; 5] = [ModelId::Ggx, ModelId::Beckmann, ModelId::GgxAniso, ModelId::BeckmannAniso, ModelId::Ellipsoid];
-
-    /// The two-lobe mixtures ([`mixture`]), simplest first.
-    pub const MIXTURES: [ModelId; 3] = [ModelId::Ggx2, ModelId::Beckmann2, ModelId::EllipsoidGgx];
-
     /// The mixture kind of a mixture id.
     pub fn mixture_kind(self) -> Option<MixtureKind> {
         match self {
             ModelId::Ggx2 => Some(MixtureKind::Ggx2),
             ModelId::Beckmann2 => Some(MixtureKind::Beckmann2),
             ModelId::EllipsoidGgx => Some(MixtureKind::EllipsoidGgx),
-            _ => None,
+            ModelId::Ggx | ModelId::Beckmann | ModelId::GgxAniso | ModelId::BeckmannAniso | ModelId::Ellipsoid => None,
         }
     }
 
     /// Whether the id is a two-lobe mixture.
     pub fn is_mixture(self) -> bool {
-        self.mixture_kind().is_some()
+        self.spec().is_mixture()
     }
 
     /// The id as the contract spells it.
     pub fn as_str(self) -> &'static str {
-        match self {
-            ModelId::Ggx => "ggx",
-            ModelId::GgxAniso => "ggx-aniso",
-            ModelId::Beckmann => "beckmann",
-            ModelId::BeckmannAniso => "beckmann-aniso",
-            ModelId::Ellipsoid => "ellipsoid",
-            ModelId::Ggx2 => "ggx2",
-            ModelId::Beckmann2 => "beckmann2",
-            ModelId::EllipsoidGgx => "ellipsoid+ggx",
-        }
+        self.spec().name
     }
 
     /// The parameter names, in the order `Model::params` returns them.
     pub fn param_names(self) -> &'static [&'static str] {
-        match self {
-            ModelId::Ggx | ModelId::Beckmann => &["alpha"],
-            ModelId::GgxAniso | ModelId::BeckmannAniso => &["alpha_x", "alpha_y", "theta_z"],
-            ModelId::Ellipsoid => &["alpha_x", "alpha_y", "theta_x", "theta_y", "theta_z"],
-            ModelId::Ggx2 | ModelId::Beckmann2 => &["alpha_x1", "alpha_y1", "alpha_x2", "alpha_y2", "theta_z", "weight"],
-            ModelId::EllipsoidGgx => &["alpha_x1", "alpha_y1", "theta_x", "theta_y", "theta_z", "alpha2", "weight"],
-        }
+        self.spec().names
     }
 
     /// Number of free parameters.
     pub fn n_params(self) -> usize {
-        self.param_names().len()
+        self.spec().names.len()
     }
 
     /// Whether the model is a special case of the ellipsoid (and so has a matrix A).
     pub fn has_matrix_a(self) -> bool {
-        matches!(self, ModelId::Ggx | ModelId::GgxAniso | ModelId::Ellipsoid)
+        self.spec().matrix_a
+    }
+
+    /// The model whose fit starts this one, and which it must improve on in `auto`.
+    pub fn parent(self) -> Option<ModelId> {
+        self.spec().parent
+    }
+}
+
+impl serde::Serialize for ModelId {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(self.as_str())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for ModelId {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let s = <std::borrow::Cow<'de, str>>::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
     }
 }
 
@@ -173,18 +160,18 @@ impl std::str::FromStr for ModelChoice {
         }
         s.parse::<ModelId>()
             .map(ModelChoice::Model)
-            .map_err(|_| Error::invalid(format!("unknown model '{s}' (expected auto, ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid, ggx2, beckmann2 or ellipsoid+ggx)")))
+            .map_err(|_| Error::invalid(format!("unknown model '{s}' (expected auto, {})", ModelId::name_list())))
     }
 }
 
 impl std::str::FromStr for ModelId {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
-        ModelId::ALL.into_iter().chain(ModelId::MIXTURES).find(|id| id.as_str() == s).ok_or_else(|| {
-            Error::invalid(format!(
-                "unknown model '{s}' (expected ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid, ggx2, beckmann2 or ellipsoid+ggx)"
-            ))
-        })
+        ModelId::EVERY
+            .iter()
+            .copied()
+            .find(|id| id.as_str() == s || id.spec().aliases.contains(&s))
+            .ok_or_else(|| Error::invalid(format!("unknown model '{s}' (expected {})", ModelId::name_list())))
     }
 }
 
@@ -236,16 +223,20 @@ impl Model {
         if let Some((name, bad)) = id.param_names().iter().zip(p).find(|(_, v)| !v.is_finite()) {
             return Err(Error::invalid(format!("model {id}: {name} = {bad} is not finite")));
         }
-        // The isotropic models' one roughness is `alpha`: checked under that name.
-        if matches!(id, ModelId::Ggx | ModelId::Beckmann) {
-            checked_alpha("alpha", p[0])?;
+        // Every roughness is checked under the name the JSON gives it (the lobe types name their own axes).
+        let spec = id.spec();
+        for ((name, &(role, _)), &v) in spec.names.iter().zip(spec.roles).zip(p) {
+            if role.is_alpha() {
+                checked_alpha(name, v)?;
+            }
         }
+        let g = spec.parts(p, 0);
         Ok(match id {
-            ModelId::Ggx => Model::Ggx(Ggx::new(p[0], p[0], 0.0)?),
-            ModelId::GgxAniso => Model::GgxAniso(Ggx::new(p[0], p[1], p[2])?),
-            ModelId::Beckmann => Model::Beckmann(Beckmann::new(p[0], p[0], 0.0)?),
-            ModelId::BeckmannAniso => Model::BeckmannAniso(Beckmann::new(p[0], p[1], p[2])?),
-            ModelId::Ellipsoid => Model::Ellipsoid(Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4])?),
+            ModelId::Ggx => Model::Ggx(Ggx::new(g.alpha_x, g.alpha_x, 0.0)?),
+            ModelId::GgxAniso => Model::GgxAniso(Ggx::new(g.alpha_x, g.alpha_y, g.theta_z)?),
+            ModelId::Beckmann => Model::Beckmann(Beckmann::new(g.alpha_x, g.alpha_x, 0.0)?),
+            ModelId::BeckmannAniso => Model::BeckmannAniso(Beckmann::new(g.alpha_x, g.alpha_y, g.theta_z)?),
+            ModelId::Ellipsoid => Model::Ellipsoid(Ellipsoid::from_params(g.alpha_x, g.alpha_y, g.theta_x, g.theta_y, g.theta_z)?),
             ModelId::Ggx2 => Model::Mixture(Mixture::from_params(MixtureKind::Ggx2, p)?),
             ModelId::Beckmann2 => Model::Mixture(Mixture::from_params(MixtureKind::Beckmann2, p)?),
             ModelId::EllipsoidGgx => Model::Mixture(Mixture::from_params(MixtureKind::EllipsoidGgx, p)?),

@@ -6,7 +6,8 @@ use nalgebra::{Matrix2, Matrix3, Vector2};
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::models::ellipsoid::rotation_xyz;
-use crate::models::{canonical, Beckmann, Ellipsoid, Ggx, GgxMatrix, Model, ModelId, ALPHA_MIN};
+use crate::models::table::{Form, Parts};
+use crate::models::{canonical, GgxMatrix, Model, ModelId, Role, ALPHA_MIN};
 
 /// The symmetric positive semi-definite part of a symmetric 2x2 matrix (negative eigenvalues set to 0).
 pub fn psd_part(m: Matrix2<f64>) -> Matrix2<f64> {
@@ -75,16 +76,20 @@ pub fn ellipsoid_params_from_ata(ata: &Matrix3<f64>) -> Result<[f64; 5]> {
     canonical::decompose(&l.l().transpose())
 }
 
-/// The slope form of any model. Beckmann's roughness matrix is exactly twice its slope covariance
-/// (Tokuyoshi sec. 2); GGX and the ellipsoid use the matrix of eq. 17 / S4.
+/// The slope form of any single-lobe model, by its form ([`super::table::Form`]). Beckmann's roughness
+/// matrix is exactly twice its slope covariance (Tokuyoshi sec. 2); GGX and the ellipsoid use the matrix of
+/// eq. 17 / S4; a Student-t lobe's is its GGX-shaped stretch.
 pub fn slope_form(model: &Model) -> Result<SlopeForm> {
-    match model {
-        Model::Ggx(g) | Model::GgxAniso(g) => Ok(SlopeForm { a2: aniso_matrix(g.alpha_x, g.alpha_y, g.theta_z), mu: Vector2::zeros() }),
-        Model::Beckmann(b) | Model::BeckmannAniso(b) => {
-            Ok(SlopeForm { a2: aniso_matrix(b.alpha_x, b.alpha_y, b.theta_z), mu: Vector2::zeros() })
+    let spec = model.id().spec();
+    if spec.is_mixture() {
+        return Err(Error::invalid(format!("{}: a two-lobe mixture has no single slope form (filter its lobes)", model.id())));
+    }
+    match (spec.lobes[0].form, model.ellipsoid()) {
+        (Form::Full, Some(e)) => ellipsoid_slope_form(&e.a()),
+        _ => {
+            let g = spec.parts(&model.params(), 0);
+            Ok(SlopeForm { a2: aniso_matrix(g.alpha_x, g.alpha_y, g.theta_z), mu: Vector2::zeros() })
         }
-        Model::Ellipsoid(e) => ellipsoid_slope_form(&e.a()),
-        Model::Mixture(_) => Err(Error::invalid(format!("{}: a two-lobe mixture has no single slope form (filter its lobes)", model.id()))),
     }
 }
 
@@ -132,57 +137,61 @@ pub fn filter_model(model: &Model, sigma: &Matrix2<f64>) -> Result<Model> {
 /// A model whose roughness matrix is `A2 + K` for a kernel roughness matrix `K` (symmetric PSD), `mu`
 /// unchanged (eq. S4); an isotropic model takes `alpha^2 + tr(K) / 2`. `K = 2 Sigma` is Tokuyoshi eq. 3
 /// ([`filter_model`]); for GGX-shaped models `ndfit scale` passes the GGX fitted to the kernel itself
-/// (data_formats/scale.md sec. 4a). The result has the same id.
+/// (data_formats/scale.md sec. 4a). The result has the same id (and the same tail, for a Student-t lobe).
 pub fn add_kernel_matrix(model: &Model, k: &Matrix2<f64>) -> Result<Model> {
     check_finite2(k)?;
     let k = psd_part(0.5 * (k + k.transpose()));
-    let iso = |alpha: f64| (alpha * alpha + 0.5 * k.trace()).sqrt();
-    match model {
-        Model::Ggx(g) => Ok(Model::Ggx(Ggx::new(iso(g.alpha_x), iso(g.alpha_x), 0.0)?)),
-        Model::Beckmann(b) => Ok(Model::Beckmann(Beckmann::new(iso(b.alpha_x), iso(b.alpha_x), 0.0)?)),
-        Model::GgxAniso(g) => {
-            let (ax, ay, t) = aniso_params(&(aniso_matrix(g.alpha_x, g.alpha_y, g.theta_z) + k))?;
-            Ok(Model::GgxAniso(Ggx::new(ax, ay, t)?))
-        }
-        Model::BeckmannAniso(b) => {
-            let (ax, ay, t) = aniso_params(&(aniso_matrix(b.alpha_x, b.alpha_y, b.theta_z) + k))?;
-            Ok(Model::BeckmannAniso(Beckmann::new(ax, ay, t)?))
-        }
-        Model::Ellipsoid(e) => {
-            let mut f = ellipsoid_slope_form(&e.a())?;
-            f.a2 += k;
-            let p = ellipsoid_params_from_ata(&ellipsoid_ata(&f))?;
-            Ok(Model::Ellipsoid(Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4])?))
-        }
-        Model::Mixture(x) => super::mixture::add_kernel_matrix_mixture(x, &k),
+    if let Model::Mixture(x) = model {
+        return super::mixture::add_kernel_matrix_mixture(x, &k);
     }
+    let (id, p) = (model.id(), model.params());
+    let spec = id.spec();
+    let mut g = spec.parts(&p, 0);
+    if spec.lobes[0].form == Form::Iso {
+        let a = (g.alpha_x * g.alpha_x + 0.5 * k.trace()).sqrt();
+        (g.alpha_x, g.alpha_y) = (a, a);
+    } else {
+        let f = slope_form(model)?;
+        g = with_slope_form(spec.lobes[0].form, g, &SlopeForm { a2: f.a2 + k, mu: f.mu })?;
+    }
+    Model::from_params(id, &spec.with_parts(&p, 0, &g))
 }
 
 /// A model of kind `id` whose slope form is the given roughness matrix (and centre, for the ellipsoid).
-/// Isotropic kinds take the moment-matched `alpha^2 = tr(A2)/2`. Alphas are floored at [`ALPHA_MIN`].
+/// Isotropic kinds take the moment-matched `alpha^2 = tr(A2)/2`. Alphas are floored at [`ALPHA_MIN`]; a
+/// Student-t tail is GGX's (`gamma = 2`).
 pub fn model_from_slope_form(id: ModelId, f: &SlopeForm) -> Result<Model> {
     check_finite2(&f.a2)?;
-    let iso = (f.a2.trace() / 2.0).max(ALPHA_MIN * ALPHA_MIN).sqrt();
-    match id {
-        ModelId::Ggx => Ok(Model::Ggx(Ggx::new(iso, iso, 0.0)?)),
-        ModelId::Beckmann => Ok(Model::Beckmann(Beckmann::new(iso, iso, 0.0)?)),
-        ModelId::GgxAniso => {
-            let (ax, ay, t) = aniso_params(&floor_matrix(&f.a2))?;
-            Ok(Model::GgxAniso(Ggx::new(ax, ay, t)?))
+    let spec = id.spec();
+    if spec.is_mixture() {
+        return Err(Error::invalid(format!("{id}: a two-lobe mixture is not determined by one slope form")));
+    }
+    let p: Vec<f64> = spec.roles.iter().map(|&(r, _)| if r == Role::Gamma { 2.0 } else { 0.0 }).collect();
+    let mut g = spec.parts(&p, 0);
+    if spec.lobes[0].form == Form::Iso {
+        let a = (f.a2.trace() / 2.0).max(ALPHA_MIN * ALPHA_MIN).sqrt();
+        (g.alpha_x, g.alpha_y) = (a, a);
+    } else {
+        g = with_slope_form(spec.lobes[0].form, g, &SlopeForm { a2: floor_matrix(&f.a2), mu: f.mu })?;
+    }
+    Model::from_params(id, &spec.with_parts(&p, 0, &g))
+}
+
+/// Lobe geometry `g` with its roughness matrix (and, for the ellipsoid, its centre) replaced by `f`.
+fn with_slope_form(form: Form, mut g: Parts, f: &SlopeForm) -> Result<Parts> {
+    match form {
+        // Moment matched (the callers that add a kernel to a known alpha add tr(K)/2 to alpha^2 directly).
+        Form::Iso => {
+            let a = (f.a2.trace() / 2.0).sqrt();
+            (g.alpha_x, g.alpha_y) = (a, a);
         }
-        ModelId::BeckmannAniso => {
-            let (ax, ay, t) = aniso_params(&floor_matrix(&f.a2))?;
-            Ok(Model::BeckmannAniso(Beckmann::new(ax, ay, t)?))
-        }
-        ModelId::Ellipsoid => {
-            let g = SlopeForm { a2: floor_matrix(&f.a2), mu: f.mu };
-            let p = ellipsoid_params_from_ata(&ellipsoid_ata(&g))?;
-            Ok(Model::Ellipsoid(Ellipsoid::from_params(p[0], p[1], p[2], p[3], p[4])?))
-        }
-        ModelId::Ggx2 | ModelId::Beckmann2 | ModelId::EllipsoidGgx => {
-            Err(Error::invalid(format!("{id}: a two-lobe mixture is not determined by one slope form")))
+        Form::Aniso => (g.alpha_x, g.alpha_y, g.theta_z) = aniso_params(&f.a2)?,
+        Form::Full => {
+            let q = ellipsoid_params_from_ata(&ellipsoid_ata(f))?;
+            (g.alpha_x, g.alpha_y, g.theta_x, g.theta_y, g.theta_z) = (q[0], q[1], q[2], q[3], q[4]);
         }
     }
+    Ok(g)
 }
 
 /// Raise a roughness matrix's eigenvalues to `ALPHA_MIN^2`: below it a model is a mirror (models/mod.rs).

@@ -54,7 +54,7 @@ impl Default for ScaleOptions {
     fn default() -> Self {
         ScaleOptions {
             footprints: vec![],
-            models: ModelId::ALL.to_vec(),
+            models: ModelId::singles().collect(),
             samples_per_point: 4,
             bins: None,
             seed: 1,
@@ -255,7 +255,11 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
         let viol = violations(&resolved, sigma_w_spread, share, opts.blur, n_independent);
         let mut theory_notes = viol.all.clone();
         theory_notes.extend(viol.ggx.iter().cloned());
-        let ggx_family = |id: ModelId| matches!(id, ModelId::Ggx | ModelId::GgxAniso | ModelId::Ellipsoid);
+        // GGX-shaped: a single lobe of the GGX kernel (the ellipsoid included), whose kernel is the GGX fitted to it.
+        let ggx_family = |id: ModelId| {
+            let s = id.spec();
+            !s.is_mixture() && s.lobes[0].kernel == crate::models::table::Kernel::Ggx
+        };
         let ggx_kernel = match fitter {
             Some(f) if opts.models.iter().any(|&id| ggx_family(id)) => {
                 ggx_kernel(f, &stats.sigma_f, s_res.len(), cells, seed ^ 0x6b65_726e_656c)
@@ -339,12 +343,10 @@ fn model_at_footprint(
     };
     let (analytic, tokuyoshi_iso) = match base {
         Ok((m, source)) => {
-            let iso = match m {
-                Model::Ggx(g) => Some(g.alpha_x),
-                Model::Beckmann(b) => Some(b.alpha_x),
-                _ => None,
-            }
-            .map(|a| (filter_isotropic(a, &stats.sigma_f, IsoRule::Eq10), filter_isotropic(a, &stats.sigma_f, IsoRule::Eq13)));
+            let spec = m.id().spec();
+            let iso = (!spec.is_mixture() && spec.lobes[0].form == crate::models::table::Form::Iso)
+                .then(|| spec.parts(&m.params(), 0).alpha_x)
+                .map(|a| (filter_isotropic(a, &stats.sigma_f, IsoRule::Eq10), filter_isotropic(a, &stats.sigma_f, IsoRule::Eq13)));
             // Tokuyoshi eq. 3: + 2 Sigma_F, or the same kernel in GGX units for GGX-shaped models (sec. 4a).
             let kernel = ggx_kernel.unwrap_or(2.0 * stats.sigma_f);
             match add_kernel_matrix(&m, &kernel) {

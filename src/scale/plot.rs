@@ -92,7 +92,7 @@ pub fn write_plot(path: &Path, results: &[FootprintResult]) -> Result<()> {
         )?;
         // Panel 2: angles.
         let mut ang = Vec::new();
-        if id == ModelId::Ellipsoid {
+        if id.spec().slot_any(crate::models::Role::ThetaX).is_some() && !id.is_mixture() {
             ang.push(("theta_x empirical".to_string(), series(results, id, false, deg(2)), BLUE, false));
             ang.push(("theta_x analytic".to_string(), series(results, id, true, deg(2)), BLUE, true));
             ang.push(("theta_y empirical".to_string(), series(results, id, false, deg(3)), RED, false));

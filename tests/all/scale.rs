@@ -244,7 +244,7 @@ mod cli {
         let csv = std::fs::read_to_string(dir.path().join("a/scale.csv")).unwrap();
         assert!(csv.starts_with(ndfit::scale::report::CSV_HEADER));
         // 5 footprints x 8 models (the single lobes and the mixtures) x 2 routes + header.
-        let n_models = ndfit::models::ModelId::ALL.len() + ndfit::models::ModelId::MIXTURES.len();
+        let n_models = ndfit::models::ModelId::EVERY.len();
         assert_eq!(csv.lines().count(), 1 + 5 * n_models * 2);
         let png = std::fs::read(dir.path().join("a/scale.png")).unwrap();
         assert_eq!(&png[1..4], b"PNG");

@@ -34,7 +34,7 @@ fn random_params(id: ModelId, rng: &mut rand::rngs::StdRng) -> Vec<f64> {
 #[test]
 fn mixture_ln_d_matches_the_lobes_mixed_by_hand() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
-    for id in ModelId::MIXTURES {
+    for id in ModelId::mixtures() {
         for _ in 0..50 {
             let p = random_params(id, &mut rng);
             let (d1, d2, w): (Model, Model, f64) = match id {
@@ -61,7 +61,7 @@ fn mixture_ln_d_matches_the_lobes_mixed_by_hand() {
 #[test]
 fn mixture_ln_d_gradient_matches_central_differences() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(12);
-    for id in ModelId::MIXTURES {
+    for id in ModelId::mixtures() {
         for _ in 0..40 {
             let x = to_internal(id, &random_params(id, &mut rng));
             let dir = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(0.2..1.0)).normalize();
@@ -120,7 +120,7 @@ fn mixture_residual_jacobian_matches_central_differences() {
 #[test]
 fn mixture_canonical_form_keeps_d_and_orders_the_lobes() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(13);
-    for id in ModelId::MIXTURES {
+    for id in ModelId::mixtures() {
         for _ in 0..200 {
             let p = random_params(id, &mut rng);
             let m = model(id, &p);

@@ -35,7 +35,7 @@ fn library_reports_of_every_model_validate() {
         file_grid: None,
         despike: None,
     };
-    let mut reports: Vec<_> = ModelId::ALL.iter().map(|&id| fit_model(&ndf, id, &FitOptions::default()).expect("fit")).collect();
+    let mut reports: Vec<_> = ModelId::singles().map(|id| fit_model(&ndf, id, &FitOptions::default()).expect("fit")).collect();
     reports.push(fit_auto(&ndf, &FitOptions::default()).expect("auto"));
     for mut r in reports {
         r.input = Some(input.clone());
