@@ -232,7 +232,7 @@ pub fn export(model: &Model, target: Target, max_theta_deg: f64) -> Result<Expor
         (_, Some(l)) if l.distribution == Distribution::Beckmann => format!("{} has no Beckmann lobe", target.as_str()),
         (_, Some(l)) if l.alpha_u > BLENDER_MAX_ALPHA => format!("Blender saturates alphas at 1, the fit has alpha_x = {:.4}", l.alpha_u),
         (_, Some(l)) => format!("Blender's anisotropy is at most 10:1, the fit has {:.2}:1", l.alpha_u / l.alpha_v),
-        _ => "the model is not representable".to_string(),
+        _ => format!("no renderer implements the {} lobe ({})", model.id(), spec.about),
     };
     let beckmann_model = spec.lobes[0].kernel == crate::models::table::Kernel::Beckmann && !spec.is_mixture();
     let distribution = if beckmann_model && target.has_beckmann() { Distribution::Beckmann } else { Distribution::Ggx };

@@ -239,7 +239,7 @@ mod tests {
     use nalgebra::Vector3;
 
     use super::*;
-    use crate::models::Ndf;
+    use crate::models::{Ellipsoid, Ggx, Ndf};
 
     fn slope_to_m(s: Vector2<f64>) -> Vector3<f64> {
         Vector3::new(-s[0], -s[1], 1.0).normalize()

@@ -54,7 +54,8 @@ impl Default for ScaleOptions {
     fn default() -> Self {
         ScaleOptions {
             footprints: vec![],
-            models: ModelId::singles().collect(),
+            // The single lobes a renderer implements (a lobe without one is priced against them by `fit`).
+            models: ModelId::singles().filter(|id| id.spec().lobes[0].kernel.renderer().is_some()).collect(),
             samples_per_point: 4,
             bins: None,
             seed: 1,

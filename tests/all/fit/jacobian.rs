@@ -9,7 +9,7 @@ use ndfit::fit::lnd::LnD;
 use ndfit::fit::objective::{FitData, Objective};
 use ndfit::fit::params::{to_internal, to_public};
 use ndfit::fit::problem::{jacobian_into, residuals_into};
-use ndfit::models::{ModelId, Ndf};
+use ndfit::models::{ModelId, Ndf, Role};
 use rand::{RngExt, SeedableRng};
 
 use super::fixtures::model;
@@ -19,13 +19,19 @@ const H: f64 = 1e-5;
 fn random_params(id: ModelId, rng: &mut rand::rngs::StdRng) -> Vec<f64> {
     let a = |rng: &mut rand::rngs::StdRng| 10f64.powf(rng.random_range(-2.5..0.5));
     let t = |rng: &mut rand::rngs::StdRng, r: f64| rng.random_range(-r..r);
-    match id {
-        ModelId::Ggx | ModelId::Beckmann => vec![a(rng)],
-        ModelId::GgxAniso | ModelId::BeckmannAniso => vec![a(rng), a(rng), t(rng, 3.0)],
-        ModelId::Ellipsoid => vec![a(rng), a(rng), t(rng, 1.2), t(rng, 1.2), t(rng, 3.0)],
-        // The mixtures have their own checks (fit/mixture.rs).
-        ModelId::Ggx2 | ModelId::Beckmann2 | ModelId::EllipsoidGgx => unreachable!("single-lobe ids only"),
-    }
+    // By the table's roles, so every single-lobe model is covered (the mixtures have their own checks).
+    id.spec()
+        .roles
+        .iter()
+        .map(|(r, _)| match r {
+            Role::Alpha | Role::AlphaX | Role::AlphaY => a(rng),
+            Role::ThetaX | Role::ThetaY => t(rng, 1.2),
+            Role::ThetaZ => t(rng, 3.0),
+            // Heavy tails near the Smith limit 3/2 to nearly Beckmann.
+            Role::Gamma => 1.5 + 10f64.powf(rng.random_range(-1.5..2.0)),
+            Role::Weight => unreachable!("single-lobe ids only"),
+        })
+        .collect()
 }
 
 #[test]
