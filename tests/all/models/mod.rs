@@ -13,3 +13,4 @@ mod masking;
 mod mixture;
 mod normalization;
 mod sampling;
+mod student;
