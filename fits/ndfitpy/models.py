@@ -293,3 +293,81 @@ def log_slope_density(model: str, params, slopes) -> np.ndarray:
 def slope_density(model: str, params, slopes) -> np.ndarray:
     """P22 of the model at slopes (x, y): ``D(m) cos^4(theta_m)`` (Heitz eq. 64)."""
     return np.exp(log_slope_density(model, params, slopes))
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The Student-t slope distribution (STD), Ribardiere, Bringier, Meneveaux and Simonot, Computer Graphics
+# Forum 36(2), 2017: P22 = (gamma-1)^gamma / (pi ax ay (gamma - 1 + x'^2/ax^2 + y'^2/ay^2)^gamma) over the
+# slopes of m' = Rz(theta_z) m, D = P22 / cos^4 (Heitz eq. 64). gamma = 2 is GGX, gamma -> inf Beckmann.
+# Its ids are ``student`` (alpha, gamma) and ``student-aniso`` (alpha_x, alpha_y, theta_z, gamma); alpha_x lies
+# along (cos theta_z, -sin theta_z) in the scan frame, as for ggx-aniso.
+
+#: Exclusive lower bound of gamma: at 3/2 the mean slope, and with it Smith's Lambda, diverges.
+STUDENT_GAMMA_MIN = 1.5
+
+#: Largest gamma (the Rust model's bound): beyond it the lobe is Beckmann for any scan's counting noise.
+STUDENT_GAMMA_MAX = 1e5
+
+#: Parameter names of the STD lobes (kept apart from PARAM_NAMES until the fitter handles them).
+STUDENT_PARAM_NAMES: Dict[str, tuple] = {
+    "student": ("alpha", "gamma"),
+    "student-aniso": ("alpha_x", "alpha_y", "theta_z", "gamma"),
+}
+
+
+def _student_log_d_grad(ax: float, ay: float, tz: float, gamma: float, m: np.ndarray, want_grad: bool):
+    """ln D of the STD lobe and its gradient in (alpha_x, alpha_y, theta_z, gamma).
+
+    With the stretched slope squared e = (x'/ax)^2 + (y'/ay)^2 and p = gamma - 1, the paper's density reads
+    P22 = (1 + e/p)^-gamma / (pi ax ay), so ln D = -ln pi - ln ax - ln ay - 4 ln cos - gamma ln(1 + e/p).
+    """
+    if not (gamma > STUDENT_GAMMA_MIN and math.isfinite(gamma)):
+        raise ValueError(f"student: gamma must be finite and > {STUDENT_GAMMA_MIN}, got {gamma}")
+    if not (ax > 0.0 and ay > 0.0):
+        raise ValueError(f"student: alpha_x and alpha_y must be > 0, got {ax}, {ay}")
+    p = gamma - 1.0
+    norm = np.linalg.norm(m, axis=1)
+    mu = m / norm[:, None]
+    mp = mu @ rot_z(tz).T
+    z = mu[:, 2]
+    below = z <= 0.0
+    zs = np.where(below, 1.0, z)
+    sx = mp[:, 0] / zs
+    sy = mp[:, 1] / zs
+    e = sx * sx / (ax * ax) + sy * sy / (ay * ay)
+    l1p = np.log1p(e / p)
+    logd = -_LN_PI - math.log(ax) - math.log(ay) - 4.0 * np.log(zs) - gamma * l1p
+    logd[below] = -np.inf
+    if not want_grad:
+        return logd, None
+    # d ln D / d e = -gamma / (p + e).
+    de = -gamma / (p + e)
+    dmp = mu @ _drot_z(tz).T
+    g = np.empty((m.shape[0], 4))
+    g[:, 0] = -1.0 / ax + de * (-2.0 * sx * sx / ax**3)
+    g[:, 1] = -1.0 / ay + de * (-2.0 * sy * sy / ay**3)
+    g[:, 2] = de * (2.0 * sx * dmp[:, 0] / zs / (ax * ax) + 2.0 * sy * dmp[:, 1] / zs / (ay * ay))
+    # d/dgamma of -gamma ln(1 + e/p), p = gamma - 1.
+    g[:, 3] = -l1p + gamma * e / (p * (p + e))
+    g[below] = 0.0
+    return logd, g
+
+
+def student_log_d_and_grad(model: str, params, m, want_grad: bool = True):
+    """ln D and d ln D / d params of ``student`` (alpha, gamma) or ``student-aniso`` (alpha_x, alpha_y,
+    theta_z, gamma); -inf (and a zero gradient row) where m.n <= 0."""
+    if model not in STUDENT_PARAM_NAMES:
+        raise ValueError(f"unknown model '{model}' (expected student or student-aniso)")
+    p = np.asarray(params, dtype=float).reshape(-1)
+    if p.size != len(STUDENT_PARAM_NAMES[model]) or not np.all(np.isfinite(p)):
+        raise ValueError(f"model '{model}' takes {len(STUDENT_PARAM_NAMES[model])} finite parameters, got {p.tolist()}")
+    m = _as_dirs(m)
+    if model == "student":
+        logd, g = _student_log_d_grad(p[0], p[0], 0.0, p[1], m, want_grad)
+        return logd, (np.column_stack([g[:, 0] + g[:, 1], g[:, 3]]) if want_grad else None)
+    return _student_log_d_grad(p[0], p[1], p[2], p[3], m, want_grad)
+
+
+def student_d(model: str, params, m) -> np.ndarray:
+    """D(m) (1/sr) of ``student`` or ``student-aniso`` at directions ``m``."""
+    return np.exp(student_log_d_and_grad(model, params, m, want_grad=False)[0])

@@ -37,6 +37,7 @@ pub mod roughness_matrix;
 pub mod sampling;
 pub mod sel;
 pub mod spec;
+pub mod student;
 pub mod table;
 
 pub use axes::LobeAxes;
@@ -48,6 +49,7 @@ pub use ggx::Ggx;
 pub use mixture::{Lobe, Mixture, MixtureKind};
 pub use roughness_matrix::{disk_to_slope_jacobian, GgxMatrix};
 pub use sel::SquaredEllipsoidalLobe;
+pub use student::Student;
 pub use table::{ModelId, ModelSpec, Role};
 
 use nalgebra::{Matrix3, Vector3};

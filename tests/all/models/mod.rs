@@ -13,4 +13,5 @@ mod masking;
 mod mixture;
 mod normalization;
 mod sampling;
+mod student;
 mod table;
