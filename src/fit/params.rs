@@ -12,12 +12,16 @@
 //! `ggx`, `beckmann`: `[u]`; `ggx-aniso`, `beckmann-aniso`: `[u_x, u_y, theta_z]`;
 //! `ellipsoid`: `[u_x, u_y, theta_x, theta_y, theta_z]`.
 //!
+//! A Student-t tail's `gamma` is bounded logistic, `gamma = GAMMA_MIN + (GAMMA_MAX - GAMMA_MIN) / (1 + exp(-g))`
+//! ([`gamma_of`]).
+//!
 //! The mixtures' weight is logistic, `w = 1 / (1 + exp(-v))`, in `(0, 1)` for every real `v`
 //! ([`super::lnd_mixture`] gives their internal vectors). A mixture lobe's roughness is bounded above as
 //! well, `alpha = ALPHA_MIN + (LOBE_ALPHA_MAX - ALPHA_MIN) / (1 + exp(-u))` ([`LOBE_ALPHA_MAX`] says why);
 //! near the floor this is the single lobes' map scaled (`ALPHA_MIN + (LOBE_ALPHA_MAX - ALPHA_MIN) exp(u)`),
 //! and the single lobes keep theirs, so their fits do not move.
 
+use crate::models::student::{GAMMA_MAX, GAMMA_MIN};
 use crate::models::{ModelId, Role, ALPHA_MIN};
 
 /// The largest roughness of a mixture lobe (`ggx2`, `beckmann2`, `ellipsoid+ggx`), on every axis; the
@@ -100,6 +104,33 @@ pub fn weight_slot(id: ModelId) -> Option<usize> {
     id.spec().slot_any(Role::Weight)
 }
 
+/// Index of a Student-t tail's `gamma` (`g`) in a model's internal vector.
+pub fn gamma_slot(id: ModelId) -> Option<usize> {
+    id.spec().slot_any(Role::Gamma)
+}
+
+/// `g -> gamma` of a Student-t tail: `GAMMA_MIN + (GAMMA_MAX - GAMMA_MIN) / (1 + exp(-g))`, in
+/// `(GAMMA_MIN, GAMMA_MAX)` for every real `g` ([`crate::models::student`] says why those ends). Near the
+/// GGX value 2 it is `GAMMA_MIN + (GAMMA_MAX - GAMMA_MIN) exp(g)`: relative changes of `gamma - 3/2` are what
+/// LM moves, as for the roughnesses.
+#[inline]
+pub fn gamma_of(g: f64) -> f64 {
+    GAMMA_MIN + (GAMMA_MAX - GAMMA_MIN) * weight_of(g)
+}
+
+/// `d gamma / d g` of [`gamma_of`].
+#[inline]
+pub fn gamma_dg(g: f64) -> f64 {
+    (GAMMA_MAX - GAMMA_MIN) * weight_of(g) * weight_of(-g)
+}
+
+/// `gamma -> g`, the inverse of [`gamma_of`]; a `gamma` at (or beyond) either end maps to a finite `g`.
+#[inline]
+pub fn g_of(gamma: f64) -> f64 {
+    let t = ((gamma - GAMMA_MIN) / (GAMMA_MAX - GAMMA_MIN)).clamp(1e-15, 1.0 - 1e-12);
+    t.ln() - (-t).ln_1p()
+}
+
 /// `v -> w`: `1 / (1 + exp(-v))`.
 #[inline]
 pub fn weight_of(v: f64) -> f64 {
@@ -122,6 +153,9 @@ pub fn to_public(id: ModelId, x: &[f64]) -> Vec<f64> {
     if let Some(i) = weight_slot(id) {
         p[i] = weight_of(x[i]);
     }
+    if let Some(i) = gamma_slot(id) {
+        p[i] = gamma_of(x[i]);
+    }
     p
 }
 
@@ -133,6 +167,9 @@ pub fn to_internal(id: ModelId, p: &[f64]) -> Vec<f64> {
     }
     if let Some(i) = weight_slot(id) {
         x[i] = v_of(p[i]);
+    }
+    if let Some(i) = gamma_slot(id) {
+        x[i] = g_of(p[i]);
     }
     x
 }
@@ -147,6 +184,9 @@ pub fn public_derivative(id: ModelId, x: &[f64]) -> Vec<f64> {
     if let Some(i) = weight_slot(id) {
         let w = weight_of(x[i]);
         g[i] = w * (1.0 - w);
+    }
+    if let Some(i) = gamma_slot(id) {
+        g[i] = gamma_dg(x[i]);
     }
     g
 }
