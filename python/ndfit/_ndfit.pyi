@@ -11,7 +11,7 @@ __version__: str
 _Path = Union[str, PathLike[str]]
 _Source = Union["Scan", _Path]
 _Form = Literal["none", "plane", "poly2", "poly3", "cylinder"]
-_Model = Literal["auto", "ggx", "beckmann", "ggx-aniso", "beckmann-aniso", "ellipsoid", "ggx2", "beckmann2", "ellipsoid+ggx"]
+_Model = Literal["auto", "ggx", "beckmann", "student", "ggx-aniso", "beckmann-aniso", "student-aniso", "ellipsoid", "ggx2", "beckmann2", "ellipsoid+ggx"]
 _Directions = npt.ArrayLike  # shape (n, 3) or (3,)
 
 class NdfitError(Exception):

@@ -11,10 +11,13 @@
 //! GGX and GTR2aniso are this with `theta_x = theta_y = 0` (Walter et al. sec. 4.2); isotropic GGX ties
 //! both roughnesses to one parameter. Anisotropic Beckmann (Heitz eq. 82) with `l = Rz m`:
 //! `ln D = -(l1^2/ax^2 + l2^2/ay^2)/l3^2 - ln pi - ln ax - ln ay - 4 ln l3`.
+//! The Student-t lobe ([`crate::models::student`]) with `e = (l1^2/ax^2 + l2^2/ay^2)/l3^2`, `p = gamma - 1`:
+//! `ln D = -gamma ln(1 + e/p) - ln pi - ln ax - ln ay - 4 ln l3`, whose `gamma` derivative is
+//! `-ln(1 + e/p) + gamma e / (p (p + e))`.
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::params::{alpha_of, bounded_alpha_du, bounded_alpha_of};
+use super::params::{alpha_of, bounded_alpha_du, bounded_alpha_of, gamma_dg, gamma_of};
 use crate::models::ellipsoid::rotation_xyz;
 use crate::models::table::{Form, Kernel};
 use crate::models::ModelId;
@@ -80,7 +83,11 @@ impl LnD {
 #[derive(Debug, Clone)]
 pub struct LobeLnD {
     shape: Shape,
-    beckmann: bool,
+    kernel: Kernel,
+    /// The Student-t tail: `gamma`, `1 / (gamma - 1)` and `d gamma / d g` (unused by the other kernels).
+    gamma: f64,
+    ip: f64,
+    gg: f64,
     ax: f64,
     ay: f64,
     /// `1 / ax`, `1 / ay` (multiplications in the per-bin work instead of divisions).
@@ -117,12 +124,15 @@ impl LobeLnD {
     /// Freeze a lobe of `shape` at its internal vector `x` (`[u]`, `[u_x, u_y, theta_z]` or the
     /// ellipsoid's five); `bounded`: a mixture lobe's roughness map ([`super::params::bounded_alpha_of`]).
     pub(crate) fn with_shape(shape: Shape, kernel: Kernel, bounded: bool, x: &[f64]) -> LobeLnD {
-        let beckmann = kernel == Kernel::Beckmann;
+        let beckmann = kernel != Kernel::Ggx;
         let (ux, uy, tx, ty, tz) = match shape {
             Shape::Iso => (x[0], x[0], 0.0, 0.0, 0.0),
             Shape::Aniso => (x[0], x[1], 0.0, 0.0, x[2]),
             Shape::Full => (x[0], x[1], x[2], x[3], x[4]),
         };
+        // A tail parameter follows the lobe's geometry (the table's roles); GGX's 2 when there is none.
+        let g = (kernel == Kernel::Student).then(|| x[Self::geometry_len(shape)]);
+        let (gamma, gg) = g.map_or((2.0, 0.0), |g| (gamma_of(g), gamma_dg(g)));
         let (ax, ay, gx, gy) = if bounded {
             (bounded_alpha_of(ux), bounded_alpha_of(uy), bounded_alpha_du(ux), bounded_alpha_du(uy))
         } else {
@@ -146,7 +156,10 @@ impl LobeLnD {
         let (an2_ax, an2_ay) = (2.0 * sy * sy, 2.0 * sx * sx * cy * cy);
         LobeLnD {
             shape,
-            beckmann,
+            kernel,
+            gamma,
+            ip: 1.0 / (gamma - 1.0),
+            gg,
             ax,
             ay,
             iax: 1.0 / ax,
@@ -167,17 +180,36 @@ impl LobeLnD {
         }
     }
 
+    /// How many internal parameters a lobe's geometry takes (the tail's slot follows them).
+    fn geometry_len(shape: Shape) -> usize {
+        match shape {
+            Shape::Iso => 1,
+            Shape::Aniso => 3,
+            Shape::Full => 5,
+        }
+    }
+
     /// `ln D(m)` for a unit `m` with `m.z > 0`.
     #[inline]
     pub fn value(&self, m: &Vector3<f64>) -> f64 {
         let v = self.r * m;
-        if self.beckmann {
-            let z2 = v.z * v.z;
-            let e = ((v.x * self.iax).powi(2) + (v.y * self.iay).powi(2)) / z2;
-            return self.constant - e - 2.0 * z2.ln();
+        match self.kernel {
+            Kernel::Beckmann => {
+                let z2 = v.z * v.z;
+                let e = ((v.x * self.iax).powi(2) + (v.y * self.iay).powi(2)) / z2;
+                self.constant - e - 2.0 * z2.ln()
+            }
+            Kernel::Student => {
+                let z2 = v.z * v.z;
+                let e = ((v.x * self.iax).powi(2) + (v.y * self.iay).powi(2)) / z2;
+                // gamma ln(1 + e/p) rather than gamma (ln(p + e) - ln p): no cancellation at large gamma.
+                self.constant - self.gamma * (e * self.ip).ln_1p() - 2.0 * z2.ln()
+            }
+            Kernel::Ggx => {
+                let q = (v.x * self.iax).powi(2) + (v.y * self.iay).powi(2) + v.z * v.z;
+                self.constant - 2.0 * q.ln()
+            }
         }
-        let q = (v.x * self.iax).powi(2) + (v.y * self.iay).powi(2) + v.z * v.z;
-        self.constant - 2.0 * q.ln()
     }
 
     /// `ln D(m)` and its gradient with respect to the internal parameters, written into `grad`
@@ -196,20 +228,35 @@ impl LobeLnD {
         let v = self.r * m;
         let (iax2, iay2) = (self.iax * self.iax, self.iay * self.iay);
         // d lnD / d ax, d lnD / d ay, and d lnD / d v (for the angles).
-        let (dax, day, dv) = if self.beckmann {
-            let z2 = v.z * v.z;
-            let e = (v.x * v.x * iax2 + v.y * v.y * iay2) / z2;
-            let dax = -1.0 / ax + 2.0 * v.x * v.x * iax2 / (ax * z2);
-            let day = -1.0 / ay + 2.0 * v.y * v.y * iay2 / (ay * z2);
-            let dv = Vector3::new(-2.0 * v.x * iax2 / z2, -2.0 * v.y * iay2 / z2, 2.0 * e / v.z - 4.0 / v.z);
-            (dax, day, dv)
-        } else {
-            let q = v.x * v.x * iax2 + v.y * v.y * iay2 + v.z * v.z;
-            let iq = 1.0 / q;
-            let dax = self.k_ax + self.c_ax * v.x * v.x * iq;
-            let day = self.k_ay + self.c_ay * v.y * v.y * iq;
-            let dv = Vector3::new(v.x * iax2, v.y * iay2, v.z) * (-4.0 * iq);
-            (dax, day, dv)
+        let mut dgamma = 0.0;
+        let (dax, day, dv) = match self.kernel {
+            Kernel::Beckmann => {
+                let z2 = v.z * v.z;
+                let e = (v.x * v.x * iax2 + v.y * v.y * iay2) / z2;
+                let dax = -1.0 / ax + 2.0 * v.x * v.x * iax2 / (ax * z2);
+                let day = -1.0 / ay + 2.0 * v.y * v.y * iay2 / (ay * z2);
+                let dv = Vector3::new(-2.0 * v.x * iax2 / z2, -2.0 * v.y * iay2 / z2, 2.0 * e / v.z - 4.0 / v.z);
+                (dax, day, dv)
+            }
+            Kernel::Student => {
+                let z2 = v.z * v.z;
+                let e = (v.x * v.x * iax2 + v.y * v.y * iay2) / z2;
+                // h = gamma / (p + e) = d(gamma ln(1 + e/p)) / de.
+                let h = self.gamma * self.ip / (1.0 + e * self.ip);
+                let dax = -1.0 / ax + 2.0 * h * v.x * v.x * iax2 / (ax * z2);
+                let day = -1.0 / ay + 2.0 * h * v.y * v.y * iay2 / (ay * z2);
+                let dv = Vector3::new(-2.0 * h * v.x * iax2 / z2, -2.0 * h * v.y * iay2 / z2, 2.0 * h * e / v.z - 4.0 / v.z);
+                dgamma = -(e * self.ip).ln_1p() + h * e * self.ip;
+                (dax, day, dv)
+            }
+            Kernel::Ggx => {
+                let q = v.x * v.x * iax2 + v.y * v.y * iay2 + v.z * v.z;
+                let iq = 1.0 / q;
+                let dax = self.k_ax + self.c_ax * v.x * v.x * iq;
+                let day = self.k_ay + self.c_ay * v.y * v.y * iq;
+                let dv = Vector3::new(v.x * iax2, v.y * iay2, v.z) * (-4.0 * iq);
+                (dax, day, dv)
+            }
         };
         let dtz = dv.dot(&(self.r_tz * m));
         match self.shape {
@@ -226,6 +273,9 @@ impl LobeLnD {
                 grad[3] = dv.dot(&(self.r_ty * m)) + self.k_ty;
                 grad[4] = dtz;
             }
+        }
+        if self.kernel == Kernel::Student {
+            grad[Self::geometry_len(self.shape)] = dgamma * self.gg;
         }
     }
 }

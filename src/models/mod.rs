@@ -91,7 +91,13 @@ impl ModelId {
             ModelId::Ggx2 => Some(MixtureKind::Ggx2),
             ModelId::Beckmann2 => Some(MixtureKind::Beckmann2),
             ModelId::EllipsoidGgx => Some(MixtureKind::EllipsoidGgx),
-            ModelId::Ggx | ModelId::Beckmann | ModelId::GgxAniso | ModelId::BeckmannAniso | ModelId::Ellipsoid => None,
+            ModelId::Ggx
+            | ModelId::Beckmann
+            | ModelId::Student
+            | ModelId::GgxAniso
+            | ModelId::BeckmannAniso
+            | ModelId::StudentAniso
+            | ModelId::Ellipsoid => None,
         }
     }
 
@@ -210,6 +216,10 @@ pub enum Model {
     Beckmann(Beckmann),
     /// `beckmann-aniso`.
     BeckmannAniso(Beckmann),
+    /// `student`.
+    Student(Student),
+    /// `student-aniso`.
+    StudentAniso(Student),
     /// `ellipsoid`.
     Ellipsoid(Ellipsoid),
     /// `ggx2`, `beckmann2`, `ellipsoid+ggx`.
@@ -238,6 +248,8 @@ impl Model {
             ModelId::GgxAniso => Model::GgxAniso(Ggx::new(g.alpha_x, g.alpha_y, g.theta_z)?),
             ModelId::Beckmann => Model::Beckmann(Beckmann::new(g.alpha_x, g.alpha_x, 0.0)?),
             ModelId::BeckmannAniso => Model::BeckmannAniso(Beckmann::new(g.alpha_x, g.alpha_y, g.theta_z)?),
+            ModelId::Student => Model::Student(Student::new(g.alpha_x, g.alpha_x, 0.0, g.gamma.unwrap_or(f64::NAN))?),
+            ModelId::StudentAniso => Model::StudentAniso(Student::new(g.alpha_x, g.alpha_y, g.theta_z, g.gamma.unwrap_or(f64::NAN))?),
             ModelId::Ellipsoid => Model::Ellipsoid(Ellipsoid::from_params(g.alpha_x, g.alpha_y, g.theta_x, g.theta_y, g.theta_z)?),
             ModelId::Ggx2 => Model::Mixture(Mixture::from_params(MixtureKind::Ggx2, p)?),
             ModelId::Beckmann2 => Model::Mixture(Mixture::from_params(MixtureKind::Beckmann2, p)?),
@@ -252,6 +264,8 @@ impl Model {
             Model::GgxAniso(_) => ModelId::GgxAniso,
             Model::Beckmann(_) => ModelId::Beckmann,
             Model::BeckmannAniso(_) => ModelId::BeckmannAniso,
+            Model::Student(_) => ModelId::Student,
+            Model::StudentAniso(_) => ModelId::StudentAniso,
             Model::Ellipsoid(_) => ModelId::Ellipsoid,
             Model::Mixture(x) => match x.kind {
                 MixtureKind::Ggx2 => ModelId::Ggx2,
@@ -268,6 +282,8 @@ impl Model {
             Model::GgxAniso(g) => vec![g.alpha_x, g.alpha_y, g.theta_z],
             Model::Beckmann(b) => vec![b.alpha_x],
             Model::BeckmannAniso(b) => vec![b.alpha_x, b.alpha_y, b.theta_z],
+            Model::Student(t) => vec![t.alpha_x, t.gamma],
+            Model::StudentAniso(t) => vec![t.alpha_x, t.alpha_y, t.theta_z, t.gamma],
             Model::Ellipsoid(e) => e.params().to_vec(),
             Model::Mixture(x) => x.params(),
         }
@@ -279,7 +295,7 @@ impl Model {
         match self {
             Model::Ggx(g) | Model::GgxAniso(g) => Some(g.to_ellipsoid().a()),
             Model::Ellipsoid(e) => Some(e.a()),
-            Model::Beckmann(_) | Model::BeckmannAniso(_) | Model::Mixture(_) => None,
+            Model::Beckmann(_) | Model::BeckmannAniso(_) | Model::Student(_) | Model::StudentAniso(_) | Model::Mixture(_) => None,
         }
     }
 }
@@ -291,6 +307,7 @@ impl Model {
         match self {
             Model::Ggx(g) | Model::GgxAniso(g) => g.g1(u, m),
             Model::Beckmann(b) | Model::BeckmannAniso(b) => b.g1(u, m),
+            Model::Student(t) | Model::StudentAniso(t) => t.g1(u, m),
             Model::Ellipsoid(e) => e.g1(u, m),
             Model::Mixture(x) => x.g1(u, m),
         }
@@ -304,6 +321,7 @@ impl Model {
         match self {
             Model::Ggx(g) | Model::GgxAniso(g) => g.lambda(u),
             Model::Beckmann(b) | Model::BeckmannAniso(b) => b.lambda(u),
+            Model::Student(t) | Model::StudentAniso(t) => t.lambda(u),
             Model::Ellipsoid(e) => e.lambda(u),
             Model::Mixture(x) => x.lambda(u),
         }
@@ -324,6 +342,8 @@ impl Model {
                 let (ax, ay, tz) = canonical::canonical_aniso(b.alpha_x, b.alpha_y, b.theta_z);
                 Model::BeckmannAniso(Beckmann { alpha_x: ax, alpha_y: ay, theta_z: tz })
             }
+            Model::Student(t) => Model::Student(t),
+            Model::StudentAniso(t) => Model::StudentAniso(t.canonical()),
             Model::Ellipsoid(e) => Model::Ellipsoid(e.canonical()),
             Model::Mixture(x) => Model::Mixture(x.canonical()),
         }
@@ -346,7 +366,7 @@ impl Model {
         match self {
             Model::Ggx(g) | Model::GgxAniso(g) => Some(g.to_ellipsoid()),
             Model::Ellipsoid(e) => Some(*e),
-            Model::Beckmann(_) | Model::BeckmannAniso(_) | Model::Mixture(_) => None,
+            Model::Beckmann(_) | Model::BeckmannAniso(_) | Model::Student(_) | Model::StudentAniso(_) | Model::Mixture(_) => None,
         }
     }
 }
@@ -365,6 +385,7 @@ impl Ndf for Model {
         match self {
             Model::Ggx(g) | Model::GgxAniso(g) => g.d(m),
             Model::Beckmann(b) | Model::BeckmannAniso(b) => b.d(m),
+            Model::Student(t) | Model::StudentAniso(t) => t.d(m),
             Model::Ellipsoid(e) => e.d(m),
             Model::Mixture(x) => x.d(m),
         }

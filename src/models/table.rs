@@ -49,6 +49,8 @@ pub enum Kernel {
     Ggx,
     /// Beckmann (Heitz eq. 82).
     Beckmann,
+    /// The Student-t slopes of Ribardiere et al. ([`super::student`]): a free tail, GGX at `gamma = 2`.
+    Student,
 }
 
 impl Kernel {
@@ -57,6 +59,7 @@ impl Kernel {
         match self {
             Kernel::Ggx => Some(Distribution::Ggx),
             Kernel::Beckmann => Some(Distribution::Beckmann),
+            Kernel::Student => None,
         }
     }
 }
@@ -206,8 +209,8 @@ macro_rules! model_table {
 }
 
 use Form::{Aniso, Full, Iso};
-use Kernel::{Beckmann, Ggx};
-use Role::{Alpha, AlphaX, AlphaY, ThetaX, ThetaY, ThetaZ, Weight};
+use Kernel::{Beckmann, Ggx, Student};
+use Role::{Alpha, AlphaX, AlphaY, Gamma, ThetaX, ThetaY, ThetaZ, Weight};
 
 const ANISO: &[(Role, Lobes)] = &[(AlphaX, L1), (AlphaY, L1), (ThetaZ, L1)];
 const ANISO_NAMES: &[&str] = &["alpha_x", "alpha_y", "theta_z"];
@@ -225,6 +228,12 @@ model_table! {
         names: &["alpha"], roles: &[(Alpha, L1)], lobes: &[LobeSpec { kernel: Beckmann, form: Iso }],
         matrix_a: false, parent: None, in_auto: true,
     },
+    /// Isotropic Student-t slopes ([`super::student`]): `alpha`, `gamma`.
+    Student => ModelSpec {
+        name: "student", aliases: &["std"], about: "isotropic Student-t slopes (STD), a free tail: GGX at gamma = 2, Beckmann as gamma grows",
+        names: &["alpha", "gamma"], roles: &[(Alpha, L1), (Gamma, L1)], lobes: &[LobeSpec { kernel: Student, form: Iso }],
+        matrix_a: false, parent: Some(ModelId::Ggx), in_auto: true,
+    },
     /// GTR2aniso rotated by `theta_z`: `alpha_x`, `alpha_y`, `theta_z`.
     GgxAniso => ModelSpec {
         name: "ggx-aniso", aliases: &["gtr2aniso"], about: "anisotropic GGX, GTR2aniso, rotated by theta_z",
@@ -236,6 +245,13 @@ model_table! {
         name: "beckmann-aniso", aliases: &[], about: "anisotropic Beckmann rotated by theta_z",
         names: ANISO_NAMES, roles: ANISO, lobes: &[LobeSpec { kernel: Beckmann, form: Aniso }],
         matrix_a: false, parent: Some(ModelId::Beckmann), in_auto: true,
+    },
+    /// Anisotropic Student-t slopes rotated by `theta_z`: `alpha_x`, `alpha_y`, `theta_z`, `gamma`.
+    StudentAniso => ModelSpec {
+        name: "student-aniso", aliases: &["std-aniso"], about: "anisotropic Student-t slopes rotated by theta_z, a free tail",
+        names: &["alpha_x", "alpha_y", "theta_z", "gamma"], roles: &[(AlphaX, L1), (AlphaY, L1), (ThetaZ, L1), (Gamma, L1)],
+        lobes: &[LobeSpec { kernel: Student, form: Aniso }],
+        matrix_a: false, parent: Some(ModelId::GgxAniso), in_auto: true,
     },
     /// The ellipsoid NDF, A = S R (Walter et al. eq. 2-3): `alpha_x`, `alpha_y`, `theta_x`, `theta_y`, `theta_z`.
     Ellipsoid => ModelSpec {
