@@ -244,7 +244,7 @@ mod tests {
     #[test]
     fn the_coarsest_lattice_is_found() {
         let (nx, ny) = (300, 280);
-        let q = 2.5e-7;
+        let q = 5e-7;
         let z: Vec<f64> = (0..nx * ny)
             .map(|k| {
                 let (i, j) = ((k / nx) as f64, (k % nx) as f64);
