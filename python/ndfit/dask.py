@@ -61,7 +61,7 @@ def fit_many(
     model: str = "auto",
     client: Any = None,
     n_workers: Optional[int] = None,
-    processes: bool = True,
+    processes: bool = False,
     **options: Any,
 ):
     """Fit every scan in ``paths`` with ``ndfit.fit(path, model=model, **options)``; a pandas DataFrame.
@@ -73,12 +73,13 @@ def fit_many(
     ``error_kind`` and ``error``. These are the fits ``ndfit batch`` makes with the same model and options.
     The ``alpha_x`` axis lies along ``(cos theta_z, -sin theta_z)`` in the scan frame (azimuth ``-theta_z``).
 
-    ``client``: None starts a ``dask.distributed.LocalCluster`` on this machine with ``n_workers`` worker
-    processes of one thread each (default: one per core) and closes it afterwards; a
-    ``dask.distributed.Client`` or a scheduler address (``"tcp://host:8786"``) runs on that cluster
-    instead (its workers need ``ndfit`` installed and the files at the same paths). ``processes=False``
-    makes the LocalCluster's workers threads of this process instead: the fits release the GIL, so they
-    still run in parallel, and the cluster starts in a fraction of the time of worker processes.
+    ``client``: None starts a ``dask.distributed.LocalCluster`` on this machine with ``n_workers`` workers
+    of one thread each (default: one per core) and closes it afterwards; a ``dask.distributed.Client`` or
+    a scheduler address (``"tcp://host:8786"``) runs on that cluster instead (its workers need ``ndfit``
+    installed and the files at the same paths). The LocalCluster's workers are threads of this process
+    (the fits release the GIL, so they run in parallel), which works the same from a plain script with
+    top-level code, a notebook or an interactive session. ``processes=True`` makes them worker processes
+    instead; those re-import the calling script, so a script then needs ``if __name__ == "__main__":``.
     ``options``: those of :func:`ndfit.fit` (``form``, ``dx``, ``subsample``, ``max_theta``, ...); each
     fit runs on one thread (``threads=1``) unless ``threads`` is given.
     """

@@ -215,11 +215,21 @@ def test_bad_options_raise(synth_dir, kwargs, pattern):
         ndfit.fit(str(synth_dir / "gauss.x3p"), **kwargs)
 
 
+def test_a_given_spacing_is_refused_even_where_the_file_carries_one(synth_dir):
+    """A negative, zero or non-finite dx/dy is refused, also for an X3P (which carries its own spacing)."""
+    for bad in [-1e-6, 0.0, float("nan"), float("inf")]:
+        with pytest.raises(ndfit.NdfitError, match="--dx must be a finite positive length"):
+            ndfit.read(str(synth_dir / "gauss.x3p"), dx=bad)
+        with pytest.raises(ndfit.NdfitError, match="--dy must be a finite positive length"):
+            ndfit.fit(str(synth_dir / "gauss.x3p"), dy=bad)
+
+
 def test_bad_arrays_and_arguments_raise():
     with pytest.raises(ndfit.NdfitError, match="2D"):
         ndfit.Scan(np.zeros(10), dx=1e-6)
-    with pytest.raises(ndfit.NdfitError, match="spacing"):
-        ndfit.Scan(np.zeros((4, 4)), dx=-1e-6)
+    for dx, dy in [(-1e-6, None), (0.0, None), (float("nan"), None), (1e-6, float("inf")), (1e-6, -1e-6)]:
+        with pytest.raises(ndfit.NdfitError, match="spacing must be finite and positive"):
+            ndfit.Scan(np.zeros((4, 4)), dx=dx, dy=dy)
     with pytest.raises(ndfit.NdfitError, match="not an array of numbers"):
         ndfit.Scan([["a", "b"], ["c", "d"]], dx=1e-6)
     with pytest.raises(ndfit.NdfitError, match="empty grid"):

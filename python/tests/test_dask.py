@@ -7,6 +7,9 @@ import json
 import math
 import os
 import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -106,3 +109,36 @@ def test_fit_many_worker_threads_equal_batch(batch_dir, ndfit_bin, tmp_path):
     paths = [str(batch_dir / k) for k in sorted(entries)]
     df = fit_many(paths, model="ellipsoid", n_workers=2, processes=False)
     assert_rows_match_batch(df, batch_dir, entries)
+
+
+def readme_fit_many_lines() -> str:
+    """The README's `fit_many` lines, as written there (from `import glob` to the `df = fit_many(` line)."""
+    text = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    lines = text.splitlines()
+    start = lines.index("import glob")
+    end = next(k for k in range(start, len(lines)) if lines[k].startswith("df = fit_many("))
+    return "\n".join(lines[start : end + 1]) + "\n"
+
+
+def test_readme_fit_many_runs_as_a_plain_script(synth_dir, ndfit_bin, tmp_path):
+    """The README's lines pasted at the top level of a file (no `if __name__ == "__main__":`) and run with
+    `python file.py` return the fits `ndfit fit` makes of the same scans with the same options."""
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    for f in sorted(synth_dir.glob("*.x3p")):
+        shutil.copy(f, scans / f.name)
+    script = tmp_path / "file.py"
+    script.write_text(readme_fit_many_lines() + 'import json\njson.dump(df.to_dict("records"), open("rows.json", "w"))\n', encoding="utf-8")
+    r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    rows = json.loads((tmp_path / "rows.json").read_text())
+    assert [os.path.basename(row["path"]) for row in rows] == sorted(f.name for f in synth_dir.glob("*.x3p"))
+    for row in rows:
+        assert row["status"] == "ok", row
+        out = tmp_path / (os.path.basename(row["path"]) + ".json")
+        run_cli(ndfit_bin, "fit", tmp_path / row["path"], "--model", "auto", "--form", "poly2", "-o", out)
+        fit = json.loads(out.read_text())
+        assert row["model"] == fit["model"], row["path"]
+        for name, v in fit["params"].items():
+            assert row[name] == v, (row["path"], name, row[name], v)  # the same fit: bit for bit
+        assert row["verdict"] == fit["quality"]["verdict"]

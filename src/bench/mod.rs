@@ -1,4 +1,4 @@
-//! Speed and accuracy measurements of every knob (`ndfit bench`, issue #8).
+//! Speed and accuracy measurements of every knob (`ndfit bench`).
 //!
 //! The pipeline scan -> empirical NDF -> fit runs on synthetic scans with known truth ([`scene`]: the
 //! visible half of a skewed ellipsoid, whose NDF is exactly Walter et al.'s eq. 1) at several sizes; one

@@ -35,6 +35,9 @@ pub struct Args {
 /// The built-in surface: a skewed, anisotropic ellipsoid like a brushed and slightly tilted metal.
 const TRUTH: EllipsoidParams = EllipsoidParams { alpha_x: 0.30, alpha_y: 0.12, theta_x: 0.15, theta_y: -0.10, theta_z: 0.50, fill: 0.96 };
 
+/// The name the demo's scan goes by in the fit JSON and the verdict line.
+const SCAN_NAME: &str = "<built-in demo scan>";
+
 /// Run `ndfit demo`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let settings = SynthSettings { nx: args.size, ny: args.size, ..SynthSettings::default() };
@@ -46,7 +49,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     // The synthetic surface has no form to remove.
     let preprocess = Preprocess { form: FormRemoval::None, ..Preprocess::default() };
     let pipeline = Pipeline::new(Options { preprocess, model: parse_model(&args.model)?, ..Options::default() });
-    let Outcome { ndf, fit: report } = pipeline.run(hf, "<built-in demo scan>")?;
+    let Outcome { ndf, fit: report } = pipeline.run(hf, SCAN_NAME)?;
     let ndf_ms = report.timings.ndf_ms.unwrap_or(0.0);
     let fitted = report.to_model()?;
     let nodes = ndf.bins.iter().map(|b| (b.m, b.proj_solid_angle));
@@ -92,6 +95,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let _ = writeln!(w, "fit JSON: {}", path.display());
     }
     let _ = writeln!(w, "\nNext: `ndfit fit YOUR_SCAN.x3p --model auto -o fit.json` (see README).");
+    // Last, the warnings and the verdict line `ndfit fit` prints for every fit.
+    for warning in &report.warnings {
+        let _ = writeln!(w, "ndfit: {SCAN_NAME}: warning: {warning}");
+    }
+    let _ = writeln!(w, "ndfit: {SCAN_NAME}: {}", super::fit::summary_line(&report));
     super::write_stdout(&out)?;
     Ok(ExitCode::SUCCESS)
 }

@@ -1,4 +1,5 @@
-//! `ndfit info`: format, grid, spacing, units, instrument metadata, invalid count, height range, Sq, Sdq.
+//! `ndfit info`: format, grid, spacing, units, instrument metadata, the file's invalid count, height range,
+//! Sq, Sdq, and apart from them the points the fit's spike test would mask.
 
 use std::process::ExitCode;
 
@@ -19,32 +20,36 @@ pub struct Args {
 /// Run `ndfit info`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let raw = args.scan.load_raw()?;
-    // Height range and counts describe the file as read (after any crop/subsample the user asked for);
-    // Sq and Sdq are taken after the requested form removal (the plane by default).
+    // The file as stored (after any crop/subsample the user asked for): its own invalid points, its
+    // height range, and Sq and Sdq after the requested form removal (the plane by default), with nothing
+    // masked. What the requested preprocessing would mask on top (`spikes`) is reported apart.
     let pre = args.scan.preprocess();
     let pre_form = pre.form;
     let path = &args.scan.scan;
-    let shape_only = ndfit::preprocess::Preprocess { form: ndfit::preprocess::FormRemoval::None, ..pre.clone() };
+    let as_stored = ndfit::preprocess::Preprocess { despike: ndfit::preprocess::Despike::None, ..pre.clone() };
+    let shape_only = ndfit::preprocess::Preprocess { form: ndfit::preprocess::FormRemoval::None, ..as_stored.clone() };
     let (prepared, materialized);
-    let (shaped, range, st) = match pre_form {
+    let (shaped, range, st, despike) = match pre_form {
         // Sq removes the least-squares plane itself: the statistics are read band by band from the
-        // heights as read (a mapped or tiled scan is never copied), the same numbers as in memory.
+        // heights as read (a mapped or tiled scan is never copied), the same numbers as in memory. The
+        // spikes are those the fit masks (after the form removal), kept apart from the heights.
         ndfit::preprocess::FormRemoval::Plane | ndfit::preprocess::FormRemoval::None => {
-            prepared = ndfit::preprocess::prepare(raw, &shape_only).map_err(|e| e.with_path(path))?;
-            let st = surface_stats_of(&prepared).map_err(|e| e.with_path(path))?;
-            (prepared.raw(), st, st)
+            prepared = ndfit::preprocess::prepare(raw, &pre).map_err(|e| e.with_path(path))?;
+            let st = surface_stats_of(prepared.raw()).map_err(|e| e.with_path(path))?;
+            (prepared.raw(), st, st, prepared.meta().despike.clone())
         }
         // Other forms are removed first (into memory).
         _ => {
             materialized = ndfit::preprocess::apply(raw, &shape_only).map_err(|e| e.with_path(path))?;
-            let leveled =
-                ndfit::preprocess::apply(materialized.clone(), &ndfit::preprocess::Preprocess { crop: None, subsample: 1, ..pre })
-                    .map_err(|e| e.with_path(path))?;
+            let whole = |p: &ndfit::preprocess::Preprocess| ndfit::preprocess::Preprocess { crop: None, subsample: 1, ..p.clone() };
+            let leveled = ndfit::preprocess::apply(materialized.clone(), &whole(&as_stored)).map_err(|e| e.with_path(path))?;
+            let despiked = ndfit::preprocess::prepare(materialized.clone(), &whole(&pre)).map_err(|e| e.with_path(path))?;
             let range = surface_stats(&materialized).map_err(|e| e.with_path(path))?;
             let st = surface_stats(&leveled).map_err(|e| e.with_path(path))?;
-            (&materialized, range, st)
+            (&materialized, range, st, despiked.meta().despike.clone())
         }
     };
+    let spikes = despike.as_ref().map_or(0, |d| d.masked);
     let m = &shaped.meta;
     if args.json {
         let v = serde_json::json!({
@@ -60,6 +65,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             "file_xy_unit": m.file_xy_unit,
             "file_z_unit": m.file_z_unit,
             "invalid": range.invalid,
+            "spikes": spikes,
+            "despike": despike,
             "valid": range.valid,
             "z_min": range.z_min,
             "z_max": range.z_max,
@@ -85,7 +92,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             m.file_xy_unit.as_deref().unwrap_or("none"),
             m.file_z_unit.as_deref().unwrap_or("none")
         );
-        let _ = writeln!(text, "invalid:    {} of {}", range.invalid, range.invalid + range.valid);
+        let _ = writeln!(text, "invalid:    {} of {} (as stored)", range.invalid, range.invalid + range.valid);
+        let _ = match &despike {
+            Some(d) => writeln!(text, "spikes:     {spikes} more masked by the fit's spike test ({})", d.rule),
+            None => writeln!(text, "spikes:     not tested (--despike none)"),
+        };
         let _ = writeln!(text, "heights:    {} .. {} m (mean {} m)", sig(range.z_min), sig(range.z_max), sig(range.z_mean));
         let _ = writeln!(text, "Sq:         {} m (after {} removal)", sig(st.sq), format!("{pre_form:?}").to_lowercase());
         let _ = writeln!(text, "Sdq:        {} (central differences, {} points with 4 valid neighbours)", sig(st.sdq), st.sdq_points);

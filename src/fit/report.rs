@@ -25,8 +25,14 @@ pub struct InputInfo {
     pub dx: f64,
     /// Spacing along y (m).
     pub dy: f64,
-    /// Masked points.
+    /// Masked points: the file's own invalid points plus the spikes.
     pub invalid: usize,
+    /// The file's own invalid points (what `ndfit info` reports as `invalid`).
+    #[serde(default)]
+    pub file_invalid: usize,
+    /// Points the spike removal masked on top of them (0 when it did not run).
+    #[serde(default)]
+    pub spikes: usize,
     /// The file's own grid (columns, rows) when a crop, `--subsample` or a preset kept fewer points
     /// (`nx`, `ny`, `dx`, `dy` are then those of the kept points).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -45,7 +51,10 @@ impl InputInfo {
     /// [`InputInfo::new`] with the invalid points counted by the caller (a scan whose spikes are masked
     /// apart from its heights, [`crate::preprocess::Prepared`]).
     pub fn with_invalid(path: &Path, hf: &Scan, invalid: usize) -> InputInfo {
+        let spikes = hf.meta.despike.as_ref().map_or(0, |d| d.masked);
         InputInfo {
+            file_invalid: invalid.saturating_sub(spikes),
+            spikes,
             path: path.display().to_string(),
             format: hf.meta.format.clone(),
             nx: hf.nx,

@@ -205,6 +205,7 @@ pub fn read_scan_subsampled(path: &Path, opts: &ReadOptions, stride: usize) -> R
 }
 
 fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Heightfield> {
+    raw_opts::check_given_spacing(opts)?;
     let md = std::fs::metadata(path)?;
     if md.is_dir() {
         if let Err(e) = std::fs::read_dir(path) {

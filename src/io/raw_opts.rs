@@ -26,6 +26,19 @@ pub fn z_scale(opts: &ReadOptions, format: &str) -> Result<f64> {
     Ok(s)
 }
 
+/// Refuse a given `--dx` or `--dy` that is not a finite positive length, whatever the format (one that
+/// carries its own spacing ignores them, but a negative or zero spacing is a mistake to report, not to
+/// pass over in silence).
+pub fn check_given_spacing(opts: &ReadOptions) -> Result<()> {
+    if let Some(dx) = opts.dx {
+        check_positive(dx, "--dx")?;
+    }
+    if let Some(dy) = opts.dy {
+        check_positive(dy, "--dy")?;
+    }
+    Ok(())
+}
+
 fn check_positive(v: f64, flag: &str) -> Result<()> {
     if v.is_finite() && v > 0.0 {
         Ok(())

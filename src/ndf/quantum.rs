@@ -18,9 +18,13 @@ const ON_LATTICE: f64 = 0.99;
 /// A difference is on the lattice when `|d / q - round(d / q)|` is below this (covers the rounding of
 /// a unit conversion of integer file values, ~1e-12 relative, with a wide margin).
 const LATTICE_SLACK: f64 = 1e-3;
-/// The 90th percentile of the nonzero differences must span at least this many steps (a tilted plane's
-/// differences are all equal: one "step", no lattice to speak of).
+/// The 90th percentile of the nonzero differences spanning at least this many steps shows a lattice
+/// (a tilted plane's differences are all equal: one "step", no lattice to speak of).
 const MIN_STEPS: f64 = 2.0;
+/// Or, for the coarsest lattices (a few height levels, where nearly every difference is 0 or one step):
+/// at least two multiples `k q` (zero included) each held by this fraction of the examined differences.
+/// A tilted plane's differences hold a single multiple.
+const MIN_LEVEL_SHARE: f64 = 0.01;
 /// The quantum is reported only when the slope lattice step, whitened, is at least this fraction of the
 /// slope scale (an f32 file's ulp is a lattice too, but one far too fine to matter).
 pub const MATERIAL_STEP: f64 = 1e-3;
@@ -91,7 +95,9 @@ impl HeightQuantum {
 
 /// Find the height quantum of a scan: `q` is the smallest nonzero adjacent height difference (ignoring
 /// differences below 1e-6 of the 90th percentile, which are rounding specks) when at least 99% of the
-/// examined differences are integer multiples of it and the 90th percentile spans at least two steps.
+/// examined differences are integer multiples of it and they show more than one step: the 90th
+/// percentile of the nonzero ones spans at least two steps, or two multiples (zero included) each hold
+/// at least 1% of them (the coarsest lattices, whose differences are mostly 0 and one step).
 /// `None` when the heights are not on a lattice, when
 /// too few differences are nonzero to tell (fewer than 100), or when the lattice is immaterial
 /// ([`MATERIAL_STEP`]).
@@ -171,15 +177,29 @@ pub(crate) fn lattice<S: BandSource>(src: &S) -> Option<Lattice> {
     let k90 = (0.9 * (nz.len() - 1) as f64) as usize;
     let p90 = *nz.select_nth_unstable_by(k90, |a, b| a.total_cmp(b)).1;
     let q = nz.iter().copied().filter(|&v| v >= 1e-6 * p90).fold(f64::INFINITY, f64::min);
-    // A lattice needs several steps in the data: a plane (every difference equal) is not quantized.
-    if !(q.is_finite() && q > 0.0 && p90 >= MIN_STEPS * q) {
+    if !(q.is_finite() && q > 0.0) {
         return None;
     }
     let on = d.iter().filter(|&&v| (v / q - (v / q).round()).abs() <= LATTICE_SLACK).count() as f64 / d.len() as f64;
-    if on < ON_LATTICE {
+    // A lattice needs several steps in the data: a plane (every difference equal) is not quantized.
+    if on < ON_LATTICE || !(p90 >= MIN_STEPS * q || two_levels(&d, q)) {
         return None;
     }
     Some(Lattice { q, on })
+}
+
+/// Whether at least two multiples `k q` of the differences `d` (zero included) each hold
+/// [`MIN_LEVEL_SHARE`] of them.
+fn two_levels(d: &[f64], q: f64) -> bool {
+    let mut counts = std::collections::HashMap::<u64, usize>::new();
+    for &v in d {
+        let k = (v / q).round();
+        if k.is_finite() && k >= 0.0 {
+            *counts.entry(k as u64).or_default() += 1;
+        }
+    }
+    let least = MIN_LEVEL_SHARE * d.len() as f64;
+    counts.values().filter(|&&c| c as f64 >= least).count() >= 2
 }
 
 /// The frame half of [`detect`]: whether the lattice is material in the frame's whitened slopes, and
@@ -207,4 +227,55 @@ pub(crate) fn assess<H: HeightRows>(lat: Lattice, hf: &H, scheme: NormalScheme, 
         rigidity: [0.0; 2],
         lattice: None,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scan::Scan;
+
+    fn scan(nx: usize, ny: usize, z: &[f64]) -> Scan<'_> {
+        Scan::from_view(ndarray::ArrayView2::from_shape((ny, nx), z).unwrap(), 1e-6, 1e-6).unwrap()
+    }
+
+    /// A smooth surface rounded to a step `q` so coarse that every adjacent difference is 0 or one step
+    /// (a handful of levels): the lattice is `q`, counted from the heights here; the rule of the 90th
+    /// percentile alone misses it (it spans one step).
+    #[test]
+    fn the_coarsest_lattice_is_found() {
+        let (nx, ny) = (300, 280);
+        let q = 5e-7;
+        let z: Vec<f64> = (0..nx * ny)
+            .map(|k| {
+                let (i, j) = ((k / nx) as f64, (k % nx) as f64);
+                q * ((4e-6 * (0.05 * j).sin() * (0.04 * i).cos() + 3e-6 * (0.031 * (i + j)).sin()) / q).round()
+            })
+            .collect();
+        let (mut steps, mut zeros, mut levels) = (0, 0, std::collections::BTreeSet::new());
+        for i in 0..ny {
+            for j in 0..nx - 1 {
+                let d = ((z[i * nx + j + 1] - z[i * nx + j]) / q).round().abs() as i64;
+                assert!(d <= 1, "a difference of {d} steps");
+                steps += usize::from(d == 1);
+                zeros += usize::from(d == 0);
+            }
+        }
+        z.iter().for_each(|v| {
+            levels.insert((v / q).round() as i64);
+        });
+        assert!(steps > 1000 && zeros > steps && levels.len() < 60, "{steps} steps, {zeros} zeros, {} levels", levels.len());
+        let got = height_quantum(&scan(nx, ny, &z)).expect("the lattice is found");
+        assert!((got / q - 1.0).abs() < 1e-9, "quantum {got} against {q}");
+    }
+
+    /// A tilted plane's differences are all equal (one "step", exact or up to rounding): no lattice,
+    /// even when its heights are exact multiples of that step.
+    #[test]
+    fn a_tilted_plane_has_no_lattice() {
+        let (nx, ny) = (200, 150);
+        let exact: Vec<f64> = (0..nx * ny).map(|k| 3e-9 * ((k % nx) as f64 + 2.0 * (k / nx) as f64)).collect();
+        assert_eq!(height_quantum(&scan(nx, ny, &exact)), None);
+        let plane: Vec<f64> = (0..nx * ny).map(|k| 1e-3 + 0.013 * (k % nx) as f64 * 1e-6 - 0.007 * (k / nx) as f64 * 1e-6).collect();
+        assert_eq!(height_quantum(&scan(nx, ny, &plane)), None);
+    }
 }

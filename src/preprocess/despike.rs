@@ -4,7 +4,9 @@
 //! A valid point with all 8 neighbours valid ([`MIN_NEIGHBOURS`]; the rim of the data is not tested, where a smooth surface ends steeply) is a spike when its
 //! height departs from the median `m` of those neighbours by more than [`SPIKE_THRESHOLD`] times their
 //! own spread, `1.4826 median |h_n - m|` (the Gaussian-consistent MAD), floored by the scan's typical
-//! departure (the same statistic's median over the scan) and by the height quantum. A smooth surface,
+//! departure (the same statistic's median over the scan) and by the height quantum (where none is known,
+//! by the typical nonzero departure, at least `0.74` of any lattice step): a departure of one lattice
+//! step is never a spike. A smooth surface,
 //! however steep, keeps every point: on a quadratic patch the departure is at most about twice the
 //! neighbours' spread, and a plane's is zero. The median of 8 neighbours is unmoved by a second spike
 //! among them, so pairs are found too.
@@ -421,7 +423,7 @@ pub fn find_spikes_over<S: BandSource<T = f64>>(
         let mid = all.len() / 2;
         MAD_NORMAL * *all.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
     };
-    let floor = typical.max(quantum.unwrap_or(0.0));
+    let floor = typical.max(quantum.unwrap_or_else(|| typical_nonzero(&all)));
     let limit = SPIKE_THRESHOLD * floor;
     let spikes: Vec<(usize, bool)> = bands
         .par_iter()
@@ -476,6 +478,20 @@ pub fn find_spikes_over<S: BandSource<T = f64>>(
         floor,
     };
     Some((spikes.into_iter().map(|s| s.0).collect(), report))
+}
+
+/// The typical nonzero departure (Gaussian-consistent median of the nonzero `|departure|`s; 0 for none):
+/// the floor of a scan whose height lattice is not known. On a lattice of step `q` a departure is a
+/// multiple of `q / 2`, so this is at least `0.74 q` and a departure of one step stays far below the
+/// threshold even where most departures are 0 (the coarsest lattices); on continuous heights no
+/// departure is 0 and it is the typical departure itself.
+fn typical_nonzero(all: &[f64]) -> f64 {
+    let mut nz: Vec<f64> = all.iter().copied().filter(|&v| v > 0.0).collect();
+    if nz.is_empty() {
+        return 0.0;
+    }
+    let mid = nz.len() / 2;
+    MAD_NORMAL * *nz.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
 }
 
 /// The spikes `(flat index, above)` of `rows` of `src`, read as the band `lo..hi` (the rows and one more
@@ -687,6 +703,39 @@ mod tests {
                 .collect();
             assert_eq!(got.0, brute, "{nx} x {ny}, offset {offset}: against the full test");
         }
+    }
+
+    /// Heights rounded to a lattice so coarse that most neighbours are equal (the spread of the 8 is 0)
+    /// and the rest one step away: no point is masked, whether the quantum is known or not; a point
+    /// raised by 100 steps still is.
+    #[test]
+    fn one_lattice_step_is_never_a_spike() {
+        let (nx, ny) = (257, 211);
+        let q = 5e-7;
+        let mut z: Vec<f64> = (0..nx * ny)
+            .map(|k| {
+                let (i, j) = ((k / nx) as f64, (k % nx) as f64);
+                q * ((4e-6 * (0.05 * j).sin() * (0.04 * i).cos() + 3e-6 * (0.031 * (i + j)).sin()) / q).round()
+            })
+            .collect();
+        // One-step departures from the 8 neighbours' median where those neighbours agree exactly.
+        let one_step = {
+            let whole_z = whole(&z, nx, ny);
+            (1..ny - 1)
+                .flat_map(|i| (1..nx - 1).map(move |j| (i, j)))
+                .filter(|&(i, j)| departure(&whole_z, nx, ny, i, j).is_some_and(|(d, s)| s == 0.0 && (d.abs() / q - 1.0).abs() < 1e-9))
+                .count()
+        };
+        assert!(one_step >= 10, "{one_step} one-step departures from flat neighbours");
+        for quantum in [None, Some(q)] {
+            let s = Scan::from_view(ndarray::ArrayView2::from_shape((ny, nx), &z).unwrap(), 1e-6, 1e-6).unwrap();
+            let (spikes, rep) = find_spikes(&s, Despike::Median, quantum).unwrap();
+            assert!(spikes.is_empty(), "quantum {quantum:?}: {} masked, floor {:e}", spikes.len(), rep.floor);
+        }
+        let k = 100 * nx + 100;
+        z[k] += 100.0 * q;
+        let s = Scan::from_view(ndarray::ArrayView2::from_shape((ny, nx), &z).unwrap(), 1e-6, 1e-6).unwrap();
+        assert_eq!(find_spikes(&s, Despike::Median, None).unwrap().0, vec![k]);
     }
 
     /// The bound [`pair_screen`] rests on, checked against sorting: the median of 4 pairs lies between

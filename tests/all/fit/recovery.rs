@@ -104,6 +104,8 @@ fn theta_z_of_a_near_isotropic_lobe_is_reported_unidentified() {
             dx: 1e-6,
             dy: 1e-6,
             invalid: 0,
+            file_invalid: 0,
+            spikes: 0,
             file_grid: None,
             despike: None,
         });

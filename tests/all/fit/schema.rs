@@ -32,6 +32,8 @@ fn library_reports_of_every_model_validate() {
         dx: 1e-6,
         dy: 1e-6,
         invalid: 0,
+        file_invalid: 0,
+        spikes: 0,
         file_grid: None,
         despike: None,
     };

@@ -77,6 +77,13 @@ fn bad_files_give_one_line_and_a_nonzero_exit() {
     for k in 0..n {
         nan_gsf[start + 4 * k..start + 4 * k + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     }
+    // The GSF file with one header field replaced by another of the same length (the data stay aligned).
+    let gsf_with = |from: &[u8], to: &[u8]| {
+        let mut b = gen::gsf();
+        let at = b.windows(from.len()).position(|w| w == from).expect("field");
+        b[at..at + to.len()].copy_from_slice(to);
+        b
+    };
     let cases: Vec<(String, Vec<&str>, &str)> = vec![
         (w("empty.x3p", b""), vec![], "empty"),
         (w("trunc.x3p", &x3p[..x3p.len() / 2]), vec![], "zip"),
@@ -86,6 +93,14 @@ fn bad_files_give_one_line_and_a_nonzero_exit() {
         (w("raw.npy", &gen::npy()), vec![], "--z-scale"),
         (w("raw2.npy", &gen::npy()), vec!["--z-scale", "1e-9"], "--dx"),
         (dir.path().join("missing.x3p").to_str().expect("utf8").to_string(), vec![], "No such file"),
+        // A spacing that is negative, zero or not finite, given (even to a format that carries its own)
+        // or carried by the file.
+        (w("neg.x3p", &x3p), vec!["--dx", "-1e-6", "--json"], "--dx must be a finite positive length"),
+        (w("zero.x3p", &x3p), vec!["--dy", "0"], "--dy must be a finite positive length"),
+        (w("nan.npy", &gen::npy()), vec!["--z-scale", "1e-9", "--dx", "NaN"], "--dx must be a finite positive length"),
+        (w("inf.npy", &gen::npy()), vec!["--z-scale", "1e-9", "--dx", "1e-6", "--dy", "inf"], "--dy must be a finite positive length"),
+        (w("neg.gsf", &gsf_with(b"XReal = 14", b"XReal = -1")), vec![], "spacing must be finite and positive"),
+        (w("zero.gsf", &gsf_with(b"YReal = 15", b"YReal = -0")), vec![], "spacing must be finite and positive"),
     ];
     for (path, extra, needle) in cases {
         let mut args = vec!["info", path.as_str()];
@@ -123,4 +138,89 @@ fn convert_writes_x3p_or_nothing() {
     assert_ne!(code, 0);
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(!out2.exists());
+}
+
+/// `info --json` reports the file as stored: `invalid` is the file's own invalid points, `sq` and `sdq`
+/// those of its heights after the plane removal with nothing masked, on every shared scan that
+/// SurfaceTopography reads (peer_readings.json: the same tolerances as the library's reading); the
+/// points the default spike test would mask are apart, in `spikes`.
+#[test]
+fn info_json_agrees_with_surface_topography_on_every_scan_needs_shared() {
+    let Some(dir) = shared_scans("info_json_agrees_with_surface_topography_on_every_scan_needs_shared") else { return };
+    let text = std::fs::read_to_string(dir.join("peer_readings.json")).expect("readable");
+    let json: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    let mut checked = 0;
+    for file in json["files"].as_array().expect("files") {
+        let name = file["file"].as_str().expect("name");
+        let readings = file["readings"].as_array().expect("readings");
+        let Some(r) = readings.iter().find(|r| r["library"] == "SurfaceTopography" && r["ok"] == true) else { continue };
+        let c = &r["common"];
+        let p = dir.join(name);
+        let (code, out, err) = run(&["info", p.to_str().expect("utf8"), "--json"]);
+        assert_eq!(code, 0, "{name}: {err}");
+        let v: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+        assert_eq!(v["invalid"].as_u64(), c["n_invalid"].as_u64(), "{name}: invalid against SurfaceTopography");
+        let rel = |a: f64, b: f64| (a - b).abs() / b.abs();
+        let (sq, want_sq) = (v["sq"].as_f64().expect("sq"), c["Sq_plane_um"].as_f64().expect("Sq") * 1e-6);
+        assert!(rel(sq, want_sq) < 1e-6, "{name}: sq {sq} against {want_sq}");
+        let (sdq, want_sdq) = (v["sdq"].as_f64().expect("sdq"), c["Sdq_central"].as_f64().expect("Sdq"));
+        assert!(rel(sdq, want_sdq) < 1e-6, "{name}: sdq {sdq} against {want_sdq}");
+        assert!(v["spikes"].as_u64().is_some(), "{name}: no spikes count");
+        eprintln!("{name}: invalid {} as SurfaceTopography, spikes {} apart", v["invalid"], v["spikes"]);
+        checked += 1;
+    }
+    assert_eq!(checked, 13, "SurfaceTopography reads 13 of the shared scans");
+}
+
+/// A smooth scan with known holes and known spikes (written here as NPY): `info` counts the holes as
+/// `invalid` and the spikes apart as `spikes`, `--despike none` tests none, and the fit's `input` splits
+/// its masked points the same way (`invalid = file_invalid + spikes`).
+#[test]
+fn info_and_fit_report_the_file_and_the_spikes_apart() {
+    let (nx, ny) = (160, 150);
+    let mut z: Vec<f64> = (0..nx * ny)
+        .map(|k| {
+            let (i, j) = ((k / nx) as f64, (k % nx) as f64);
+            1e-7 * ((0.21 * j).sin() + (0.17 * i).cos() + 0.5 * (0.13 * (i - j)).sin())
+        })
+        .collect();
+    let holes: Vec<usize> = (0..nx * ny).step_by(331).collect();
+    // Spikes of 10 um amid 0.3 um of relief, away from the holes and the rim.
+    let spikes: Vec<usize> = (0..nx * ny)
+        .step_by(997)
+        .filter(|&k| (2..ny - 2).contains(&(k / nx)) && (2..nx - 2).contains(&(k % nx)))
+        .filter(|&k| holes.iter().all(|&h| (h / nx).abs_diff(k / nx) > 2 || (h % nx).abs_diff(k % nx) > 2))
+        .collect();
+    for &k in &holes {
+        z[k] = f64::NAN;
+    }
+    for &k in &spikes {
+        z[k] += 1e-5;
+    }
+    assert!(spikes.len() > 10, "{} spikes", spikes.len());
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("spiky.npy");
+    let mut b = gen::npy_header("<f8", false, ny, nx);
+    z.iter().for_each(|v| b.extend(v.to_le_bytes()));
+    std::fs::write(&p, b).expect("write");
+    let ps = p.to_str().expect("utf8");
+    let (code, out, err) = run(&["info", ps, "--dx", "1e-6", "--z-scale", "1", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    assert_eq!(v["invalid"].as_u64(), Some(holes.len() as u64));
+    assert_eq!(v["spikes"].as_u64(), Some(spikes.len() as u64));
+    let (code, out, err) = run(&["info", ps, "--dx", "1e-6", "--z-scale", "1", "--json", "--despike", "none"]);
+    assert_eq!(code, 0, "{err}");
+    let none: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    assert_eq!((none["invalid"].as_u64(), none["spikes"].as_u64()), (Some(holes.len() as u64), Some(0)));
+    assert_eq!(none["sq"], v["sq"], "sq is the file's, whatever the spike test");
+    let fit = dir.path().join("fit.json");
+    let (code, _, err) = run(&["fit", ps, "--dx", "1e-6", "--z-scale", "1", "--model", "beckmann", "-o", fit.to_str().expect("utf8")]);
+    assert_eq!(code, 0, "{err}");
+    let f: serde_json::Value = serde_json::from_slice(&std::fs::read(&fit).expect("fit JSON")).expect("JSON");
+    let input = &f["input"];
+    assert_eq!(input["file_invalid"].as_u64(), Some(holes.len() as u64));
+    assert_eq!(input["spikes"].as_u64(), Some(spikes.len() as u64));
+    assert_eq!(input["invalid"].as_u64(), Some((holes.len() + spikes.len()) as u64));
+    assert_eq!(input["despike"]["masked"], input["spikes"]);
 }
