@@ -79,7 +79,9 @@ pub(crate) fn checked_gamma(name: &str, g: f64) -> Result<f64> {
     }
     // At or below 3/2 Lambda is infinite (the mean slope diverges).
     if !(g > GAMMA_MIN) {
-        return Err(Error::invalid(format!("{name} = {g} must exceed {GAMMA_MIN} (the mean slope, and so Smith's Lambda, is infinite below)")));
+        return Err(Error::invalid(format!(
+            "{name} = {g} must exceed {GAMMA_MIN} (the mean slope, and so Smith's Lambda, is infinite below)"
+        )));
     }
     if g > GAMMA_MAX {
         return Err(Error::invalid(format!("{name} = {g} exceeds the largest supported tail exponent {GAMMA_MAX}")));
