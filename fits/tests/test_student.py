@@ -32,7 +32,7 @@ def _lobe(model, p):
 
 
 def _hemisphere_integral(model, p, n_r=600, n_phi=256):
-    """Integral of D(m) cos(theta_m) over the hemisphere, taken in slope space (d omega cos = cos^-3 ... so
+    """Integral of D(m) cos(theta_m) over the hemisphere, taken in slope space (d omega = cos^3 ds, so
     D cos d omega = D cos^4 ds, Heitz eq. 63-64) with s = L t, L = Rz^T diag(ax, ay), polar |t| = tan(psi)^k:
     Gauss-Legendre in psi, the periodic trapezoid rule in phi. The power k = max(1, 2/(2 gamma - 3)) makes the
     heavy tail (P22 ~ |s|^(-2 gamma)) vanish smoothly at psi = pi/2."""
@@ -106,7 +106,9 @@ def test_gradient_matches_finite_differences(model, params):
         up, dn = p.copy(), p.copy()
         up[j] += h
         dn[j] -= h
-        fd = (models.student_log_d_and_grad(model, up, m, False)[0] - models.student_log_d_and_grad(model, dn, m, False)[0]) / (2 * h)
+        f_up = models.student_log_d_and_grad(model, up, m, False)[0]
+        f_dn = models.student_log_d_and_grad(model, dn, m, False)[0]
+        fd = (f_up - f_dn) / (2 * h)
         np.testing.assert_allclose(g[:, j], fd, rtol=1e-6, atol=1e-6 * (1 + np.abs(fd).max()))
 
 

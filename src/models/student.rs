@@ -79,7 +79,9 @@ pub(crate) fn checked_gamma(name: &str, g: f64) -> Result<f64> {
     }
     // At or below 3/2 Lambda is infinite (the mean slope diverges).
     if !(g > GAMMA_MIN) {
-        return Err(Error::invalid(format!("{name} = {g} must exceed {GAMMA_MIN} (the mean slope, and so Smith's Lambda, is infinite below)")));
+        return Err(Error::invalid(format!(
+            "{name} = {g} must exceed {GAMMA_MIN} (the mean slope, and so Smith's Lambda, is infinite below)"
+        )));
     }
     if g > GAMMA_MAX {
         return Err(Error::invalid(format!("{name} = {g} exceeds the largest supported tail exponent {GAMMA_MAX}")));
@@ -263,10 +265,10 @@ mod tests {
 
     #[test]
     fn gamma_ratio_against_lgamma_and_its_asymptotic_series() {
-        // Near the switch lgamma of numbers below 200 is exact to a few 1e-15.
-        for p in [64.0, 100.0, 150.0] {
+        // Near the switch the lgamma difference is good to about 1e-14 (lgamma(100) = 360 has an ulp of 6e-14).
+        for p in [64.0, 80.0, 100.0] {
             let direct = libm::lgamma(p + 0.5) - libm::lgamma(p);
-            assert!((ln_gamma_ratio_half(p) - direct).abs() < 1e-13, "p = {p}");
+            assert!((ln_gamma_ratio_half(p) - direct).abs() < 5e-14, "p = {p}");
         }
         // Far out: Gamma(p + 1/2)/Gamma(p) = sqrt(p) (1 - 1/(8p) + 1/(128p^2) + 5/(1024p^3) - ...).
         for p in [1e3, 1e5, 1e7] {

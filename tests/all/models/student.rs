@@ -174,7 +174,10 @@ fn lambda_matches_quadrature_of_its_integral() {
                 }
                 let dev = (got - want).abs() / want;
                 worst = worst.max(dev);
-                assert!(dev < 1e-7 && err < 1e-8 * want, "{p:?} theta {theta} phi {phi}: Lambda {got:e} vs quadrature {want:e} (err {err:e})");
+                assert!(
+                    dev < 1e-7 && err < 1e-8 * want,
+                    "{p:?} theta {theta} phi {phi}: Lambda {got:e} vs quadrature {want:e} (err {err:e})"
+                );
             }
         }
     }
@@ -235,7 +238,8 @@ fn sampler_matches_its_pdf() {
     const NT: usize = 30;
     const NP: usize = 60;
     const N: usize = 400_000;
-    const X: [f64; 6] = [-0.932469514203152, -0.661209386466265, -0.238619186083197, 0.238619186083197, 0.661209386466265, 0.932469514203152];
+    const X: [f64; 6] =
+        [-0.932469514203152, -0.661209386466265, -0.238619186083197, 0.238619186083197, 0.661209386466265, 0.932469514203152];
     const W: [f64; 6] = [0.171324492379170, 0.360761573048139, 0.467913934572691, 0.467913934572691, 0.360761573048139, 0.171324492379170];
     let lobes = [[0.3, 0.3, 0.0, 1.6], [0.5, 0.2, 0.7, 2.5], [0.8, 0.3, -1.0, 1.55], [0.2, 0.6, 0.3, 40.0]];
     let n_tests = lobes.len() as f64;
@@ -326,7 +330,14 @@ fn bad_parameters_are_refused() {
 
 #[test]
 fn extremes_stay_finite() {
-    let mut dirs = vec![Vector3::z(), -Vector3::z(), Vector3::x(), Vector3::new(0.6, 0.8, 0.0), Vector3::new(1.0, 0.0, 1e-300), Vector3::new(0.0, 1.0, -1e-300)];
+    let mut dirs = vec![
+        Vector3::z(),
+        -Vector3::z(),
+        Vector3::x(),
+        Vector3::new(0.6, 0.8, 0.0),
+        Vector3::new(1.0, 0.0, 1e-300),
+        Vector3::new(0.0, 1.0, -1e-300),
+    ];
     for theta in [1e-8, 45.0, 89.0, 89.999_999, 90.0 - 1e-13] {
         dirs.push(dir(theta, 0.3));
         dirs.push(-dir(theta, 2.0));
