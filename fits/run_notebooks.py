@@ -1,14 +1,8 @@
 #!/usr/bin/env python3
-"""Execute every notebook of a folder top to bottom (nbclient), or write them back with their outputs.
+"""Execute every notebook of a folder top to bottom (nbclient), or strip their outputs.
 
-    python fits/run_notebooks.py notebooks            # execute in memory; nothing is written back (CI)
-    python fits/run_notebooks.py --write notebooks    # execute and write each back with its outputs
+    python fits/run_notebooks.py notebooks            # execute in memory; nothing is written back
     python fits/run_notebooks.py --strip notebooks    # remove outputs and execution counts, in place
-
-The notebooks are committed with their outputs (figures and tables), so that a reader sees them on the
-repository's web page; `--write` records the digest of the cells' sources beside the outputs
-(`metadata.ndfit.source_sha256`, see source_digest), which fits/tests/test_notebooks_outputs.py checks
-against the sources, so outputs left over from edited cells are caught. Run timings are not kept.
 
 Notebooks run with the repository root as working directory, so `NDFIT` (the ndfit binary; default
 target/release/ndfit) may be relative to it. The last line sums up: `notebooks: N passed, M failed`.
@@ -38,7 +32,6 @@ def strip(path: str) -> bool:
             cell.execution_count = None
         cell.metadata.pop("execution", None)
     nb.metadata.pop("widgets", None)
-    nb.metadata.pop("ndfit", None)
     after = nbformat.writes(nb)
     if after != before:
         with open(path, "w", encoding="utf-8") as fh:
@@ -47,20 +40,8 @@ def strip(path: str) -> bool:
     return False
 
 
-def source_digest(nb) -> str:
-    """SHA-256 of every cell's type and source, in order: what the outputs were computed from."""
-    import hashlib
-
-    h = hashlib.sha256()
-    for cell in nb.cells:
-        src = cell.source if isinstance(cell.source, str) else "".join(cell.source)
-        h.update(cell.cell_type.encode() + b"\0" + src.encode("utf-8") + b"\0")
-    return h.hexdigest()
-
-
-def execute(path: str, timeout: int, out_dir: str = "", write: bool = False) -> str:
-    """Run one notebook; returns '' or a one-line error. With ``out_dir`` the executed copy is written there;
-    with ``write`` it replaces ``path`` (only when every cell ran), with the digest of its sources."""
+def execute(path: str, timeout: int, out_dir: str = "") -> str:
+    """Run one notebook; returns '' or a one-line error. With ``out_dir`` the executed copy is written there."""
     import nbformat
     from nbclient import NotebookClient
     from nbclient.exceptions import CellExecutionError, CellTimeoutError
@@ -80,14 +61,6 @@ def execute(path: str, timeout: int, out_dir: str = "", write: bool = False) -> 
         if out_dir:
             os.makedirs(out_dir, exist_ok=True)
             nbformat.write(nb, os.path.join(out_dir, os.path.basename(path)))
-    if write:
-        for cell in nb.cells:
-            cell.metadata.pop("execution", None)
-        nb.metadata.setdefault("ndfit", {})["source_sha256"] = source_digest(nb)
-        tmp = path + ".tmp"
-        with open(tmp, "w", encoding="utf-8") as fh:
-            nbformat.write(nb, fh)
-        os.replace(tmp, path)
     return ""
 
 
@@ -95,7 +68,6 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("folder")
     ap.add_argument("--strip", action="store_true", help="strip outputs in place instead of executing")
-    ap.add_argument("--write", action="store_true", help="write each executed notebook back with its outputs")
     ap.add_argument("--timeout", type=int, default=900, help="seconds per cell")
     ap.add_argument("--out", default="", help="write the executed notebooks (with outputs) into this folder")
     args = ap.parse_args(argv)
@@ -111,7 +83,7 @@ def main(argv=None) -> int:
     failed = 0
     for p in paths:
         t0 = time.perf_counter()
-        err = execute(p, args.timeout, args.out, args.write)
+        err = execute(p, args.timeout, args.out)
         dt = time.perf_counter() - t0
         if err:
             failed += 1

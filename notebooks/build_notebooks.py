@@ -3,8 +3,7 @@
 
     fits/.venv/bin/python notebooks/build_notebooks.py
 
-Edit the cells here, not in the .ipynb files, so the notebooks stay reviewable as Python; then commit them
-with their outputs: NDFIT=target/release/ndfit fits/.venv/bin/python fits/run_notebooks.py --write notebooks
+Edit the cells here, not in the .ipynb files, so the notebooks stay reviewable as Python and free of outputs.
 """
 
 import os
@@ -736,9 +735,8 @@ assert from_option.params == from_array.params
 """
 
 PY_DASK = r"""
-# Every shared real scan, one Dask task per scan on a 2-worker LocalCluster (started and closed here; its
-# workers are threads of this kernel, processes=True makes them processes); with a dask.distributed Client
-# or a scheduler address the same call runs on a cluster.
+# Every shared real scan, one Dask task per scan on a 2-worker LocalCluster (started and closed here); with a
+# dask.distributed Client or a scheduler address the same call runs on a cluster.
 if HAVE_REAL:
     files = sorted(os.path.join(SCANS, f) for f in os.listdir(SCANS) if not f.endswith((".json", ".md")))
     df = fit_many(files, model="auto", n_workers=2)
