@@ -68,7 +68,7 @@ def test_document_validates_generates_glsl_and_turns_the_tangent(tmp_path, targe
     assert rot.getInput("axis").getConnectedNode().getCategory() == "normal"
 
     # The library's rotate3d, applied to the scan's +x about +z, must land on the export's tangent azimuth.
-    glsl = os.path.join(str(search.find("libraries/stdlib/genglsl/mx_rotate_vector3.glsl")))
+    glsl = search.find("libraries/stdlib/genglsl/mx_rotate_vector3.glsl").asString()
     assert "cross(_in, axis) * s" in open(glsl).read()
     amount = rot.getInput("amount").getValue()
     t = rotate3d(np.array([1.0, 0.0, 0.0]), amount, np.array([0.0, 0.0, 1.0]))

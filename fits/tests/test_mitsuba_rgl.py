@@ -211,7 +211,7 @@ def test_gaussian_scan_table_matches_beckmann(tmp_path):
     scan = tmp_path / "gauss.x3p"
     truth_path = tmp_path / "gauss.truth.json"
     ndfit("synth", "--surface", "gaussian", "--sigma-x", "0.2", "--sigma-y", "0.1", "--theta-z", "0.4",
-          "--nx", "1024", "--ny", "1024", "--seed", "3", "-o", scan)
+          "--nx", "1024", "--ny", "1024", "--seed", "3", scan)
     truth = json.loads(truth_path.read_text())
     p = truth["params"] if "params" in truth else truth["truth"]["params"]
     out = tmp_path / "gauss.bsdf"
