@@ -59,7 +59,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if args.output.is_some() {
         bail!("{path}: -o is for --to rgl (the other renderers' exports go to standard output)");
     }
-    let target: Target = args.to.parse().map_err(|e: ndfit::Error| anyhow!("{path}: --to: {}; or rgl for a tabulated BSDF", e.message()))?;
+    let target: Target =
+        args.to.parse().map_err(|e: ndfit::Error| anyhow!("{path}: --to: {}; or rgl for a tabulated BSDF", e.message()))?;
     let text = std::fs::read_to_string(&args.fit).with_context(|| format!("{path}: cannot read"))?;
     let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| anyhow!("{path}: not valid JSON ({e})"))?;
     let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;

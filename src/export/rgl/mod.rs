@@ -80,7 +80,9 @@ const MAX_RES: usize = 512;
 impl RglOptions {
     fn check(&self) -> Result<()> {
         let bad = |name: &str, v: usize, lo: usize| Error::invalid(format!("{name} must be in [{lo}, {MAX_RES}], got {v}"));
-        for (name, v, lo) in [("theta_i", self.theta_i, 2), ("phi_i", self.phi_i, 3), ("ndf_res", self.ndf_res, 8), ("warp_res", self.warp_res, 4)] {
+        for (name, v, lo) in
+            [("theta_i", self.theta_i, 2), ("phi_i", self.phi_i, 3), ("ndf_res", self.ndf_res, 8), ("warp_res", self.warp_res, 4)]
+        {
             if !(lo..=MAX_RES).contains(&v) {
                 return Err(bad(name, v, lo));
             }
@@ -305,7 +307,10 @@ pub fn check_structure(t: &TensorFile, flavour: Flavour) -> Result<()> {
         && refl.shape[3] == refl.shape[4]
         && lum.shape[2..] == refl.shape[3..];
     if !ok {
-        return Err(bad(format!("shapes disagree: phi_i {np}, theta_i {nt}, vndf {:?}, luminance {:?}, reflectance {:?}", vndf.shape, lum.shape, refl.shape)));
+        return Err(bad(format!(
+            "shapes disagree: phi_i {np}, theta_i {nt}, vndf {:?}, luminance {:?}, reflectance {:?}",
+            vndf.shape, lum.shape, refl.shape
+        )));
     }
     if np > 2 {
         let p = phi_i.as_f32().unwrap_or_default();

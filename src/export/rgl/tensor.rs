@@ -97,8 +97,7 @@ impl Field {
 
     /// The values of an `f32` field (`None` for any other type).
     pub fn as_f32(&self) -> Option<Vec<f32>> {
-        (self.dtype == Dtype::Float32)
-            .then(|| self.data.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+        (self.dtype == Dtype::Float32).then(|| self.data.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
     }
 }
 
@@ -121,8 +120,7 @@ impl TensorFile {
 
     /// The file's bytes: header, field table, then each field's data at an aligned offset.
     pub fn to_bytes(&self) -> Vec<u8> {
-        let header: usize =
-            12 + 2 + 4 + self.fields.iter().map(|f| 2 + f.name.len() + 2 + 1 + 8 + 8 * f.shape.len()).sum::<usize>();
+        let header: usize = 12 + 2 + 4 + self.fields.iter().map(|f| 2 + f.name.len() + 2 + 1 + 8 + 8 * f.shape.len()).sum::<usize>();
         let mut offsets = Vec::with_capacity(self.fields.len());
         let mut at = header.next_multiple_of(ALIGN);
         for f in &self.fields {

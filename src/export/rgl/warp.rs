@@ -122,7 +122,10 @@ mod tests {
                 let (i, j) = ((fx as usize).min(w - 2), (fy as usize).min(h - 2));
                 let (tx, ty) = (fx - i as f64, fy - j as f64);
                 let v = |i: usize, j: usize| data[j * w + i];
-                let d = (1.0 - tx) * (1.0 - ty) * v(i, j) + tx * (1.0 - ty) * v(i + 1, j) + (1.0 - tx) * ty * v(i, j + 1) + tx * ty * v(i + 1, j + 1);
+                let d = (1.0 - tx) * (1.0 - ty) * v(i, j)
+                    + tx * (1.0 - ty) * v(i + 1, j)
+                    + (1.0 - tx) * ty * v(i, j + 1)
+                    + tx * ty * v(i + 1, j + 1);
                 mass += d * qx * qy / (m * m) as f64;
             }
         }
