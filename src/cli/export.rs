@@ -1,32 +1,66 @@
 //! `ndfit export FIT.json --to mitsuba|pbrt|blender|openpbr|materialx [--json]`: a fit as a renderer's
-//! parameters (the math is in `ndfit::export`).
+//! parameters (the math is in `ndfit::export`); `ndfit export FIT.json|SCAN --to rgl -o OUT.bsdf`: the fit
+//! or the scan's own NDF as a tabulated BSDF (`ndfit::export::rgl`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{anyhow, Context};
+use anyhow::{anyhow, bail, Context};
+use ndfit::export::rgl::{self, Flavour, Material, RglOptions};
 use ndfit::export::{export, Target};
-use ndfit::models::Model;
+use ndfit::models::{Model, Ndf};
 
 /// Arguments of `ndfit export`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// A fit result (`ndfit.fit/1`) or any JSON object with `model` and `params`.
+    /// A fit result (`ndfit.fit/1`) or any JSON object with `model` and `params`; with `--to rgl` also a
+    /// scan, whose own NDF is tabulated.
     pub fit: PathBuf,
     /// The renderer: mitsuba (roughconductor), pbrt (conductor, pbrt-v4), blender (Principled BSDF),
-    /// openpbr (OpenPBR Surface), materialx (conductor_bsdf).
+    /// openpbr (OpenPBR Surface), materialx (conductor_bsdf), or rgl (a tabulated BSDF file for Mitsuba 3's
+    /// `measured` and pbrt-v4's `measured`, written to `-o`).
     #[arg(long = "to", value_name = "RENDERER")]
     pub to: String,
     /// Print one JSON object (the contract's keys, plus `note` and `approximation` when the fit had to be
     /// approximated) instead of a snippet in the renderer's syntax.
     #[arg(long)]
     pub json: bool,
+    /// The tabulated BSDF to write (`--to rgl` only; written atomically).
+    #[arg(short = 'o', long)]
+    pub output: Option<PathBuf>,
+    /// `--to rgl`: the conductor: none (a perfect mirror, F = 1), Al, Ag, Au, Cu or Cr.
+    #[arg(long, default_value = "none")]
+    pub material: String,
+    /// `--to rgl`: write `spectra` with `wavelengths` (pbrt-v4, Mitsuba's spectral variants) instead of
+    /// `rgb` (Mitsuba's RGB variants, which refuse a file with wavelengths).
+    #[arg(long)]
+    pub spectral: bool,
+    /// `--to rgl`: incident elevations, 0 to 90 degrees.
+    #[arg(long, default_value_t = RglOptions::default().theta_i)]
+    pub theta_i: usize,
+    /// `--to rgl`: incident azimuths over the full turn (both ends included).
+    #[arg(long, default_value_t = RglOptions::default().phi_i)]
+    pub phi_i: usize,
+    /// `--to rgl`: nodes per axis of the NDF and projected-area grids.
+    #[arg(long, default_value_t = RglOptions::default().ndf_res)]
+    pub ndf_res: usize,
+    /// `--to rgl`: nodes per axis of the sampling warps and the reflectance (the file's size grows with its
+    /// square times theta_i x phi_i).
+    #[arg(long, default_value_t = RglOptions::default().warp_res)]
+    pub warp_res: usize,
 }
 
 /// Run `ndfit export`.
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let path = args.fit.display().to_string();
-    let target: Target = args.to.parse().map_err(|e: ndfit::Error| anyhow!("{path}: --to: {}", e.message()))?;
+    if args.to == "rgl" {
+        return run_rgl(&args, &path);
+    }
+    if args.output.is_some() {
+        bail!("{path}: -o is for --to rgl (the other renderers' exports go to standard output)");
+    }
+    let target: Target =
+        args.to.parse().map_err(|e: ndfit::Error| anyhow!("{path}: --to: {}; or rgl for a tabulated BSDF", e.message()))?;
     let text = std::fs::read_to_string(&args.fit).with_context(|| format!("{path}: cannot read"))?;
     let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| anyhow!("{path}: not valid JSON ({e})"))?;
     let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
@@ -45,6 +79,78 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         eprintln!("ndfit: {path}: {note}");
     }
     emit(args.json, &path, || out.to_json(), || out.snippet(&name))
+}
+
+/// `--to rgl`: tabulate a fit file's model, or a scan's regularized empirical NDF, and write the tensor file.
+fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
+    let Some(out) = &args.output else { bail!("{path}: --to rgl writes a file: give it with -o OUT.bsdf") };
+    if args.json {
+        bail!("{path}: --json is not for --to rgl (the table is a binary file)");
+    }
+    let material: Material = args.material.parse().map_err(|e: ndfit::Error| anyhow!("{path}: --material: {}", e.message()))?;
+    let opts = RglOptions {
+        theta_i: args.theta_i,
+        phi_i: args.phi_i,
+        ndf_res: args.ndf_res,
+        warp_res: args.warp_res,
+        material,
+        flavour: if args.spectral { Flavour::Spectral } else { Flavour::Rgb },
+    };
+    ndfit::io::atomic::protect_input(&args.fit);
+    ndfit::io::atomic::check_output(out)?;
+    let name = args.fit.file_name().map_or(path.to_string(), |n| n.to_string_lossy().into_owned());
+    let tail = format!(
+        "Smith masking-shadowing (separable) from the tabulated NDF; conductor {}; phi = 0 and the tangent u along the scan's +x",
+        material_text(material)
+    );
+    let fail = |e: ndfit::Error| anyhow!("{path}: {}", e.message());
+    let table = if looks_like_json(&args.fit)? {
+        let text = std::fs::read_to_string(&args.fit).with_context(|| format!("{path}: cannot read"))?;
+        let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| anyhow!("{path}: not valid JSON ({e})"))?;
+        let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
+        let description = format!("ndfit tabulated {} model of {name} {}; {tail}", model.id(), params_text(&model));
+        rgl::tabulate(&|m| model.d(m), &description, &opts, false).map_err(fail)?
+    } else {
+        let outcome = ndfit::Pipeline::default().run_path(&args.fit)?;
+        let fit = outcome.fit.to_model()?;
+        let max_theta = outcome.fit.quality.max_theta_deg;
+        let reg = rgl::empirical::Regularized::new(&outcome.ndf, &fit, max_theta);
+        let description = format!(
+            "ndfit measured NDF of the scan {name}: {}; fitted {} {}; {tail}",
+            reg.describe(max_theta),
+            fit.id(),
+            params_text(&fit)
+        );
+        rgl::tabulate(&|m| reg.d(m), &description, &opts, true).map_err(fail)?
+    };
+    let bytes = table.tensor.to_bytes();
+    ndfit::io::write_bytes_atomic(out, &bytes)?;
+    eprintln!("ndfit: {path}: wrote {} ({} bytes)", out.display(), bytes.len());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Whether the file's first non-blank byte opens a JSON object (a fit), rather than a scan.
+fn looks_like_json(p: &Path) -> anyhow::Result<bool> {
+    use std::io::Read;
+    let mut head = [0u8; 256];
+    let n = std::fs::File::open(p).and_then(|mut f| f.read(&mut head)).with_context(|| format!("{}: cannot read", p.display()))?;
+    Ok(head[..n].iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'{'))
+}
+
+/// `(name = value, ...)` of a model's parameters.
+fn params_text(m: &Model) -> String {
+    let names = m.id().param_names();
+    let vals = m.params();
+    let parts: Vec<String> = names.iter().zip(&vals).map(|(n, v)| format!("{n} = {v:.6}")).collect();
+    format!("({})", parts.join(", "))
+}
+
+/// The material as the description states it.
+fn material_text(m: Material) -> String {
+    match m {
+        Material::None => "none (F = 1)".into(),
+        _ => format!("{} (complex index: Rakic et al. 1998 Lorentz-Drude model)", m.as_str()),
+    }
 }
 
 /// Write the export to standard output: the JSON document with `--json`, the renderer's snippet otherwise.

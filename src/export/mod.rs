@@ -36,6 +36,7 @@ use crate::models::{LobeAxes, Model, ModelId, Ndf};
 use crate::ndf::SlopeFrame;
 
 pub mod mixture;
+pub mod rgl;
 pub mod snippet;
 
 /// Largest `alpha_x / alpha_y` of Blender's Principled BSDF: `1 / aspect^2` at `anisotropic = 1`.

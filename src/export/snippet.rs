@@ -52,14 +52,16 @@ impl Export {
             ),
             Target::OpenPbr => format!(
                 "<?xml version=\"1.0\"?>\n<!-- {} -->\n<materialx version=\"1.39\">\n  \
-                 <!-- alpha_t lies along geometry_tangent: the {tangent}. -->\n  \
+                 <!-- alpha_t lies along geometry_tangent: the {tangent}. -->\n{}  \
                  <open_pbr_surface name=\"ndfit_surface\" type=\"surfaceshader\">\n    \
+                 <input name=\"geometry_tangent\" type=\"vector3\" nodename=\"ndfit_tangent\"/>\n    \
                  <input name=\"base_metalness\" type=\"float\" value=\"1.0\"/>\n    \
                  <input name=\"specular_roughness\" type=\"float\" value=\"{}\"/>\n    \
                  <input name=\"specular_roughness_anisotropy\" type=\"float\" value=\"{}\"/>\n  </open_pbr_surface>\n  \
                  <surfacematerial name=\"ndfit\" type=\"material\">\n    \
                  <input name=\"surfaceshader\" type=\"surfaceshader\" nodename=\"ndfit_surface\"/>\n  </surfacematerial>\n</materialx>\n",
                 xml_comment(&head),
+                tangent_nodes(t),
                 num("specular_roughness"),
                 num("specular_roughness_anisotropy")
             ),
@@ -67,20 +69,36 @@ impl Export {
                 let r = [self.lobe.alpha_u, self.lobe.alpha_v];
                 format!(
                     "<?xml version=\"1.0\"?>\n<!-- {} -->\n<materialx version=\"1.39\">\n  \
-                     <!-- roughness = (alpha_x, alpha_y), alpha_x along the tangent input: the {tangent}. -->\n  \
+                     <!-- roughness = (alpha_x, alpha_y), alpha_x along the tangent input: the {tangent}. -->\n{}  \
                      <conductor_bsdf name=\"ndfit_conductor\" type=\"BSDF\">\n    \
-                     <input name=\"roughness\" type=\"vector2\" value=\"{}, {}\"/>\n  </conductor_bsdf>\n  \
+                     <input name=\"roughness\" type=\"vector2\" value=\"{}, {}\"/>\n    \
+                     <input name=\"tangent\" type=\"vector3\" nodename=\"ndfit_tangent\"/>\n  </conductor_bsdf>\n  \
                      <surface name=\"ndfit_surface\" type=\"surfaceshader\">\n    \
                      <input name=\"bsdf\" type=\"BSDF\" nodename=\"ndfit_conductor\"/>\n  </surface>\n  \
                      <surfacematerial name=\"ndfit\" type=\"material\">\n    \
                      <input name=\"surfaceshader\" type=\"surfaceshader\" nodename=\"ndfit_surface\"/>\n  </surfacematerial>\n</materialx>\n",
                     xml_comment(&head),
+                    tangent_nodes(t),
                     r[0],
                     r[1]
                 )
             }
         }
     }
+}
+
+/// MaterialX nodes whose output `ndfit_tangent` is the surface's world tangent (the scan's `+x`) turned
+/// counter-clockwise about the normal by `t` radians. `rotate3d` computes
+/// `v cos(a) + (v x axis) sin(a) + axis (axis.v) (1 - cos(a))`, a clockwise turn for a positive amount
+/// (its GLSL and OSL sources), so the amount is `-t` in degrees.
+fn tangent_nodes(t: f64) -> String {
+    format!(
+        "  <tangent name=\"ndfit_surface_tangent\" type=\"vector3\">\n    <input name=\"space\" type=\"string\" value=\"world\"/>\n  </tangent>\n  \
+         <normal name=\"ndfit_surface_normal\" type=\"vector3\">\n    <input name=\"space\" type=\"string\" value=\"world\"/>\n  </normal>\n  \
+         <rotate3d name=\"ndfit_tangent\" type=\"vector3\">\n    <input name=\"in\" type=\"vector3\" nodename=\"ndfit_surface_tangent\"/>\n    \
+         <input name=\"amount\" type=\"float\" value=\"{}\"/>\n    <input name=\"axis\" type=\"vector3\" nodename=\"ndfit_surface_normal\"/>\n  </rotate3d>\n",
+        -t.to_degrees()
+    )
 }
 
 /// Every line of `text` behind `prefix`.

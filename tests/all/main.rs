@@ -6,6 +6,7 @@ mod batch;
 mod bench;
 mod cli;
 mod export;
+mod export_rgl;
 mod facade;
 mod fit;
 mod fused_resolution;
