@@ -42,7 +42,7 @@ fn main() {
         let g = EllipsoidGeometry::new(&ep, &s).unwrap();
         row(&format!("cap {p:?}, {n}^2"), &hf, |i, j| g.slope(s.xc(j), s.yc(i)));
     }
-    for (lambda, n) in [(400.0, 1024), (100.0, 1024), (40.0, 1024)] {
+    for (lambda, n) in [(100.0, 1024), (40.0, 1024), (16.0, 1024), (8.0, 1024)] {
         let w = waves::Waves::new(lambda, 0.3, 11);
         let hf = w.surface(n, n);
         row(&format!("waves, wavelength {lambda} dx, {n}^2"), &hf, |i, j| Some(w.gradient(j as f64, i as f64)));
