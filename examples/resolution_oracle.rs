@@ -33,11 +33,11 @@ fn main() {
     println!("| truth | flagged | truly unresolved | FP rate | FN rate | bins truly / all | bin FP | bin FN |");
     println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     let caps256 = [[0.05, 0.05, 0.0, 0.0, 0.0], [0.4, 0.1, 0.0, 0.0, 0.6], [0.35, 0.2, 0.0, -0.35, 1.0]];
-    let sets: Vec<(usize, [f64; 5])> =
-        caps256.iter().map(|p| (256, *p)).chain(HARD_END_SET.iter().map(|p| (1024, *p))).collect();
+    let sets: Vec<(usize, [f64; 5])> = caps256.iter().map(|p| (256, *p)).chain(HARD_END_SET.iter().map(|p| (1024, *p))).collect();
     for (n, p) in sets {
         let s = SynthSettings { nx: n, ny: n, seed: 7, ..SynthSettings::default() };
-        let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+        let ep =
+            EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
         let (hf, _) = ellipsoid_surface(&s, &ep).unwrap();
         let g = EllipsoidGeometry::new(&ep, &s).unwrap();
         row(&format!("cap {p:?}, {n}^2"), &hf, |i, j| g.slope(s.xc(j), s.yc(i)));

@@ -86,7 +86,12 @@ fn main() {
             let gp = ndfit::synth::GaussianParams { sigma_x: sx, sigma_y: sy, theta_z: 0.3, corr_length: corr };
             let s = SynthSettings { nx: 1024, ny: 1024, seed: 7, ..SynthSettings::default() };
             let (hf, t) = ndfit::synth::gaussian_surface(&s, &gp).unwrap();
-            row(&format!("Gaussian, sigma {sx}/{sy}, corr {} dx, 1024^2", corr / 1e-6), &hf, &t.to_model().unwrap(), ModelId::BeckmannAniso);
+            row(
+                &format!("Gaussian, sigma {sx}/{sy}, corr {} dx, 1024^2", corr / 1e-6),
+                &hf,
+                &t.to_model().unwrap(),
+                ModelId::BeckmannAniso,
+            );
         }
     }
     if set.contains("hard") {

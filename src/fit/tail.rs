@@ -27,9 +27,9 @@ pub const MIN_TAIL_SHARE: f64 = 0.005;
 
 /// Share of the region's unresolved normals lying in bins where they are the majority from which the
 /// `rim` rule takes them for a lone lobe's rim and cuts the `core`. A single lobe's rim holds its
-/// unresolved normals nearly alone (objective.md measures 0.79-0.93 on caps); a second, wider lobe
-/// covers the narrow lobe's rim with resolved normals, and most unresolved normals then share bins
-/// with a resolved majority (0.06-0.15 on two-cap scans).
+/// unresolved normals nearly alone; a second, wider lobe covers the narrow lobe's rim with resolved
+/// normals, and most unresolved normals then share bins with a resolved majority (objective.md, "Why
+/// the rim rule").
 pub const MIN_ALONE_SHARE: f64 = 0.5;
 
 /// Which tail rule the fit applies (`--tail`).

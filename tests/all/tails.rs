@@ -473,7 +473,8 @@ fn resolution_test_against_exact_slopes() {
     let cases = [([0.05, 0.05, 0.0, 0.0, 0.0], 0.00266, 0.0), ([0.4, 0.1, 0.0, 0.0, 0.6], 0.00757, 0.0105)];
     for (p, fp, bin_fp) in cases {
         let s = SynthSettings { nx: 256, ny: 256, seed: 7, ..SynthSettings::default() };
-        let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
+        let ep =
+            EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
         let (hf, _) = ellipsoid_surface(&s, &ep).expect("synth");
         let g = EllipsoidGeometry::new(&ep, &s).expect("geometry");
         let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
