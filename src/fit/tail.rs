@@ -1,7 +1,7 @@
 //! The tail cut of the fit region (`data_formats/objective.md`, "The tail the scan cannot resolve").
-//! Three rules, all only on a scan smooth at the sampling step ([`MAX_UNRESOLVED_SHARE`]), and only
-//! once at least [`MIN_TAIL_SHARE`] of the region's normals lie in bins most of whose normals the
-//! sampling does not resolve ([`crate::ndf::resolution`]):
+//! Three rules, all only on a scan smooth at the sampling step ([`MAX_UNRESOLVED_SHARE`]); `rim` and
+//! `core` only once at least [`MIN_TAIL_SHARE`] of the region's normals lie in bins most of whose
+//! normals the sampling does not resolve ([`crate::ndf::resolution`]):
 //! - `rim` (the default): the `core` cut when the unresolved normals are a lone lobe's rim (at least
 //!   [`MIN_ALONE_SHARE`] of them in bins they dominate), else the `unresolved` cut: where another
 //!   lobe's resolved normals fill the bins of that rim, those bins stay;
