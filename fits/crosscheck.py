@@ -46,7 +46,7 @@ import numpy as np  # noqa: E402
 from ndfitpy import canonical, endtoend, fitjson, models, scanio  # noqa: E402
 from ndfitpy import objective as obj  # noqa: E402
 from ndfitpy.bins import read_ndf_csv  # noqa: E402
-from ndfitpy.tail import cut_core  # noqa: E402
+from ndfitpy.tail import cut_rim  # noqa: E402
 from ndfitpy.tail import cut_unresolved as tail_cut  # noqa: E402
 from ndfitpy.fit import fit  # noqa: E402
 
@@ -190,7 +190,7 @@ def check_scan(ndfit: str, scan: str, name: str, model_list, work: str, ndf_args
         return [Row(scan=name, model=m, notes=[f"reading ndfit's NDF: {e}"]) for m in model_list]
     fit_args = []
     if not tail and bins.extra.get("unresolved") is not None:
-        # The default tail rule (core) needs the binning frame: the NDF's JSON carries it. (Without the
+        # The default tail rule (rim) needs the binning frame: the NDF's JSON carries it. (Without the
         # CSV's unresolved counts no rule applies.)
         js = os.path.join(work, f"{name}.ndf.json")
         ok, _, msg = run([ndfit, "ndf", scan, "-o", js, *ndf_args], timeout)
@@ -198,7 +198,7 @@ def check_scan(ndfit: str, scan: str, name: str, model_list, work: str, ndf_args
             return [Row(scan=name, model=m, notes=[f"ndfit ndf (json) failed: {msg}"]) for m in model_list]
         with open(js, encoding="utf-8") as fh:
             frame = json.load(fh)["frame"]
-        bins, _ = cut_core(bins, frame)
+        bins, _ = cut_rim(bins, frame)
     if tail:
         bins, info = tail_cut(bins)
         fit_args = ["--tail", "unresolved"]

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from ndfitpy.bins import Bins, read_ndf_csv
-from ndfitpy.tail import cut_core, cut_unresolved, whitened_lambert_radius
+from ndfitpy.tail import cut_core, cut_rim, cut_unresolved, whitened_lambert_radius
 
 
 def _bins(count, unresolved):
@@ -79,3 +79,25 @@ def test_core_rule_keeps_the_core_when_the_tail_is_unresolved():
     b.extra["unresolved"] = np.array([200.0, 60.0, 0.0, 30.0])
     cut, info = cut_core(b, frame)
     assert info.rule.startswith("none (rough") and len(cut) == 4
+
+
+def test_rim_rule_cuts_the_core_of_a_lone_rim_and_only_unresolved_bins_under_another_lobe():
+    """The default rule on the bins above: all 30 unresolved normals in the one bin they dominate (a lone
+    lobe's rim): the core cut, as cut_core. The same bin, plus 40 unresolved normals spread over bins of
+    resolved ones (another lobe covering the rim: 30 of 70 alone, under half): only that bin leaves, the
+    resolved bin beyond |p| = 1 stays."""
+    frame = {"center": [0.0, 0.0], "whiten": [[1.0, 0.0], [0.0, 1.0]]}
+    r = np.array([0.0, 1.0, 1.5, 2.0, 2.5])  # |p| = 0, 0.765, 0.944, 1.051, 1.15
+    m = np.column_stack([-r, np.zeros(5), np.ones(5)])
+    b = Bins(m=m, count=np.array([500.0, 300.0, 150.0, 200.0, 50.0]), proj_solid_angle=np.full(5, 0.1))
+    b.extra["unresolved"] = np.array([0.0, 0.0, 0.0, 0.0, 30.0])
+    cut, info = cut_rim(b, frame)
+    core, core_info = cut_core(b, frame)
+    assert info == core_info and info.rule == "core" and list(cut.count) == list(core.count) == [500, 300, 150]
+    b.extra["unresolved"] = np.array([0.0, 0.0, 20.0, 20.0, 30.0])
+    cut, info = cut_rim(b, frame)
+    assert info.rule == "unresolved" and list(cut.count) == [500, 300, 150, 200] and cut.n_samples == 1200
+    assert info.bins_excluded == 1 and info.n_excluded == 50
+    b.extra["unresolved"] = np.array([0.0, 0.0, 0.0, 0.0, 5.0])
+    cut, info = cut_rim(b, frame)
+    assert info.rule == "none (tail resolved)" and len(cut) == 5

@@ -139,6 +139,6 @@ def fit(
     extra_starts: int = 0,
     max_theta: Optional[float] = None,
     na: Optional[float] = None,
-    tail: Literal["core", "unresolved", "all"] = "core",
+    tail: Literal["rim", "core", "unresolved", "all"] = "rim",
     threads: Optional[int] = None,
 ) -> Fit: ...

@@ -617,12 +617,12 @@ fn finish<'py>(py: Python<'py>, out: Vec<f64>, single: bool) -> PyResult<Bound<'
 /// - the NDF: `normals` (central|triangles), `ndf_cells` (odd, 3-1023), `target_count` (default 64).
 /// - the fit: `objective` (poisson|logd), `solver` (lm|nelder-mead|lbfgs), `extra_starts` (0-4),
 ///   `max_theta` (degrees, (0, 90], default 70) or `na` (numerical aperture: max_theta = asin(NA)),
-///   `tail` (core|unresolved|all, as `--tail`), `preset` (fast|balanced|accurate, as `--preset`).
+///   `tail` (rim|core|unresolved|all, as `--tail`), `preset` (fast|balanced|accurate, as `--preset`).
 /// - `threads`: threads for this call (default: all cores, as the CLI).
 #[pyfunction]
 #[pyo3(signature = (source, model="auto", form="plane", preset=None, *, dx=None, dy=None, z_scale=None, format=None, crop=None,
     subsample=1, despike="median", normals="central", ndf_cells=None, target_count=None, objective="poisson", solver="lm",
-    extra_starts=0, max_theta=None, na=None, tail="core", threads=None))]
+    extra_starts=0, max_theta=None, na=None, tail="rim", threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,

@@ -34,10 +34,12 @@ pub struct FitArgs {
     /// The objective's numerical aperture NA (0-1]: sets --max-theta to asin(NA); both given must agree.
     #[arg(long, allow_hyphen_values = true)]
     pub na: Option<f64>,
-    /// The tail: `core` (default) keeps the whitened core when the sampling leaves an unresolved tail;
-    /// `unresolved` leaves out only the bins where most normals are not resolved by the sampling; `all`
-    /// keeps every bin within --max-theta (data_formats/objective.md).
-    #[arg(long, default_value = "core")]
+    /// The tail: `rim` (default) cuts as `core` when the unresolved normals are a lone lobe's rim and
+    /// as `unresolved` when another lobe's resolved normals fill those bins; `core` keeps the whitened
+    /// core when the sampling leaves an unresolved tail; `unresolved` leaves out only the bins where most
+    /// normals are not resolved by the sampling; `all` keeps every bin within --max-theta
+    /// (data_formats/objective.md).
+    #[arg(long, default_value = "rim")]
     pub tail: String,
     /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` = the defaults). Sets the
     /// subsampling stride (on top of --subsample; the kept points are all that is read, and the form is

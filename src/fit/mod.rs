@@ -68,8 +68,8 @@ pub struct FitOptions {
     /// Largest polar angle (radians) of the bins the objective uses; the model is normalized over them
     /// (objective.md). Default [`objective::DEFAULT_MAX_THETA_DEG`].
     pub max_theta: f64,
-    /// The tail rule ([`tail`], objective.md): by default the whitened core when the sampling leaves an
-    /// unresolved tail ([`tail::TailRule::Core`]).
+    /// The tail rule ([`tail`], objective.md): by default the whitened core of a lone lobe whose rim the
+    /// sampling leaves unresolved, else only the unresolved bins ([`tail::TailRule::Rim`]).
     pub tail: tail::TailRule,
 }
 
@@ -81,7 +81,7 @@ impl Default for FitOptions {
             tolerances: Tolerances::default(),
             extra_starts: 0,
             max_theta: objective::DEFAULT_MAX_THETA_DEG.to_radians(),
-            tail: tail::TailRule::Core,
+            tail: tail::TailRule::Rim,
         }
     }
 }

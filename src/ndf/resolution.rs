@@ -458,3 +458,95 @@ pub fn assess<S: BandSource>(src: &S, ndf: &mut super::EmpiricalNdf) {
     );
     ndf.unresolved = ndf.bin_cells.iter().map(|&c| cells[c as usize]).collect();
 }
+
+/// The per-normal test against a truth: for every central-difference sample of an NDF, whether the
+/// test flags it ([`assess`]'s decision) and whether it truly is unresolved, its slope `s` off the
+/// exact gradient `g` by more than the tolerance in the test's own measure,
+/// `|W (s - g)| > eps max(|W (s - c)|, 1)`; per bin, whether most of its normals are flagged
+/// ([`super::EmpiricalNdf::unresolved`]) and whether most truly are.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Confusion {
+    /// Samples with an exact gradient.
+    pub normals: u64,
+    /// Of them, truly unresolved.
+    pub truly: u64,
+    /// Flagged but truly resolved.
+    pub false_pos: u64,
+    /// Truly unresolved but not flagged.
+    pub false_neg: u64,
+    /// Non-empty bins.
+    pub bins: u64,
+    /// Of them, with a truly unresolved majority.
+    pub bins_truly: u64,
+    /// Majority flagged, not truly.
+    pub bins_false_pos: u64,
+    /// Majority truly unresolved, not flagged.
+    pub bins_false_neg: u64,
+}
+
+impl Confusion {
+    /// Share of the truly resolved normals that are flagged.
+    pub fn fp_rate(&self) -> f64 {
+        self.false_pos as f64 / (self.normals - self.truly).max(1) as f64
+    }
+    /// Share of the truly unresolved normals that are not flagged.
+    pub fn fn_rate(&self) -> f64 {
+        self.false_neg as f64 / self.truly.max(1) as f64
+    }
+    /// [`Confusion::fp_rate`] over bins.
+    pub fn bin_fp_rate(&self) -> f64 {
+        self.bins_false_pos as f64 / (self.bins - self.bins_truly).max(1) as f64
+    }
+    /// [`Confusion::fn_rate`] over bins.
+    pub fn bin_fn_rate(&self) -> f64 {
+        self.bins_false_neg as f64 / self.bins_truly.max(1) as f64
+    }
+}
+
+/// [`Confusion`] of the test on the central-difference NDF `ndf` of `hf` (its frame, grid and
+/// tolerance), against `exact(i, j)`, the true gradient at row `i`, column `j` (`None`: no truth
+/// there, the sample is left out). A measurement of the estimate, not part of the pipeline.
+pub fn confusion<S: BandSource>(
+    src: &S,
+    ndf: &super::EmpiricalNdf,
+    exact: impl Fn(usize, usize) -> Option<[f64; 2]> + Sync + Send,
+) -> Confusion {
+    let (frame, tol, grid) = (ndf.frame, ndf.resolution_tolerance, ndf.grid);
+    // Per cell: samples, flagged, truly unresolved; then the per-normal tallies.
+    type Acc = (Vec<[u64; 3]>, [u64; 4]);
+    let (cells, t) = fold_samples(
+        src,
+        || -> Acc { (vec![[0; 3]; grid.cells()], [0; 4]) },
+        |a, hf, i, j, sx, sy| {
+            let Some(g) = exact(i, j) else { return };
+            let flagged = unresolved_at(hf, &frame, i, j, sx, sy, tol);
+            let w = &frame.whiten;
+            let (ex, ey) = (sx - g[0], sy - g[1]);
+            let (wx, wy) = (w[0][0] * ex + w[0][1] * ey, w[1][0] * ex + w[1][1] * ey);
+            let p = frame.to_whitened(sx, sy);
+            let truly = !(wx * wx + wy * wy <= tol * tol * (p[0] * p[0] + p[1] * p[1]).max(1.0));
+            let c = &mut a.0[grid.cell_of(frame.to_lambert(sx, sy))];
+            c[0] += 1;
+            c[1] += flagged as u64;
+            c[2] += truly as u64;
+            a.1[0] += 1;
+            a.1[1] += truly as u64;
+            a.1[2] += (flagged && !truly) as u64;
+            a.1[3] += (truly && !flagged) as u64;
+        },
+        |mut a, b| {
+            a.0.iter_mut().zip(&b.0).for_each(|(x, y)| (0..3).for_each(|k| x[k] += y[k]));
+            (0..4).for_each(|k| a.1[k] += b.1[k]);
+            a
+        },
+    );
+    let mut c = Confusion { normals: t[0], truly: t[1], false_pos: t[2], false_neg: t[3], ..Confusion::default() };
+    for &[n, f, u] in cells.iter().filter(|c| c[0] > 0) {
+        let (flagged, truly) = (2 * f > n, 2 * u > n);
+        c.bins += 1;
+        c.bins_truly += truly as u64;
+        c.bins_false_pos += (flagged && !truly) as u64;
+        c.bins_false_neg += (truly && !flagged) as u64;
+    }
+    c
+}
