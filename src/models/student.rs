@@ -271,7 +271,7 @@ mod tests {
             assert!((ln_gamma_ratio_half(p) - direct).abs() < 5e-14, "p = {p}");
         }
         // Far out: Gamma(p + 1/2)/Gamma(p) = sqrt(p) (1 - 1/(8p) + 1/(128p^2) + 5/(1024p^3) - ...).
-        for p in [1e3, 1e5, 1e7] {
+        for p in [1e3_f64, 1e5, 1e7] {
             let series = p.sqrt() * (1.0 - 1.0 / (8.0 * p) + 1.0 / (128.0 * p * p) + 5.0 / (1024.0 * p * p * p));
             assert!((ln_gamma_ratio_half(p) - series.ln()).abs() < 1e-14, "p = {p}");
         }
