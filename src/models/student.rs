@@ -265,10 +265,11 @@ mod tests {
 
     #[test]
     fn gamma_ratio_against_lgamma_and_its_asymptotic_series() {
-        // Near the switch the lgamma difference is good to about 1e-14 (lgamma(100) = 360 has an ulp of 6e-14).
+        // Near the switch the lgamma difference is good to a few ulps of lgamma itself (lgamma(100) = 360 has an
+        // ulp of 6e-14; libm's lgamma is within a few of them).
         for p in [64.0, 80.0, 100.0] {
             let direct = libm::lgamma(p + 0.5) - libm::lgamma(p);
-            assert!((ln_gamma_ratio_half(p) - direct).abs() < 5e-14, "p = {p}");
+            assert!((ln_gamma_ratio_half(p) - direct).abs() < 3e-13, "p = {p}: {}", ln_gamma_ratio_half(p) - direct);
         }
         // Far out: Gamma(p + 1/2)/Gamma(p) = sqrt(p) (1 - 1/(8p) + 1/(128p^2) + 5/(1024p^3) - ...).
         for p in [1e3_f64, 1e5, 1e7] {
