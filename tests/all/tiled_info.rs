@@ -57,8 +57,9 @@ fn info_of_a_mapped_x3p_equals_the_whole_grid_statistics() {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_ndfit")).arg("info").arg(&x3p).arg("--json").output().expect("run");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
-    // The old path: the heights as read with the spikes masked, in memory; the statistics remove the plane.
-    let pre = Preprocess { form: FormRemoval::None, ..Preprocess::default() };
+    // The file as stored: the heights as read, nothing masked, in memory; the statistics remove the plane.
+    // What the default preprocessing masks is reported apart, as `spikes`.
+    let pre = Preprocess { form: FormRemoval::None, despike: ndfit::preprocess::Despike::None, ..Preprocess::default() };
     let want = surface_stats(&apply(hf, &pre).expect("apply")).expect("stats");
     let num = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
     assert_eq!(
@@ -66,4 +67,5 @@ fn info_of_a_mapped_x3p_equals_the_whole_grid_statistics() {
         [want.z_min, want.z_max, want.z_mean, want.sq, want.sdq].map(f64::to_bits)
     );
     assert_eq!([num("valid"), num("invalid"), num("sdq_points")], [want.valid as f64, want.invalid as f64, want.sdq_points as f64]);
+    assert!(num("spikes") > 0.0, "the planted spikes are reported apart: {v}");
 }

@@ -148,7 +148,12 @@ fn json_fields_are_canonical_and_round_trip() {
             let p: Vec<f64> = id
                 .param_names()
                 .iter()
-                .map(|n| if n.starts_with("alpha") { 0.02 + 2.0 * rng.uniform() } else { 4.0 * rng.uniform() - 2.0 })
+                .map(|n| match *n {
+                    n if n.starts_with("alpha") => 0.02 + 2.0 * rng.uniform(),
+                    // A Student-t tail, from near the Smith limit 3/2 to nearly Beckmann.
+                    "gamma" => 1.55 + 20.0 * rng.uniform(),
+                    _ => 4.0 * rng.uniform() - 2.0,
+                })
                 .collect();
             let model = Model::from_params(id, &p).unwrap();
             let fields = model.to_json_fields();
