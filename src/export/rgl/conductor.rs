@@ -9,7 +9,7 @@
 use nalgebra::Complex;
 
 /// `hc` in eV nm: a wavelength in nm is `HC / E`.
-const HC_EV_NM: f64 = 1239.841_98;
+const HC_EV_NM: f64 = 1_239.841_98;
 
 /// A reflecting material of the table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -320,7 +320,7 @@ pub fn check_structure(t: &TensorFile, flavour: Flavour) -> Result<()> {
         }
     }
     for f in &t.fields {
-        if f.shape.iter().any(|&s| s == 0) {
+        if f.shape.contains(&0) {
             return Err(bad(format!("field '{}' is empty", f.name)));
         }
     }
