@@ -162,10 +162,13 @@ fn rgl_ndf_and_sigma_against_the_model() {
 /// (Phys. Rev. B 6, 4370 (1972); for Al the table pbrt-v4 ships) at 450, 551 and 653 nm: within 0.03 for Ag
 /// and Al; Au and Cu within 0.16, the Lorentz-Drude fit's known departure at their interband edge (Cu at
 /// 551 nm: 0.78 against the measured 0.64).
+/// `(wavelength nm, n, k)`, measured.
+type Measured = (f64, f64, f64);
+
 #[test]
 fn rgl_conductors_against_measured_indices() {
     let r0 = |n: f64, k: f64| ((n - 1.0).powi(2) + k * k) / ((n + 1.0).powi(2) + k * k);
-    let table: [(Material, [(f64, f64, f64); 3]); 4] = [
+    let table: [(Material, [Measured; 3]); 4] = [
         (Material::Au, [(450.85, 1.502, 1.876), (551.04, 0.3455, 2.731), (652.55, 0.166, 3.15)]),
         (Material::Ag, [(450.85, 0.151, 2.479), (551.04, 0.1244, 3.348), (652.55, 0.14, 4.15)]),
         (Material::Cu, [(450.85, 1.165, 2.398), (551.04, 0.950, 2.577), (652.55, 0.214, 3.67)]),
