@@ -140,5 +140,6 @@ def fit(
     max_theta: Optional[float] = None,
     na: Optional[float] = None,
     tail: Literal["rim", "core", "unresolved", "all"] = "rim",
+    tolerance: Optional[float] = None,
     threads: Optional[int] = None,
 ) -> Fit: ...

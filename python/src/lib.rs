@@ -617,12 +617,13 @@ fn finish<'py>(py: Python<'py>, out: Vec<f64>, single: bool) -> PyResult<Bound<'
 /// - the NDF: `normals` (central|triangles), `ndf_cells` (odd, 3-1023), `target_count` (default 64).
 /// - the fit: `objective` (poisson|logd), `solver` (lm|nelder-mead|lbfgs), `extra_starts` (0-4),
 ///   `max_theta` (degrees, (0, 90], default 70) or `na` (numerical aperture: max_theta = asin(NA)),
-///   `tail` (rim|core|unresolved|all, as `--tail`), `preset` (fast|balanced|accurate, as `--preset`).
+///   `tail` (rim|core|unresolved|all, as `--tail`), `tolerance` (the NDF error beyond counting noise a
+///   renderer cannot show, default 0.05, as `--tolerance`), `preset` (fast|balanced|accurate, as `--preset`).
 /// - `threads`: threads for this call (default: all cores, as the CLI).
 #[pyfunction]
 #[pyo3(signature = (source, model="auto", form="plane", preset=None, *, dx=None, dy=None, z_scale=None, format=None, crop=None,
     subsample=1, despike="median", normals="central", ndf_cells=None, target_count=None, objective="poisson", solver="lm",
-    extra_starts=0, max_theta=None, na=None, tail="rim", threads=None))]
+    extra_starts=0, max_theta=None, na=None, tail="rim", tolerance=None, threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -646,6 +647,7 @@ fn fit(
     max_theta: Option<f64>,
     na: Option<f64>,
     tail: &str,
+    tolerance: Option<f64>,
     threads: Option<usize>,
 ) -> PyResult<Fit> {
     let src = Source::from_py(source)?;
@@ -654,8 +656,10 @@ fn fit(
     let max_theta = check::aperture_deg(max_theta, na, Spelling::Keyword).map_err(to_py)?;
     let extra_starts = check::extra_starts(extra_starts, Spelling::Keyword).map_err(to_py)?;
     let tail = check::parse::<ndfit::fit::tail::TailRule>("tail", tail, Spelling::Keyword).map_err(to_py)?;
+    let tolerance = check::tolerance(tolerance, Spelling::Keyword).map_err(to_py)?;
     let fit = FitOptions {
         tail,
+        tolerance,
         objective: objective.parse::<Objective>().map_err(|e| invalid(format!("objective: {}", e.message())))?,
         solver: solver.parse::<Solver>().map_err(|e| invalid(format!("solver: {}", e.message())))?,
         extra_starts,

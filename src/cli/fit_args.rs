@@ -41,6 +41,13 @@ pub struct FitArgs {
     /// (data_formats/objective.md).
     #[arg(long, default_value = "rim")]
     pub tail: String,
+    /// The NDF error beyond counting noise a renderer cannot show (default 0.05: a highlight's radiance is
+    /// linear in D, and 5% is about one just-noticeable colour difference at a highlight's lightness;
+    /// data_formats/objective.md, "The tolerance"). `auto` climbs to a richer model only while no model
+    /// fitted is within it, and a richer one wins only by lowering the error by more than it; a fit is
+    /// `misfit` only beyond it.
+    #[arg(long, allow_hyphen_values = true)]
+    pub tolerance: Option<f64>,
     /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` = the defaults). Sets the
     /// subsampling stride (on top of --subsample; the kept points are all that is read, and the form is
     /// removed from them), the NDF's normals and bins (unless --ndf-cells), the tolerance and the starts.
@@ -59,7 +66,9 @@ impl FitArgs {
         let max_theta = check::aperture_deg(self.max_theta, self.na, Spelling::Flag)?;
         let tail = self.tail.parse::<ndfit::fit::tail::TailRule>().map_err(|e| bad("--tail", e))?;
         let ndf = self.ndf.options().map_err(|e| ndfit::Error::invalid(e.to_string()))?;
-        let fit = FitOptions { objective, solver, extra_starts, max_theta: max_theta.to_radians(), tail, ..FitOptions::default() };
+        let tolerance = check::tolerance(self.tolerance, Spelling::Flag)?;
+        let fit =
+            FitOptions { objective, solver, extra_starts, max_theta: max_theta.to_radians(), tail, tolerance, ..FitOptions::default() };
         Ok(Options { read: self.scan.read_options(), preprocess: self.scan.preprocess(), preset: self.preset, ndf, model, fit })
     }
 }

@@ -1,6 +1,6 @@
 //! Fitting the two-lobe mixtures ([`crate::models::mixture`]): starts from the single-lobe fit they
-//! extend, and the ladder step of `--model auto` (one lobe or two), derived in
-//! `data_formats/objective.md` ("Mixtures and the ladder").
+//! extend, the price a second lobe must pay in deviance, and the data's overdispersion the ladder of
+//! `--model auto` guards with (`data_formats/objective.md`, "Mixtures and the ladder").
 
 use super::{fit_chain, fit_from, public, FitOptions, Fitted, Session};
 use crate::error::Result;
@@ -337,111 +337,8 @@ pub(super) fn fit_mixture_chain(s: &Session, id: ModelId, opts: &FitOptions) -> 
     fit_mixture(s, id, &p, opts)
 }
 
-/// The ladder's exact pruning: a candidate's criterion `F / c_data + p ln N` is at least `p ln N` (a
-/// deviance is never negative), so a mixture whose `p ln N` is not below the best criterion met so far
-/// (the best single lobe's, then any mixture's fitted before it) cannot be chosen (the choice takes a
-/// strictly lower criterion) and need not be fitted. For the best single lobe this reads
-/// `F_single / c_data <= (p - p_single) ln N`. The choice is the same with or without it.
-pub(super) struct Pruning {
-    c_data: f64,
-    n: f64,
-    best_single: f64,
-}
-
 /// `c_data = max(1, dispersion)` of the data ([`super::verdict::data_dispersion`]), or `c_single` when the
 /// NDF has no split.
-fn data_c(ndf: &crate::ndf::EmpiricalNdf, s: &Session, c_single: f64) -> f64 {
+pub(super) fn data_c(ndf: &crate::ndf::EmpiricalNdf, s: &Session, c_single: f64) -> f64 {
     super::verdict::data_dispersion(ndf, s.data.max_theta).filter(|d| d.is_finite()).map_or(c_single, |d| d.max(1.0))
-}
-
-impl Pruning {
-    /// The bound after the single lobes `singles` (the ladder's `c_single` recomputed as
-    /// [`super::fit_auto`] does).
-    pub fn new(ndf: &crate::ndf::EmpiricalNdf, s: &Session, singles: &[&Fitted]) -> Pruning {
-        let k = s.data.k_nonzero as f64;
-        let c_single = super::qbic::overdispersion(singles.iter().filter_map(|f| {
-            let dof = k - f.id.n_params() as f64 - 1.0;
-            (dof > 0.0).then(|| f.f / dof)
-        }));
-        let c_data = data_c(ndf, s, c_single);
-        // The single lobe the ladder starts from: the first smallest single-lobe QBIC (fit_auto's choice).
-        let n = s.data.n;
-        let mut chosen = 0;
-        for i in 1..singles.len() {
-            if super::qbic::qbic(singles[i].f, c_single, singles[i].id.n_params(), n)
-                < super::qbic::qbic(singles[chosen].f, c_single, singles[chosen].id.n_params(), n)
-            {
-                chosen = i;
-            }
-        }
-        let best_single = singles.get(chosen).map_or(f64::INFINITY, |f| super::qbic::qbic(f.f, c_data, f.id.n_params(), n));
-        Pruning { c_data, n, best_single }
-    }
-
-    /// Whether mixture `id` cannot beat the ladder's choice so far: the best single lobe, or a mixture
-    /// fitted before it that beat that (`fitted`, in the ladder's order).
-    pub fn cannot_win(&self, id: ModelId, fitted: &[Fitted]) -> bool {
-        let best = fitted.iter().map(|f| super::qbic::qbic(f.f, self.c_data, f.id.n_params(), self.n)).fold(self.best_single, f64::min);
-        super::qbic::qbic(0.0, self.c_data, id.n_params(), self.n) >= best
-    }
-}
-
-/// The ladder step of `--model auto`: the best single lobe (chosen among the single lobes by the QBIC
-/// with their own overdispersion, unchanged) against the mixtures, by `F / c_data + p ln N` with the
-/// data's own overdispersion `c_data = max(1, dispersion)` ([`super::verdict::data_dispersion`]): a
-/// mixture wins only when its deviance, measured in the data's own noise, drops by more than `ln N` per
-/// added parameter. Derivation in `data_formats/objective.md` ("Mixtures and the ladder").
-pub(super) struct Ladder {
-    /// `c_data`.
-    pub c_data: f64,
-    /// The ladder criterion of every fit.
-    pub criterion: Vec<f64>,
-    /// The index of the fit chosen.
-    pub chosen: usize,
-    /// One sentence for the report.
-    pub summary: String,
-}
-
-impl Ladder {
-    /// The ladder over `fits` (single lobes first, `n_single` of them, the best of which is
-    /// `best_single`); `c_single` is the single lobes' overdispersion, used when the NDF has no split.
-    pub fn new(ndf: &crate::ndf::EmpiricalNdf, s: &Session, fits: &[Fitted], n_single: usize, best_single: usize, c_single: f64) -> Ladder {
-        let c_data = data_c(ndf, s, c_single);
-        let criterion: Vec<f64> = fits.iter().map(|f| super::qbic::qbic(f.f, c_data, f.id.n_params(), s.data.n)).collect();
-        let mut chosen = best_single;
-        for i in n_single..fits.len() {
-            if criterion[i] < criterion[chosen] {
-                chosen = i;
-            }
-        }
-        let best_mix = (n_single..fits.len()).min_by(|&a, &b| criterion[a].total_cmp(&criterion[b]));
-        let summary = match best_mix {
-            None => format!("one lobe: no mixture fitted; {} chosen", fits[best_single].id),
-            Some(m) => {
-                let d = criterion[m] - criterion[best_single];
-                if chosen == m {
-                    format!(
-                        "two lobes: {} beats the best single lobe {} by {:.1} in F / c_data + p ln N (c_data = {c_data:.3})",
-                        fits[m].id, fits[best_single].id, -d
-                    )
-                } else {
-                    format!(
-                        "one lobe: the best mixture {} does not pay for its {} extra parameters over {} (criterion {:+.1}, c_data = {c_data:.3})",
-                        fits[m].id,
-                        fits[m].id.n_params() as i64 - fits[best_single].id.n_params() as i64,
-                        fits[best_single].id,
-                        d
-                    )
-                }
-            }
-        };
-        Ladder { c_data, criterion, chosen, summary }
-    }
-
-    /// `(F_parent - F) / (c_data (p - p_parent))`: the deviance, in the data's noise, that each added
-    /// parameter removes (worth keeping when above `ln N`).
-    pub fn gain_per_param(&self, parent: &Fitted, f: &Fitted) -> f64 {
-        let dp = (f.id.n_params() as f64 - parent.id.n_params() as f64).max(1.0);
-        (parent.f - f.f) / (self.c_data * dp)
-    }
 }

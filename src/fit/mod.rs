@@ -71,6 +71,10 @@ pub struct FitOptions {
     /// The tail rule ([`tail`], objective.md): by default the whitened core of a lone lobe whose rim the
     /// sampling leaves unresolved, else only the unresolved bins ([`tail::TailRule::Rim`]).
     pub tail: tail::TailRule,
+    /// The NDF error beyond counting noise a renderer cannot show ([`verdict::DEFAULT_TOLERANCE`]): the
+    /// verdict's `misfit` lies beyond it, and `auto` climbs to a richer model only while the current one
+    /// exceeds it.
+    pub tolerance: f64,
 }
 
 impl Default for FitOptions {
@@ -82,6 +86,7 @@ impl Default for FitOptions {
             extra_starts: 0,
             max_theta: objective::DEFAULT_MAX_THETA_DEG.to_radians(),
             tail: tail::TailRule::Rim,
+            tolerance: verdict::DEFAULT_TOLERANCE,
         }
     }
 }
@@ -447,11 +452,17 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
         delta_excess,
         specular,
         converged: fit.local.converged || fit.delta,
+        tolerance: opts.tolerance,
     };
     let (verdict, reasons) = verdict::judge(ndf, &evidence);
     // Every warning of the NDF stage reaches the fit; a verdict other than ok says why there too.
     let mut warnings: Vec<String> = ndf.warnings.iter().cloned().chain(warnings).collect();
-    let new: Vec<String> = reasons.iter().filter(|r| !warnings.contains(r)).map(|r| format!("{verdict}: {r}")).collect();
+    // An `ok` fit's reason (a difference within the tolerance) stays in `quality.reasons` alone.
+    let new: Vec<String> = reasons
+        .iter()
+        .filter(|r| verdict != verdict::Verdict::Ok && !warnings.contains(r))
+        .map(|r| format!("{verdict}: {r}"))
+        .collect();
     warnings.extend(new);
     let matrix_a =
         model.matrix_a().map(|a| [[a[(0, 0)], a[(0, 1)], a[(0, 2)]], [a[(1, 0)], a[(1, 1)], a[(1, 2)]], [a[(2, 0)], a[(2, 1)], a[(2, 2)]]]);
@@ -513,16 +524,16 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
     })
 }
 
-/// Fit every model of the two nested chains (ggx -> ggx-aniso -> ellipsoid, beckmann -> beckmann-aniso)
-/// and choose by the quasi-likelihood BIC ([`qbic`]): `F / c + p ln N`, with the overdispersion
-/// `c = max(1, smallest reduced chi-square among the candidates)`.
+/// Choose the model a scene requires: the ladder of the models the table puts in `auto`, climbed one
+/// rung (depth in the table's parent tree) at a time while no model fitted so far is within the tolerance
+/// on the NDF error beyond counting noise ([`FitOptions::tolerance`], [`verdict::excess_delta`]).
 ///
-/// Why BIC: the user's rule is that the simplest model that explains the data wins; BIC's penalty
-/// `ln N` per parameter (about 14 for a 1024^2 scan) is consistent (it picks the true model with
-/// probability -> 1 as N grows) where AIC's 2 keeps a spurious extra parameter about 16% of the time.
-/// Why `c`: neighbouring normals of a real surface are correlated, so the deviance of even the right
-/// model is `c` times its Poisson expectation; dividing by `c` (QAIC/QBIC, Burnham and Anderson) keeps
-/// that correlation from buying parameters.
+/// The choice is the rule `scale` uses ([`verdict::select`]), at the scan's own footprint: the candidates
+/// ordered simplest first (rung, then parameters, then error), the first within the tolerance, or when
+/// none is, the first within the tolerance of the smallest error: a richer model wins only when it lowers
+/// the error by more than the tolerance. The likelihood is a guard, not the decider: a model enters the
+/// choice only when its quasi-likelihood BIC ([`qbic`], `F / c_data + p ln N` with the data's own
+/// overdispersion) is below its parent's, so the data support its added parameters.
 pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
     fit_auto_pruned(ndf, opts, true)
 }
@@ -536,129 +547,144 @@ fn candidate(r: Result<Fitted>) -> (Option<Fitted>, Option<String>) {
     }
 }
 
-/// [`fit_auto`], with the ladder's pruning on or off: with `prune`, a mixture is not fitted when it
-/// cannot win (its deviance cannot fall below 0, so `p ln N` alone already exceeds the best criterion, data_formats/objective.md);
-/// its absence cannot change the choice, only the candidates listed. Public so a test can hold the two to the same choice.
-pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, prune: bool) -> Result<FitReport> {
+/// A model's rung in the `auto` ladder: its depth in the table's parent tree.
+pub fn rung(id: ModelId) -> usize {
+    std::iter::successors(id.parent(), |p| p.parent()).count()
+}
+
+/// Fit `id` on its rung from its parent's fit, the way [`fit_chain`] grows it; a model whose parent is
+/// not in the ladder brings its own chain.
+fn fit_on_rung(s: &Session, id: ModelId, parent: Option<&Fitted>, opts: &FitOptions) -> Result<Fitted> {
+    let spec = id.spec();
+    match parent {
+        None if spec.parent.is_none() => fit_grown(s, id, None, opts),
+        None => fit_chain(s, id, opts),
+        Some(p) if spec.is_mixture() => mixture::fit_mixture(s, id, p, opts),
+        Some(p) if spec.lobes[0].form == Form::Full => fit_ellipsoid(s, id, p, opts),
+        Some(p) => fit_grown(s, id, Some(p), opts),
+    }
+}
+
+/// [`fit_auto`], lazily (`lazy`: a rung is fitted only while no model below it is within the tolerance) or
+/// fitting every rung; the choice is the same (the rungs above the first model within the tolerance come
+/// after it in the order of the choice). Public so a test can hold the two to the same choice.
+pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Result<FitReport> {
     let t0 = Instant::now();
     let s = Session::new(ndf, opts)?;
     // A candidate that cannot be fitted is left out (and said so); only when none is usable is it an error.
     let mut warnings = Vec::new();
+    // A delta NDF: every model is at its floor; the simplest wins (only the first rung is fitted).
     let delta = s.data.k_nonzero == 1;
-    let mut mixtures: Vec<Fitted> = Vec::new();
-    let mut pruned: Vec<ModelId> = Vec::new();
-    let (ggx, ggx_a, ell, beck, beck_a) = if delta {
-        // A delta NDF: every model is at its floor; the simplest wins below (no mixture is fitted).
-        let d = |id| Some(delta_fit(&s, id));
-        (d(ModelId::Ggx), d(ModelId::GgxAniso), d(ModelId::Ellipsoid), d(ModelId::Beckmann), d(ModelId::BeckmannAniso))
-    } else {
-        // The GGX chain and the Beckmann chain are independent: on the caller's rayon pool they run side by
-        // side (a batch job's pool has one thread, so there they run in turn); each fit is serial, so the
-        // results and the order of the warnings are those of fitting them in turn.
-        let (g, b) = rayon::join(
-            || {
-                let ggx = candidate(fit_iso(&s, ModelId::Ggx, opts));
-                let ggx_a = candidate(fit_grown(&s, ModelId::GgxAniso, ggx.0.as_ref(), opts));
-                let ell = match &ggx_a.0 {
-                    Some(a) => candidate(fit_ellipsoid(&s, ModelId::Ellipsoid, a, opts)),
-                    None => (None, None),
-                };
-                [ggx, ggx_a, ell]
-            },
-            || {
-                let beck = candidate(fit_iso(&s, ModelId::Beckmann, opts));
-                let beck_a = candidate(fit_grown(&s, ModelId::BeckmannAniso, beck.0.as_ref(), opts));
-                [beck, beck_a]
-            },
-        );
-        let [ggx, ggx_a, ell] = g.map(|(f, w)| {
-            warnings.extend(w);
-            f
-        });
-        let [beck, beck_a] = b.map(|(f, w)| {
-            warnings.extend(w);
-            f
-        });
-        // The ladder's second rung: each mixture from the single lobe it extends, unless it cannot win.
-        let singles: Vec<&Fitted> = [&ggx, &beck, &ggx_a, &beck_a, &ell].into_iter().flatten().collect();
-        let bound = prune.then(|| mixture::Pruning::new(ndf, &s, &singles));
-        let rungs: Vec<(ModelId, &Fitted)> = [(ModelId::Ggx2, &ggx_a), (ModelId::Beckmann2, &beck_a), (ModelId::EllipsoidGgx, &ell)]
-            .into_iter()
-            .filter_map(|(id, p)| p.as_ref().map(|p| (id, p)))
-            .collect();
-        // The mixtures the single lobes alone do not rule out are fitted side by side; the rule in turn below
-        // then drops any that a mixture before it rules out (a stronger bound), as fitting them in turn would.
-        let fitted: Vec<Option<Result<Fitted>>> = {
+    let ids: Vec<ModelId> = ModelId::EVERY.iter().copied().filter(|id| id.spec().in_auto).collect();
+    let top = ids.iter().map(|&id| rung(id)).max().unwrap_or(0);
+    let k = s.data.k_nonzero;
+    let n = s.data.n;
+    let dispersion = verdict::data_dispersion(ndf, s.data.max_theta);
+    let mut fits: Vec<Fitted> = Vec::new();
+    let mut deltas: Vec<Option<f64>> = Vec::new();
+    let mut errors: Vec<Option<f64>> = Vec::new();
+    let mut not_fitted: Vec<ModelId> = Vec::new();
+    let mut c_data = 1.0;
+    for r in 0..=top {
+        let here: Vec<ModelId> = ids.iter().copied().filter(|&id| rung(id) == r).collect();
+        // Climb only while it pays: no model so far is within the tolerance.
+        let within = errors.iter().zip(&fits).any(|(e, f)| e.is_some_and(|e| e <= opts.tolerance) && guard_ok(&fits, f, c_data, n));
+        if (lazy && within) || (delta && r > 0) {
+            not_fitted.extend(here);
+            continue;
+        }
+        let parents: Vec<Option<&Fitted>> = here.iter().map(|id| id.parent().and_then(|p| fits.iter().find(|f| f.id == p))).collect();
+        // A model whose parent is in the ladder but was not fitted (dropped) cannot grow from it.
+        let fitted: Vec<Option<(Option<Fitted>, Option<String>)>> = {
             use rayon::prelude::*;
-            rungs
-                .par_iter()
-                .map(|&(id, p)| (!bound.as_ref().is_some_and(|b| b.cannot_win(id, &[]))).then(|| mixture::fit_mixture(&s, id, p, opts)))
+            here.par_iter()
+                .zip(parents.par_iter())
+                .map(|(&id, &p)| {
+                    let orphan = id.parent().is_some_and(|q| q.spec().in_auto) && p.is_none();
+                    if delta {
+                        Some((Some(delta_fit(&s, id)), None))
+                    } else if orphan {
+                        None
+                    } else {
+                        Some(candidate(fit_on_rung(&s, id, p, opts)))
+                    }
+                })
                 .collect()
         };
-        for (&(id, _), r) in rungs.iter().zip(fitted) {
-            match r {
-                Some(r) if !bound.as_ref().is_some_and(|b| b.cannot_win(id, &mixtures)) => {
-                    let (f, w) = candidate(r);
-                    warnings.extend(w);
-                    mixtures.extend(f);
-                }
-                _ => pruned.push(id),
+        for (id, f) in here.iter().zip(fitted) {
+            let Some((f, w)) = f else {
+                warnings.push(format!("{id}: not fitted, its parent {} gave no usable fit", id.parent().map_or("", |p| p.as_str())));
+                continue;
+            };
+            warnings.extend(w);
+            if let Some(f) = f {
+                let d = Model::from_params(f.id, &public(&f)).ok().and_then(|m| metric::delta_to_data(&m, ndf));
+                deltas.push(d);
+                errors.push(d.and_then(|d| verdict::excess_delta(d, dispersion, k, n)));
+                fits.push(f);
             }
         }
-        (ggx, ggx_a, ell, beck, beck_a)
-    };
-    let mut fits: Vec<Fitted> = [ggx, beck, ggx_a, beck_a, ell].into_iter().flatten().collect();
+        if r == 0 {
+            // The guard's overdispersion: the data's own, or (no dispersion split) the first rung's.
+            let c_first = qbic::overdispersion(fits.iter().filter_map(|f| reduced(f, k)));
+            c_data = mixture::data_c(ndf, &s, c_first);
+        }
+    }
     if fits.is_empty() {
         return Err(Error::new(ErrorKind::Numerical, format!("no model could be fitted ({})", warnings.join("; "))));
     }
-    let k = s.data.k_nonzero as f64;
-    let c = qbic::overdispersion(fits.iter().filter_map(|f| {
-        let dof = k - f.id.n_params() as f64 - 1.0;
-        (dof > 0.0).then(|| f.f / dof)
-    }));
-    let crit: Vec<f64> = fits.iter().map(|f| qbic::qbic(f.f, c, f.id.n_params(), s.data.n)).collect();
-    let mut chosen = 0;
-    for i in 1..fits.len() {
-        if crit[i] < crit[chosen] {
-            chosen = i;
-        }
-    }
-    // One lobe or two (mixture.rs): the best single lobe against the mixtures by the QBIC with the data's
-    // own dispersion.
-    let n_single = fits.len();
-    fits.append(&mut mixtures);
-    let crit: Vec<f64> = crit.into_iter().chain(fits[n_single..].iter().map(|f| qbic::qbic(f.f, c, f.id.n_params(), s.data.n))).collect();
-    let ladder = mixture::Ladder::new(ndf, &s, &fits, n_single, chosen, c);
-    let chosen = ladder.chosen;
-    let parent = |id: ModelId| id.parent();
-    let deltas: Vec<Option<f64>> =
-        fits.iter().map(|f| Model::from_params(f.id, &public(f)).ok().and_then(|m| metric::delta_to_data(&m, ndf))).collect();
     let idx = |id: ModelId| fits.iter().position(|f| f.id == id);
-    let candidates: Vec<Candidate> = fits
+    let supported: Vec<bool> = fits.iter().map(|f| guard_ok(&fits, f, c_data, n)).collect();
+    // Simplest first: rung, parameters, error (unknown errors last), then the table's order.
+    let mut order: Vec<usize> = (0..fits.len()).collect();
+    let key = |i: usize| errors[i].filter(|e| e.is_finite()).unwrap_or(f64::INFINITY);
+    order.sort_by(|&a, &b| {
+        (rung(fits[a].id), fits[a].id.n_params())
+            .cmp(&(rung(fits[b].id), fits[b].id.n_params()))
+            .then(key(a).total_cmp(&key(b)))
+            .then(fits[a].id.cmp(&fits[b].id))
+    });
+    let priced: Vec<f64> = order.iter().map(|&i| if supported[i] { key(i) } else { f64::INFINITY }).collect();
+    let (chosen, within) = match verdict::select(&priced, opts.tolerance) {
+        Some((j, w)) => (order[j], w),
+        // No error is known (a delta NDF, or no bin with a count): the simplest supported model.
+        None => (order.iter().copied().find(|&i| supported[i]).unwrap_or(order[0]), false),
+    };
+    let c = qbic::overdispersion(fits.iter().filter_map(|f| reduced(f, k)));
+    let crit: Vec<f64> = fits.iter().map(|f| qbic::qbic(f.f, c, f.id.n_params(), n)).collect();
+    let crit_data: Vec<f64> = fits.iter().map(|f| qbic::qbic(f.f, c_data, f.id.n_params(), n)).collect();
+    let candidates: Vec<Candidate> = order
         .iter()
-        .enumerate()
-        .map(|(i, f)| {
-            let par = parent(f.id);
+        .map(|&i| {
+            let f = &fits[i];
+            let par = f.id.parent();
             let pi = par.and_then(idx);
-            let dof = k - f.id.n_params() as f64 - 1.0;
             Candidate {
                 model: f.id,
                 params: names(f.id, &public(f)),
                 n_params: f.id.n_params(),
                 objective_value: f.f,
-                reduced_chi2: (dof > 0.0).then(|| f.f / dof),
+                reduced_chi2: reduced(f, k),
                 delta_data: deltas[i],
                 criterion: crit[i],
                 parent: par,
                 d_criterion: pi.map(|j| crit[i] - crit[j]),
                 d_delta_data: pi.and_then(|j| Some(deltas[i]? - deltas[j]?)),
                 converged: f.local.converged,
-                qbic_data: Some(ladder.criterion[i]),
-                deviance_per_dof: (dof > 0.0).then(|| f.f / dof),
-                gain_per_param: pi.map(|j| ladder.gain_per_param(&fits[j], f)),
+                qbic_data: Some(crit_data[i]),
+                deviance_per_dof: reduced(f, k),
+                gain_per_param: pi.map(|j| {
+                    let dp = (f.id.n_params() as f64 - fits[j].id.n_params() as f64).max(1.0);
+                    (fits[j].f - f.f) / (c_data * dp)
+                }),
+                rung: Some(rung(f.id)),
+                delta_excess: errors[i],
+                effect: pi.and_then(|j| Some(errors[j]? - errors[i]?)),
+                supported: Some(supported[i]),
             }
         })
         .collect();
+    let summary = ladder_summary(&fits, &errors, &supported, chosen, within, opts.tolerance, &not_fitted);
     let best = fits.into_iter().nth(chosen).expect("chosen indexes the fits");
     let mut rep = build_report(ndf, &s, best, opts, 0.0)?;
     rep.warnings.extend(warnings);
@@ -666,14 +692,79 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, prune: bool) -> Re
         criterion: "qbic".into(),
         overdispersion: c,
         candidates,
-        data_overdispersion: Some(ladder.c_data),
-        ladder: Some(if pruned.is_empty() {
-            ladder.summary.clone()
-        } else {
-            let ids: Vec<String> = pruned.iter().map(|m| m.to_string()).collect();
-            format!("{}; not fitted, as they cannot win (F / c_data <= added parameters x ln N): {}", ladder.summary, ids.join(", "))
-        }),
+        data_overdispersion: Some(c_data),
+        ladder: Some(summary),
+        tolerance: Some(opts.tolerance),
+        not_fitted,
     });
     rep.timings.fit_ms = t0.elapsed().as_secs_f64() * 1e3;
     Ok(rep)
+}
+
+/// `F / (K - p - 1)`, when there are degrees of freedom.
+fn reduced(f: &Fitted, k: usize) -> Option<f64> {
+    let dof = k as f64 - f.id.n_params() as f64 - 1.0;
+    (dof > 0.0).then(|| f.f / dof)
+}
+
+/// The likelihood guard: a model whose parent was fitted enters the choice only when its criterion
+/// `F / c_data + p ln N` is below the parent's (the data support the added parameters).
+fn guard_ok(fits: &[Fitted], f: &Fitted, c_data: f64, n: f64) -> bool {
+    match f.id.parent().and_then(|p| fits.iter().find(|g| g.id == p)) {
+        Some(p) => qbic::qbic(f.f, c_data, f.id.n_params(), n) < qbic::qbic(p.f, c_data, p.id.n_params(), n),
+        None => true,
+    }
+}
+
+/// One sentence on the ladder: the choice and why, what each rung bought, and what was not fitted.
+fn ladder_summary(
+    fits: &[Fitted],
+    errors: &[Option<f64>],
+    supported: &[bool],
+    chosen: usize,
+    within: bool,
+    tolerance: f64,
+    not_fitted: &[ModelId],
+) -> String {
+    let pct = |e: Option<f64>| e.map_or("unknown".to_string(), |e| format!("{:.1}%", 100.0 * e));
+    let id = fits[chosen].id;
+    let mut out = if within {
+        format!(
+            "{id} (rung {}): NDF error beyond counting noise {}, within the tolerance {:.1}%",
+            rung(id),
+            pct(errors[chosen]),
+            100.0 * tolerance
+        )
+    } else {
+        let best = (0..fits.len()).filter(|&i| supported[i]).filter_map(|i| Some((i, errors[i]?))).min_by(|a, b| a.1.total_cmp(&b.1));
+        match best {
+            Some((b, e)) => format!(
+                "{id} (rung {}): no model is within the tolerance {:.1}%; the smallest NDF error beyond counting noise is {}'s, {:.1}%, and {id}'s {} is within the tolerance of it (a richer model wins only when it lowers the error by more than the tolerance)",
+                rung(id),
+                100.0 * tolerance,
+                fits[b].id,
+                100.0 * e,
+                pct(errors[chosen])
+            ),
+            None => format!("{id}: no NDF error could be measured; the simplest model is kept"),
+        }
+    };
+    let effects: Vec<String> = fits
+        .iter()
+        .enumerate()
+        .filter_map(|(i, f)| {
+            let p = f.id.parent()?;
+            let j = fits.iter().position(|g| g.id == p)?;
+            let guard = if supported[i] { "" } else { ", not supported by the likelihood" };
+            Some(format!("{} over {p}: {}{guard}", f.id, errors[j].zip(errors[i]).map_or("unknown".into(), |(a, b)| format!("{:+.1}%", 100.0 * (b - a)))))
+        })
+        .collect();
+    if !effects.is_empty() {
+        out += &format!("; each rung's effect on the error: {}", effects.join(", "));
+    }
+    if !not_fitted.is_empty() {
+        let ids: Vec<&str> = not_fitted.iter().map(|m| m.as_str()).collect();
+        out += &format!("; not fitted (a model below them is within the tolerance, or the NDF is a delta): {}", ids.join(", "));
+    }
+    out
 }

@@ -110,7 +110,8 @@ pub struct Quality {
     /// `ok`, `misfit` or `unresolved` ([`super::verdict`]).
     #[serde(default)]
     pub verdict: super::verdict::Verdict,
-    /// Why the verdict is not `ok` (one line each; empty for `ok`).
+    /// Why the verdict is not `ok` (one line each); for `ok`, a difference the counts show that is within
+    /// the tolerance, or nothing.
     #[serde(default)]
     pub reasons: Vec<String>,
 }
@@ -172,8 +173,7 @@ pub struct Candidate {
     pub delta_data: Option<f64>,
     /// The information criterion (see [`Selection::criterion`]); lower is better.
     pub criterion: f64,
-    /// The model this one extends in its nested chain (ggx -> ggx-aniso -> ellipsoid, beckmann ->
-    /// beckmann-aniso), if any.
+    /// The model this one extends (the model table's parent), if any.
     pub parent: Option<ModelId>,
     /// `criterion - criterion(parent)`: negative when the extra parameters pay for themselves.
     pub d_criterion: Option<f64>,
@@ -192,9 +192,24 @@ pub struct Candidate {
     /// against its price `ln N` in the criterion.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gain_per_param: Option<f64>,
+    /// The model's rung in the ladder: its depth in the model table's parent tree.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rung: Option<usize>,
+    /// The NDF error beyond counting noise (`quality.delta_excess` of this candidate), what the choice is
+    /// priced in.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delta_excess: Option<f64>,
+    /// What the rung buys: `delta_excess(parent) - delta_excess`, the drop in NDF error beyond noise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub effect: Option<f64>,
+    /// The likelihood guard: `qbic_data` below the parent's (the data support the added parameters); a
+    /// candidate without it is not chosen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supported: Option<bool>,
 }
 
-/// Model selection of `--model auto`.
+/// Model selection of `--model auto`: the ladder of the model table priced in the NDF error beyond
+/// counting noise, with the likelihood as a guard (`crate::fit::fit_auto`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Selection {
     /// The criterion: `qbic` = `F / c + p ln N` (BIC with the quasi-likelihood overdispersion `c`).
@@ -207,9 +222,15 @@ pub struct Selection {
     /// block split), or `overdispersion` when the NDF has no split.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub data_overdispersion: Option<f64>,
-    /// One sentence: the best single lobe against the best mixture, and which won.
+    /// One sentence: the model chosen and why, the effect of each rung, the rungs not fitted.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ladder: Option<String>,
+    /// The tolerance on the NDF error beyond counting noise the choice used (`--tolerance`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance: Option<f64>,
+    /// The models of the ladder not fitted, as a model on a rung below them was within the tolerance.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub not_fitted: Vec<ModelId>,
 }
 
 /// A fit result (`ndfit.fit/1`).

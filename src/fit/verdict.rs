@@ -1,6 +1,7 @@
-//! Whether a fit deserves trust: `ok`, `misfit` (the model does not describe the data beyond the
-//! overdispersion the data show) or `unresolved` (the scan cannot resolve the NDF). The rules and their
-//! derivation are in `data_formats/objective.md` ("The verdict").
+//! Whether a fit deserves trust: `ok`, `misfit` (the model's NDF error beyond counting noise exceeds the
+//! tolerance a renderer can show, and the counts confirm it) or `unresolved` (the scan cannot resolve the
+//! NDF); and the one rule by which `auto` and `scale` price a model in that error ([`select`]). The rules
+//! and their derivation are in `data_formats/objective.md` ("The verdict", "The tolerance").
 
 use crate::ndf::EmpiricalNdf;
 
@@ -8,11 +9,13 @@ use crate::ndf::EmpiricalNdf;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
-    /// The model describes the data to within the data's own dispersion, and the data resolve the NDF.
+    /// The model describes the data to within the data's own dispersion, or its NDF error beyond noise
+    /// is within the tolerance (a difference the counts show but a renderer cannot), and the data resolve
+    /// the NDF.
     #[default]
     Ok,
-    /// The deviance per dof exceeds the data's own dispersion by more than [`MISFIT_RATIO`], or the
-    /// solver did not converge.
+    /// The deviance per dof exceeds the data's own dispersion by more than [`MISFIT_RATIO`] and the NDF
+    /// error beyond noise exceeds the tolerance, or the solver did not converge.
     Misfit,
     /// The scan cannot resolve the NDF (quantized heights, too few samples, a lobe inside one bin,
     /// most normals outside the fitted region).
@@ -81,7 +84,41 @@ pub fn data_dispersion(ndf: &EmpiricalNdf, max_theta: f64) -> Option<f64> {
 /// that is right, so the noise adds `phi K / N` to `delta_data^2` (`K` populated bins, `N` normals).
 pub fn excess_delta(delta_data: f64, dispersion: Option<f64>, k: usize, n: f64) -> Option<f64> {
     let noise2 = dispersion.unwrap_or(1.0).max(1.0) * k as f64 / n;
-    (delta_data.is_finite() && n > 0.0).then(|| (delta_data * delta_data - noise2).max(0.0).sqrt())
+    (delta_data.is_finite() && n > 0.0).then(|| beyond_noise(delta_data * delta_data, noise2))
+}
+
+/// The NDF error a model makes beyond the noise of the histogram it is measured on, from the squares of
+/// the metric `delta2` and of the noise `noise2`: `sqrt(max(delta^2 - noise^2, 0))` (the noise adds in
+/// quadrature to a model's own error). The one definition of the error `auto` ([`excess_delta`]) and
+/// `scale` (`scale::analyze::delta`) price models in.
+pub fn beyond_noise(delta2: f64, noise2: f64) -> f64 {
+    (delta2 - noise2).max(0.0).sqrt()
+}
+
+/// The default tolerance on the NDF error beyond noise: what a renderer can show.
+///
+/// A highlight's radiance is `D(h) G F / (4 |i.n| |o.n|)`, linear in `D`, so a relative error `e` of `D`
+/// changes the highlight's luminance `Y` by the factor `1 + e`. CIELAB's lightness `L* = 116 (Y/Y_n)^(1/3)
+/// - 16` gives `dL* = (L* + 16) / 3 * dY / Y`; a just-noticeable colour difference is `dE*ab ~ 2.3`
+/// (Mahy, Van Eycken and Oosterlinck 1994), so at a highlight's lightness `L* = 100` a relative
+/// luminance change of `3 x 2.3 / 116 = 0.059` is just visible (more at darker tones, where `L* + 16` is
+/// smaller). The NDF error is a root-mean-square over the directions where the normals are, so the
+/// highlight's pixels see errors of about that size; rounding down keeps the choice on the safe side:
+/// 0.05.
+pub const DEFAULT_TOLERANCE: f64 = 0.05;
+
+/// The one rule by which a model is chosen from candidates listed simplest first with their NDF errors
+/// beyond noise `errors` (`NaN` or infinite: a candidate that cannot be chosen): the first within
+/// `tolerance`; when none is, the first within `tolerance` of the smallest error (a richer model wins
+/// only when it lowers the error by more than the tolerance). Returns its index and whether it is within
+/// the tolerance itself; `None` when no error is finite. `scale` recommends the first case only, for the
+/// worst error over the footprints; `auto` takes either, for the scan's own footprint.
+pub fn select(errors: &[f64], tolerance: f64) -> Option<(usize, bool)> {
+    if let Some(i) = errors.iter().position(|&e| e <= tolerance) {
+        return Some((i, true));
+    }
+    let best = errors.iter().copied().filter(|e| e.is_finite()).fold(f64::INFINITY, f64::min);
+    errors.iter().position(|&e| e <= best + tolerance).map(|i| (i, false))
 }
 
 /// What the verdict looks at, gathered by the fit.
@@ -105,9 +142,13 @@ pub struct Evidence {
     pub specular: bool,
     /// The solver reported convergence.
     pub converged: bool,
+    /// The tolerance on `delta_excess` ([`DEFAULT_TOLERANCE`]): a larger error is visible.
+    pub tolerance: f64,
 }
 
-/// The verdict and its reasons (one line each), from the evidence and the NDF's quantization.
+/// The verdict and its reasons (one line each), from the evidence and the NDF's quantization. A
+/// significant but invisible difference (deviance beyond the dispersion, NDF error within the tolerance)
+/// is `ok`, with that reason.
 pub fn judge(ndf: &EmpiricalNdf, e: &Evidence) -> (Verdict, Vec<String>) {
     let mut unresolved = Vec::new();
     unresolved.extend(ndf.quantization.as_ref().and_then(|q| q.unresolved_reason()));
@@ -133,21 +174,32 @@ pub fn judge(ndf: &EmpiricalNdf, e: &Evidence) -> (Verdict, Vec<String>) {
         return (Verdict::Unresolved, unresolved);
     }
     let mut misfit = Vec::new();
+    let mut invisible = Vec::new();
     if !e.converged {
         misfit.push("the solver stopped without converging".into());
     }
     if let Some(chi2) = e.reduced_chi2 {
         let phi = e.dispersion.unwrap_or(1.0).max(1.0);
         if chi2 > MISFIT_RATIO * phi {
-            misfit.push(format!(
-                "deviance per dof {chi2:.3} is {:.1} times the data's own dispersion {phi:.3} (above {MISFIT_RATIO}): the model does not describe the data{}",
-                chi2 / phi,
-                e.delta_excess.map_or(String::new(), |d| format!(" (NDF error {:.1}% beyond counting noise)", 100.0 * d))
-            ));
+            let why = format!("deviance per dof {chi2:.3} is {:.1} times the data's own dispersion {phi:.3} (above {MISFIT_RATIO})", chi2 / phi);
+            match e.delta_excess {
+                // Guard: without an error beyond noise, the statistical test alone decides.
+                None => misfit.push(format!("{why}: the model does not describe the data")),
+                Some(d) if d > e.tolerance => misfit.push(format!(
+                    "{why}: the model does not describe the data (NDF error {:.1}% beyond counting noise, above the tolerance {:.1}%)",
+                    100.0 * d,
+                    100.0 * e.tolerance
+                )),
+                Some(d) => invisible.push(format!(
+                    "{why}, but the NDF error beyond counting noise, {:.1}%, is within the tolerance {:.1}%: a difference the counts show and a renderer does not",
+                    100.0 * d,
+                    100.0 * e.tolerance
+                )),
+            }
         }
     }
     if misfit.is_empty() {
-        (Verdict::Ok, Vec::new())
+        (Verdict::Ok, invisible)
     } else {
         (Verdict::Misfit, misfit)
     }

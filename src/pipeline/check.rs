@@ -70,6 +70,16 @@ pub fn ndf_options(scheme: NormalScheme, cells_across: Option<usize>, target_cou
     Ok(NdfOptions { scheme, cells_across, target_count, frame: None, resolution: None })
 }
 
+/// The tolerance on the NDF error beyond counting noise: positive and finite; none is the default,
+/// [`crate::fit::verdict::DEFAULT_TOLERANCE`].
+pub fn tolerance(t: Option<f64>, s: Spelling) -> Result<f64> {
+    match t {
+        None => Ok(crate::fit::verdict::DEFAULT_TOLERANCE),
+        Some(t) if t.is_finite() && t > 0.0 => Ok(t),
+        Some(t) => Err(Error::invalid(format!("{} {t} must be a positive number (an NDF error, 0.05 = 5%)", s.name("tolerance")))),
+    }
+}
+
 /// Extra ellipsoid starts beyond the default two: 0 to 4.
 pub fn extra_starts(n: usize, s: Spelling) -> Result<usize> {
     if n > 4 {

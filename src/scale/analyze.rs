@@ -109,7 +109,7 @@ pub fn delta(model: &impl Ndf, ndf: &EmpiricalNdf, halves: Option<(&[u64], &[u64
     }
     let d2 = s2 / sw;
     let noise2 = (sn / sw).max(ss / sw);
-    Delta { delta: d2.sqrt(), noise: noise2.sqrt(), excess: (d2 - noise2).max(0.0).sqrt() }
+    Delta { delta: d2.sqrt(), noise: noise2.sqrt(), excess: crate::fit::verdict::beyond_noise(d2, noise2) }
 }
 
 /// One route's result for one model at one footprint.
@@ -552,7 +552,9 @@ pub fn recommend(results: &[FootprintResult], tolerance: f64) -> Recommendation 
             .then(a.ic_sum.unwrap_or(f64::INFINITY).total_cmp(&b.ic_sum.unwrap_or(f64::INFINITY)))
             .then(a.model.cmp(&b.model))
     });
-    let chosen = cands.iter().find(|c| c.passes).map(|c| c.model);
+    // The rule `auto` shares (fit::verdict::select); `scale` recommends only a model within the tolerance.
+    let worst: Vec<f64> = cands.iter().map(|c| c.worst_delta_model).collect();
+    let chosen = crate::fit::verdict::select(&worst, tolerance).filter(|&(_, within)| within).map(|(i, _)| cands[i].model);
     let mut words = Vec::new();
     let fps: Vec<String> = results.iter().map(|r| format!("{:.3e}", r.stats.footprint)).collect();
     let plural = |n: usize| if n == 1 { "" } else { "s" };

@@ -245,13 +245,28 @@ fn verdict_rules() {
         delta_excess: Some(0.01),
         specular: false,
         converged: true,
+        tolerance: 0.05,
     };
-    assert_eq!(judge(&ndf, &good).0, Verdict::Ok);
-    let misfit = judge(&ndf, &Evidence { reduced_chi2: Some(4.5), ..good });
+    assert_eq!(judge(&ndf, &good), (Verdict::Ok, Vec::new()));
+    // Beyond the dispersion and beyond the tolerance: a misfit.
+    let misfit = judge(&ndf, &Evidence { reduced_chi2: Some(4.5), delta_excess: Some(0.08), ..good });
     assert_eq!(misfit.0, Verdict::Misfit);
-    assert!(misfit.1[0].contains("2.2 times"), "{:?}", misfit.1);
+    assert!(misfit.1[0].contains("2.2 times") && misfit.1[0].contains("8.0%"), "{:?}", misfit.1);
+    // Beyond the dispersion, within the tolerance: significant but invisible, ok with its reason.
+    let invisible = judge(&ndf, &Evidence { reduced_chi2: Some(4.5), ..good });
+    assert_eq!(invisible.0, Verdict::Ok);
+    assert!(invisible.1.len() == 1 && invisible.1[0].contains("within the tolerance 5.0%"), "{:?}", invisible.1);
+    // The tolerance is the user's: the same fit is a misfit under a tighter one.
+    assert_eq!(judge(&ndf, &Evidence { reduced_chi2: Some(4.5), tolerance: 0.005, ..good }).0, Verdict::Misfit);
+    // Within the dispersion, the error beyond noise alone makes no misfit (it is noisy on few normals).
+    assert_eq!(judge(&ndf, &Evidence { delta_excess: Some(0.3), ..good }).0, Verdict::Ok);
+    // No error beyond noise known: the statistical test alone decides.
+    assert_eq!(judge(&ndf, &Evidence { reduced_chi2: Some(4.5), delta_excess: None, ..good }).0, Verdict::Misfit);
     // Underdispersed data (a dispersion below 1) are held to the Poisson floor.
-    assert_eq!(judge(&ndf, &Evidence { reduced_chi2: Some(2.5), dispersion: Some(0.3), ..good }).0, Verdict::Misfit);
+    assert_eq!(
+        judge(&ndf, &Evidence { reduced_chi2: Some(2.5), dispersion: Some(0.3), delta_excess: Some(0.2), ..good }).0,
+        Verdict::Misfit
+    );
     assert_eq!(judge(&ndf, &Evidence { converged: false, ..good }).0, Verdict::Misfit);
     for bad in [
         Evidence { specular: true, ..good },

@@ -4,6 +4,7 @@
 
 pub(crate) mod fixtures;
 
+mod auto;
 mod bound;
 mod cli;
 mod compare;
