@@ -64,6 +64,9 @@ pub struct Report {
     pub numpy_pool_over_batch: Option<f64>,
     /// numpy over `ndfit fit`, one scan.
     pub numpy_over_fit: Option<f64>,
+    /// `ndfit fit --model auto` over one single-lobe fit, `ndfit fit --model ggx-aniso`, on the same
+    /// single-lobe scan (target at most 3).
+    pub auto_over_single: Option<f64>,
 }
 
 /// Write the scans of `plan` into `work` (once: existing files are kept) and return the single scan
@@ -174,6 +177,13 @@ pub fn run(plan: &Plan, work: &Path, mut log: impl FnMut(&str)) -> Result<Report
             out_json.as_os_str(),
         ],
     ));
+    // `auto` against one single-lobe fit, whole processes: the scan is one ellipsoid cap.
+    for model in ["ggx-aniso", "auto"] {
+        cmds.push(Cmd::new(
+            &format!("ndfit fit --model {model}"),
+            [plan.ndfit.as_os_str(), "fit".as_ref(), scan.as_os_str(), "--model".as_ref(), model.as_ref(), "-o".as_ref(), out_json.as_os_str()],
+        ));
+    }
     cmds.push(Cmd::new("ndfit --version (start-up)", [plan.ndfit.as_os_str(), "--version".as_ref()]));
     if let Some(py) = &plan.python {
         let mut argv = vec![py.clone().into_os_string(), plan.numpy_pool.clone().into_os_string(), "--jobs".into(), "1".into()];
@@ -233,6 +243,7 @@ pub fn run(plan: &Plan, work: &Path, mut log: impl FnMut(&str)) -> Result<Report
         numpy_over_fit: ratio(find(&single, "numpy"), find(&single, "ndfit fit")),
         batch_over_floor: ratio(find(&batch, "ndfit batch"), find(&batch, "unzip")),
         numpy_pool_over_batch: ratio(find(&batch, "numpy"), find(&batch, "ndfit batch")),
+        auto_over_single: ratio(find(&single, "ndfit fit --model auto"), find(&single, "ndfit fit --model ggx-aniso")),
         single,
         batch,
     })
@@ -271,6 +282,7 @@ pub fn markdown(r: &Report) -> String {
         );
     }
     let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}x"));
+    s += &format!("\n`ndfit fit --model auto` / `ndfit fit --model ggx-aniso` (one single-lobe scan) {} (target <= 3x).\n", f(r.auto_over_single));
     s += &format!(
         "\nRatios of medians: `ndfit fit` / `unzip -p` {} (target <= 1.2x); `ndfit batch` / paired `unzip -p` over {} scans {} (target <= 1.3x); numpy pool / `ndfit batch` {}; numpy / `ndfit fit` (one scan) {}.\n",
         f(r.fit_over_floor),

@@ -1,0 +1,101 @@
+#!/usr/bin/env python3
+"""Fit the shared real scans with `ndfit fit --model auto` and write docs/REAL_SCANS.md: per scan the
+chosen model, its verdict and NDF error beyond counting noise (`quality.delta_excess`), and the effect of
+each rung of the ladder (`selection.candidates`: the parent's `delta_excess` minus the candidate's).
+
+    python3 fits/real_scans_table.py [--ndfit target/release/ndfit] [--before OLD_NDFIT] [--out docs/REAL_SCANS.md]
+
+`--before` fits the scans with another build as well and adds its chosen model and `delta_excess` (the
+comparison of a change to `auto`). The scans are read from ../shared/data/scans (relative to the repository).
+"""
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+SCANS = ROOT.parent / "shared" / "data" / "scans"
+EXTS = {".x3p", ".al3d", ".dat", ".opd", ".plu", ".sur", ".tmd"}
+
+
+def fit(ndfit, scan, out):
+    r = subprocess.run([ndfit, "fit", str(scan), "--model", "auto", "-o", str(out)], capture_output=True, text=True)
+    if r.returncode != 0:
+        return None, r.returncode, r.stderr.strip().splitlines()[-1:] or [""]
+    return json.loads(out.read_text()), 0, None
+
+
+def rung(c):
+    """One candidate's effect: its model and the change of delta_excess over its parent."""
+    e = c.get("effect")
+    change = "-" if e is None else f"{-100 * e:+.1f}%"
+    guard = "" if c.get("supported", True) else " (guard)"
+    return f"{c['model']} {change}{guard}"
+
+
+def pct(v):
+    return "-" if v is None else f"{100 * v:.1f}%"
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--ndfit", default=str(ROOT / "target" / "release" / "ndfit"))
+    ap.add_argument("--before", default=None)
+    ap.add_argument("--out", default=str(ROOT / "docs" / "REAL_SCANS.md"))
+    a = ap.parse_args()
+    scans = sorted(p for p in SCANS.iterdir() if p.suffix.lower() in EXTS)
+    if not scans:
+        sys.exit(f"{SCANS}: no scans")
+    rows, now, then, failed = [], [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for s in scans:
+            rep, rc, err = fit(a.ndfit, s, Path(tmp) / "fit.json")
+            if rep is None:
+                failed.append(f"{s.name}: exit {rc}: {err[0]}")
+                continue
+            q, sel = rep["quality"], rep.get("selection") or {}
+            old = None
+            if a.before:
+                old, _, _ = fit(a.before, s, Path(tmp) / "before.json")
+            de = q.get("delta_excess")
+            if de is not None:
+                now.append(de)
+            old_de = old["quality"].get("delta_excess") if old else None
+            if old_de is not None:
+                then.append(old_de)
+            effects = ", ".join(rung(c) for c in sel.get("candidates", []) if c.get("parent") is not None)
+            rows.append(
+                f"| {s.name} | {rep['model']} | {q['verdict']} | {pct(de)} | "
+                + (f"{old['model']} | {pct(old_de)} | " if a.before else "")
+                + f"{effects or '-'} | {', '.join(sel.get('not_fitted', [])) or '-'} |"
+            )
+            print(rows[-1], file=sys.stderr)
+    tol = None
+    head = "| scan | chosen | verdict | delta_excess | " + ("before: chosen | before: delta_excess | " if a.before else "")
+    head += "effect of each rung (change of delta_excess over its parent) | not fitted |\n"
+    head += "|" + " --- |" * (head.count("|") - 1) + "\n"
+    med = f"{statistics.median(now):.3f}" if now else "-"
+    lines = [
+        "# The shared real scans under `--model auto`",
+        "",
+        "Made by `python3 fits/real_scans_table.py" + (" --before OLD_NDFIT" if a.before else "") + "` (default options, the",
+        "default tolerance; data_formats/objective.md, \"The tolerance\" and \"Mixtures and the ladder\"). A rung's",
+        "effect is the change of the NDF error beyond counting noise over its parent (negative: it lowers the",
+        "error); `(guard)` marks a candidate the likelihood does not support.",
+        "",
+        head + "\n".join(rows),
+        "",
+        f"Median `delta_excess` of the chosen model: {med}" + (f" (before: {statistics.median(then):.3f})" if then else "") + ".",
+    ]
+    if failed:
+        lines += ["", "Failed:", *[f"- {f}" for f in failed]]
+    Path(a.out).write_text("\n".join(lines) + "\n")
+    print(f"wrote {a.out}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
