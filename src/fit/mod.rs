@@ -525,8 +525,9 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 }
 
 /// Choose the model a scene requires: the ladder of the models the table puts in `auto`, climbed one
-/// rung (depth in the table's parent tree) at a time while no model fitted so far is within the tolerance
-/// on the NDF error beyond counting noise ([`FitOptions::tolerance`], [`verdict::excess_delta`]).
+/// step at a time (a rung, its depth in the table's parent tree, and within it a parameter count) while no
+/// model fitted so far is within the tolerance on the NDF error beyond counting noise
+/// ([`FitOptions::tolerance`], [`verdict::excess_delta`]); the models of a step are fitted side by side.
 ///
 /// The choice is the rule `scale` uses ([`verdict::select`]), at the scan's own footprint: the candidates
 /// ordered simplest first (rung, then parameters, then error), the first within the tolerance, or when
@@ -565,9 +566,9 @@ fn fit_on_rung(s: &Session, id: ModelId, parent: Option<&Fitted>, opts: &FitOpti
     }
 }
 
-/// [`fit_auto`], lazily (`lazy`: a rung is fitted only while no model below it is within the tolerance) or
-/// fitting every rung; the choice is the same (the rungs above the first model within the tolerance come
-/// after it in the order of the choice). Public so a test can hold the two to the same choice.
+/// [`fit_auto`], lazily (`lazy`: a step is fitted only while no model before it is within the tolerance)
+/// or fitting every step; the choice is the same (the steps after the first model within the tolerance
+/// come after it in the order of the choice). Public so a test can hold the two to the same choice.
 pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Result<FitReport> {
     let t0 = Instant::now();
     let s = Session::new(ndf, opts)?;
@@ -575,8 +576,13 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Res
     let mut warnings = Vec::new();
     // A delta NDF: every model is at its floor; the simplest wins (only the first rung is fitted).
     let delta = s.data.k_nonzero == 1;
-    let ids: Vec<ModelId> = ModelId::EVERY.iter().copied().filter(|id| id.spec().in_auto).collect();
-    let top = ids.iter().map(|&id| rung(id)).max().unwrap_or(0);
+    // The ladder's steps: its models grouped by rung, then by parameter count, simplest first (the order
+    // of the choice, so a step left out can only hold models the choice would rank after one within the
+    // tolerance).
+    let mut steps: Vec<(usize, usize)> =
+        ModelId::EVERY.iter().filter(|id| id.spec().in_auto).map(|&id| (rung(id), id.n_params())).collect();
+    steps.sort();
+    steps.dedup();
     let k = s.data.k_nonzero;
     let n = s.data.n;
     let dispersion = verdict::data_dispersion(ndf, s.data.max_theta);
@@ -585,8 +591,9 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Res
     let mut errors: Vec<Option<f64>> = Vec::new();
     let mut not_fitted: Vec<ModelId> = Vec::new();
     let mut c_data = 1.0;
-    for r in 0..=top {
-        let here: Vec<ModelId> = ids.iter().copied().filter(|&id| rung(id) == r).collect();
+    for (r, p) in steps {
+        let here: Vec<ModelId> =
+            ModelId::EVERY.iter().copied().filter(|id| id.spec().in_auto && (rung(*id), id.n_params()) == (r, p)).collect();
         // Climb only while it pays: no model so far is within the tolerance.
         let within = errors.iter().zip(&fits).any(|(e, f)| e.is_some_and(|e| e <= opts.tolerance) && guard_ok(&fits, f, c_data, n));
         if (lazy && within) || (delta && r > 0) {
