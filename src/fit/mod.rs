@@ -531,8 +531,7 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 ///
 /// The choice is the rule `scale` uses ([`verdict::select`]), at the scan's own footprint: the candidates
 /// ordered simplest first (rung, then parameters, then error), the first within the tolerance, or when
-/// none is, the first within the tolerance of the smallest error: a richer model wins only when it lowers
-/// the error by more than the tolerance. The likelihood is a guard, not the decider: a model enters the
+/// none is (every model visibly off), the one of the smallest error. The likelihood is a guard, not the decider: a model enters the
 /// choice only when its quasi-likelihood BIC ([`qbic`], `F / c_data + p ln N` with the data's own
 /// overdispersion) is below its parent's, so the data support its added parameters.
 pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
@@ -743,15 +742,12 @@ fn ladder_summary(
             100.0 * tolerance
         )
     } else {
-        let best = (0..fits.len()).filter(|&i| supported[i]).filter_map(|i| Some((i, errors[i]?))).min_by(|a, b| a.1.total_cmp(&b.1));
-        match best {
-            Some((b, e)) => format!(
-                "{id} (rung {}): no model is within the tolerance {:.1}%; the smallest NDF error beyond counting noise is {}'s, {:.1}%, and {id}'s {} is within the tolerance of it (a richer model wins only when it lowers the error by more than the tolerance)",
+        match errors[chosen] {
+            Some(e) => format!(
+                "{id} (rung {}): no model is within the tolerance {:.1}%, and {id} has the smallest NDF error beyond counting noise, {:.1}%",
                 rung(id),
                 100.0 * tolerance,
-                fits[b].id,
-                100.0 * e,
-                pct(errors[chosen])
+                100.0 * e
             ),
             None => format!("{id}: no NDF error could be measured; the simplest model is kept"),
         }

@@ -109,16 +109,17 @@ pub const DEFAULT_TOLERANCE: f64 = 0.05;
 
 /// The one rule by which a model is chosen from candidates listed simplest first with their NDF errors
 /// beyond noise `errors` (`NaN` or infinite: a candidate that cannot be chosen): the first within
-/// `tolerance`; when none is, the first within `tolerance` of the smallest error (a richer model wins
-/// only when it lowers the error by more than the tolerance). Returns its index and whether it is within
-/// the tolerance itself; `None` when no error is finite. `scale` recommends the first case only, for the
-/// worst error over the footprints; `auto` takes either, for the scan's own footprint.
+/// `tolerance` (a richer model is taken only while the simpler ones are visibly off); when none is, every
+/// candidate is visibly off and the one closest to the data, the first of the smallest error. Returns its
+/// index and whether it is within the tolerance; `None` when no error is finite. `scale` recommends the
+/// first case only, for the worst error over the footprints (naming the closest otherwise); `auto` takes
+/// either, for the scan's own footprint.
 pub fn select(errors: &[f64], tolerance: f64) -> Option<(usize, bool)> {
     if let Some(i) = errors.iter().position(|&e| e <= tolerance) {
         return Some((i, true));
     }
     let best = errors.iter().copied().filter(|e| e.is_finite()).fold(f64::INFINITY, f64::min);
-    errors.iter().position(|&e| e <= best + tolerance).map(|i| (i, false))
+    errors.iter().position(|&e| e == best).map(|i| (i, false))
 }
 
 /// What the verdict looks at, gathered by the fit.
