@@ -40,7 +40,7 @@ fn side_by_side(a: &Heightfield, b: &Heightfield) -> Heightfield {
 /// the default keeps the wide lobe's resolved bins.
 #[test]
 fn auto_takes_the_second_lobe_of_a_two_cap_scan() {
-    let (a, b) = (cap(640, 0.12, 0.05, 5), cap(370, 0.55, 0.30, 6));
+    let (a, b) = (cap(640, 0.12, 0.05, 5), cap(324, 0.55, 0.30, 6));
     let opts = NdfOptions::default();
     let (na, nb) = (empirical_ndf(&a, &opts).expect("ndf").n_samples as f64, empirical_ndf(&b, &opts).expect("ndf").n_samples as f64);
     let w = na / (na + nb);
