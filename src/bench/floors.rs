@@ -181,7 +181,15 @@ pub fn run(plan: &Plan, work: &Path, mut log: impl FnMut(&str)) -> Result<Report
     for model in ["ggx-aniso", "auto"] {
         cmds.push(Cmd::new(
             &format!("ndfit fit --model {model}"),
-            [plan.ndfit.as_os_str(), "fit".as_ref(), scan.as_os_str(), "--model".as_ref(), model.as_ref(), "-o".as_ref(), out_json.as_os_str()],
+            [
+                plan.ndfit.as_os_str(),
+                "fit".as_ref(),
+                scan.as_os_str(),
+                "--model".as_ref(),
+                model.as_ref(),
+                "-o".as_ref(),
+                out_json.as_os_str(),
+            ],
         ));
     }
     cmds.push(Cmd::new("ndfit --version (start-up)", [plan.ndfit.as_os_str(), "--version".as_ref()]));
@@ -282,7 +290,10 @@ pub fn markdown(r: &Report) -> String {
         );
     }
     let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}x"));
-    s += &format!("\n`ndfit fit --model auto` / `ndfit fit --model ggx-aniso` (one single-lobe scan) {} (target <= 3x).\n", f(r.auto_over_single));
+    s += &format!(
+        "\n`ndfit fit --model auto` / `ndfit fit --model ggx-aniso` (one single-lobe scan) {} (target <= 3x).\n",
+        f(r.auto_over_single)
+    );
     s += &format!(
         "\nRatios of medians: `ndfit fit` / `unzip -p` {} (target <= 1.2x); `ndfit batch` / paired `unzip -p` over {} scans {} (target <= 1.3x); numpy pool / `ndfit batch` {}; numpy / `ndfit fit` (one scan) {}.\n",
         f(r.fit_over_floor),

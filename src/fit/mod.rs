@@ -458,11 +458,8 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     // Every warning of the NDF stage reaches the fit; a verdict other than ok says why there too.
     let mut warnings: Vec<String> = ndf.warnings.iter().cloned().chain(warnings).collect();
     // An `ok` fit's reason (a difference within the tolerance) stays in `quality.reasons` alone.
-    let new: Vec<String> = reasons
-        .iter()
-        .filter(|r| verdict != verdict::Verdict::Ok && !warnings.contains(r))
-        .map(|r| format!("{verdict}: {r}"))
-        .collect();
+    let new: Vec<String> =
+        reasons.iter().filter(|r| verdict != verdict::Verdict::Ok && !warnings.contains(r)).map(|r| format!("{verdict}: {r}")).collect();
     warnings.extend(new);
     let matrix_a =
         model.matrix_a().map(|a| [[a[(0, 0)], a[(0, 1)], a[(0, 2)]], [a[(1, 0)], a[(1, 1)], a[(1, 2)]], [a[(2, 0)], a[(2, 1)], a[(2, 2)]]]);
@@ -759,7 +756,11 @@ fn ladder_summary(
             let p = f.id.parent()?;
             let j = fits.iter().position(|g| g.id == p)?;
             let guard = if supported[i] { "" } else { ", not supported by the likelihood" };
-            Some(format!("{} over {p}: {}{guard}", f.id, errors[j].zip(errors[i]).map_or("unknown".into(), |(a, b)| format!("{:+.1}%", 100.0 * (b - a)))))
+            Some(format!(
+                "{} over {p}: {}{guard}",
+                f.id,
+                errors[j].zip(errors[i]).map_or("unknown".into(), |(a, b)| format!("{:+.1}%", 100.0 * (b - a)))
+            ))
         })
         .collect();
     if !effects.is_empty() {

@@ -182,7 +182,8 @@ pub fn judge(ndf: &EmpiricalNdf, e: &Evidence) -> (Verdict, Vec<String>) {
     if let Some(chi2) = e.reduced_chi2 {
         let phi = e.dispersion.unwrap_or(1.0).max(1.0);
         if chi2 > MISFIT_RATIO * phi {
-            let why = format!("deviance per dof {chi2:.3} is {:.1} times the data's own dispersion {phi:.3} (above {MISFIT_RATIO})", chi2 / phi);
+            let why =
+                format!("deviance per dof {chi2:.3} is {:.1} times the data's own dispersion {phi:.3} (above {MISFIT_RATIO})", chi2 / phi);
             match e.delta_excess {
                 // Guard: without an error beyond noise, the statistical test alone decides.
                 None => misfit.push(format!("{why}: the model does not describe the data")),
