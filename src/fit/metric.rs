@@ -35,7 +35,7 @@ pub fn delta_to_model(d: &Model, reference: &Model) -> Option<f64> {
 }
 
 /// `delta(D_model; D_empirical)` over the bins of `ndf` (the fit error against the data; it includes
-/// the counting noise of the bins, about `sqrt(K_eff / N)`).
+/// the counting noise of the bins, [`counting_noise2`]).
 pub fn delta_to_data(model: &Model, ndf: &EmpiricalNdf) -> Option<f64> {
     let n: f64 = ndf.bins.iter().map(|b| b.count as f64).sum();
     // Guard: an NDF without counts has no reference distribution.
@@ -52,6 +52,42 @@ pub fn delta_to_data(model: &Model, ndf: &EmpiricalNdf) -> Option<f64> {
         den += wk;
     }
     (den > 0.0).then(|| (num / den).sqrt())
+}
+
+/// The square of the counting noise in [`delta_to_data`] were `model` the truth: its expectation of
+/// `delta_data^2` under Poisson counts `lambda_k = N D(m_k) W_k` in every bin,
+/// `(1/N) sum_k E[(lambda_k - c_k)^2 / c_k; c_k >= 1]` ([`poisson_relative_noise`]). About `K / N` where
+/// every bin holds many normals, less where bins hold one or two (an empty bin has no weight), so a
+/// model's error is not hidden by noise that sparse bins do not have. `None` for an NDF without counts.
+pub fn counting_noise2(model: &Model, ndf: &EmpiricalNdf) -> Option<f64> {
+    let n: f64 = ndf.bins.iter().map(|b| b.count as f64).sum();
+    // Guard: an NDF without counts has no noise to speak of.
+    if n <= 0.0 {
+        return None;
+    }
+    let sum: f64 =
+        ndf.bins.iter().filter(|b| b.proj_solid_angle > 0.0).map(|b| poisson_relative_noise(n * model.d(b.m) * b.proj_solid_angle)).sum();
+    Some(sum / n)
+}
+
+/// `E[(lambda - c)^2 / c; c >= 1]` for a Poisson count `c` of mean `lambda`: the series up to a mean of
+/// 50, past it the expansion `1 + 2 / lambda` (its next term is below 1e-3 there).
+pub fn poisson_relative_noise(lambda: f64) -> f64 {
+    // Guard: no expected count (or a non-finite model value), no populated bin and no noise.
+    if !(lambda > 0.0 && lambda.is_finite()) {
+        return 0.0;
+    }
+    if lambda > 50.0 {
+        return 1.0 + 2.0 / lambda;
+    }
+    let c_max = (lambda + 12.0 * lambda.sqrt() + 25.0) as u32;
+    let (mut p, mut sum) = ((-lambda).exp(), 0.0);
+    for c in 1..=c_max {
+        let c = c as f64;
+        p *= lambda / c;
+        sum += p * (lambda - c).powi(2) / c;
+    }
+    sum
 }
 
 /// Fixed quadrature nodes `(m_k, W_k)` over the hemisphere, the same for every point of a sweep so that

@@ -441,7 +441,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     }
     let dispersion = verdict::data_dispersion(ndf, s.data.max_theta);
     let delta_data = metric::delta_to_data(&model, ndf);
-    let delta_excess = delta_data.and_then(|d| verdict::excess_delta(d, dispersion, k, s.data.n));
+    let delta_excess = delta_data.and_then(|d| verdict::excess_delta(d, metric::counting_noise2(&model, ndf)));
     let evidence = verdict::Evidence {
         n_params: p,
         n_samples: s.data.n,
@@ -527,10 +527,11 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 /// ([`FitOptions::tolerance`], [`verdict::excess_delta`]); the models of a step are fitted side by side.
 ///
 /// The choice is the rule `scale` uses ([`verdict::select`]), at the scan's own footprint: the candidates
-/// ordered simplest first (rung, then parameters, then error), the first within the tolerance, or when
-/// none is (every model visibly off), the one of the smallest error. The likelihood is a guard, not the decider: a model enters the
-/// choice only when its quasi-likelihood BIC ([`qbic`], `F / c_data + p ln N` with the data's own
-/// overdispersion) is below its parent's, so the data support its added parameters.
+/// ordered simplest first (rung, then parameters, then error), the first whose error exceeds the smallest
+/// by no more than the tolerance (in quadrature): the first within the tolerance, or when every model is
+/// visibly off, the simplest a renderer cannot tell from the closest. The likelihood is a guard, not the
+/// decider: a model enters the choice only when its quasi-likelihood BIC ([`qbic`], `F / c_data + p ln N`
+/// with the data's own overdispersion) is below its parent's, so the data support its added parameters.
 pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
     fit_auto_pruned(ndf, opts, true)
 }
@@ -581,7 +582,6 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Res
     steps.dedup();
     let k = s.data.k_nonzero;
     let n = s.data.n;
-    let dispersion = verdict::data_dispersion(ndf, s.data.max_theta);
     let mut fits: Vec<Fitted> = Vec::new();
     let mut deltas: Vec<Option<f64>> = Vec::new();
     let mut errors: Vec<Option<f64>> = Vec::new();
@@ -621,9 +621,10 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Res
             };
             warnings.extend(w);
             if let Some(f) = f {
-                let d = Model::from_params(f.id, &public(&f)).ok().and_then(|m| metric::delta_to_data(&m, ndf));
+                let m = Model::from_params(f.id, &public(&f)).ok();
+                let d = m.as_ref().and_then(|m| metric::delta_to_data(m, ndf));
                 deltas.push(d);
-                errors.push(d.and_then(|d| verdict::excess_delta(d, dispersion, k, n)));
+                errors.push(d.and_then(|d| verdict::excess_delta(d, metric::counting_noise2(m.as_ref()?, ndf))));
                 fits.push(f);
             }
         }
@@ -741,7 +742,7 @@ fn ladder_summary(
     } else {
         match errors[chosen] {
             Some(e) => format!(
-                "{id} (rung {}): no model is within the tolerance {:.1}%, and {id} has the smallest NDF error beyond counting noise, {:.1}%",
+                "{id} (rung {}): no model is within the tolerance {:.1}%; {id}, NDF error beyond counting noise {:.1}%, is the simplest within the tolerance of the closest",
                 rung(id),
                 100.0 * tolerance,
                 100.0 * e

