@@ -90,6 +90,10 @@ def main():
         "",
         f"Median `delta_excess` of the chosen model: {med}" + (f" (before: {statistics.median(then):.3f})" if then else "") + ".",
     ]
+    if then:
+        lines += ["", "The `before` columns are the other build's own report: a build that removes another noise "
+                  "from `delta_data` reports another `delta_excess` for the same fit (the dispersion-scaled noise "
+                  "of older builds is larger where the dispersion is, e.g. st_al3d-1 and st_tmd-1)."]
     if failed:
         lines += ["", "Failed:", *[f"- {f}" for f in failed]]
     Path(a.out).write_text("\n".join(lines) + "\n")

@@ -633,6 +633,10 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Res
             let c_first = qbic::overdispersion(fits.iter().filter_map(|f| reduced(f, k)));
             c_data = mixture::data_c(ndf, &s, c_first);
         }
+        // No model can leave less than the data's noise, so the smallest deviance per dof so far bounds it:
+        // on a smooth surface the dispersion split reads tens and would refuse every added parameter.
+        let c_fits = fits.iter().filter_map(|f| reduced(f, k)).fold(f64::INFINITY, f64::min);
+        c_data = c_data.min(c_fits).max(1.0);
     }
     if fits.is_empty() {
         return Err(Error::new(ErrorKind::Numerical, format!("no model could be fitted ({})", warnings.join("; "))));
