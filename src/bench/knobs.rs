@@ -26,7 +26,7 @@ impl Binning {
     }
 }
 
-/// How the heights are stored for the NDF pass (issue #8's "f32 versus f64 storage").
+/// How the heights are stored for the NDF pass (f32 or f64 storage).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Storage {

@@ -45,7 +45,7 @@ pub struct NumpyRun {
     pub nlopt: Option<String>,
 }
 
-/// The speed-up targets of issue #8 (numpy time / ndfit time, same run).
+/// The speed-up targets against the numpy pipeline (numpy time / ndfit time, same run).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Target {
     /// Scan side at which the target applies (a comparison at another size is reported, not judged).
@@ -76,7 +76,7 @@ pub struct Comparison {
     pub numpy: NumpyRun,
     /// numpy time / ndfit time for the task (the speed-up).
     pub ratio: f64,
-    /// The target of issue #8 for this task.
+    /// The speed-up target for this task.
     pub target: Target,
     /// Whether `ratio >= target.required` (`None`: not at the target's scan size, so not judged).
     pub met: Option<bool>,

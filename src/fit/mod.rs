@@ -1,4 +1,4 @@
-//! Fitting analytic NDFs to an empirical NDF with Levenberg-Marquardt (issue #5).
+//! Fitting analytic NDFs to an empirical NDF with Levenberg-Marquardt.
 //!
 //! - [`params`]: the unbounded parameterization (`alpha = ALPHA_MIN + exp(u)`, free angles) and why;
 //! - [`lnd`]: `ln D` of every model (Walter et al. eq. 1-3, Heitz eq. 82) with its analytic gradient;
