@@ -2,7 +2,7 @@
 
 use nalgebra::{Vector2, Vector3};
 
-use super::ggx::{inv_a2, projected_roughness};
+use super::ggx::{projected_roughness, smith_lambda};
 use super::{checked_alpha, checked_angle, rotate_z, smith_g1, Masking, Ndf};
 use crate::error::Result;
 
@@ -69,26 +69,19 @@ impl Masking for Beckmann {
     /// `Lambda = (erf(a) - 1)/2 + exp(-a^2)/(2 a sqrt(pi))`, `a = 1/(alpha_o tan theta_o)` (eq. 80),
     /// evaluated as `(exp(-a^2)/(a sqrt(pi)) - erfc(a)) / 2` so that `erf(a) - 1` does not cancel.
     fn lambda(&self, u: Vector3<f64>) -> f64 {
-        let w = inv_a2(self.alpha_x, self.alpha_y, self.theta_z, u);
-        // On the horizon a = 0 and Lambda = +inf: saturate (see Masking::lambda).
-        if !w.is_finite() || w == 0.0 && u.z == 0.0 {
-            return f64::MAX;
-        }
-        // Along the normal a = inf: nothing is masked.
-        if w == 0.0 {
-            return 0.0;
-        }
-        let a = 1.0 / w.sqrt();
-        // Past a = 26.6 both terms underflow; Lambda < 1e-300 there.
-        if a > 26.0 {
-            return 0.0;
-        }
-        let l = ((-a * a).exp() / (a * std::f64::consts::PI.sqrt()) - libm::erfc(a)) / 2.0;
-        if !l.is_finite() {
-            return f64::MAX; // a so small that 1/a overflowed: the grazing limit
-        }
-        // The two terms nearly cancel for large a; rounding may leave an ulp below 0.
-        l.max(0.0)
+        smith_lambda(self.alpha_x, self.alpha_y, self.theta_z, u, |w| {
+            let a = 1.0 / w.sqrt();
+            // Past a = 26.6 both terms underflow; Lambda < 1e-300 there.
+            if a > 26.0 {
+                return 0.0;
+            }
+            let l = ((-a * a).exp() / (a * std::f64::consts::PI.sqrt()) - libm::erfc(a)) / 2.0;
+            if !l.is_finite() {
+                return f64::MAX; // a so small that 1/a overflowed: the grazing limit
+            }
+            // The two terms nearly cancel for large a; rounding may leave an ulp below 0.
+            l.max(0.0)
+        })
     }
 
     /// Heitz eq. 43: `X+(u.m) / (1 + Lambda(u))`.

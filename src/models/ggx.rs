@@ -81,6 +81,23 @@ pub(crate) fn inv_a2(ax: f64, ay: f64, theta_z: f64, u: Vector3<f64>) -> f64 {
     ((ax * l.x).powi(2) + (ay * l.y).powi(2)) / (u.z * u.z)
 }
 
+/// Smith's `Lambda(u)` of a lobe of slopes stretched by `(ax, ay)` and turned by `theta_z`, which depends
+/// on `u` only through `w = 1/a^2` ([`inv_a2`]; Heitz sec. 5.3), with the guards every such lobe shares;
+/// `lambda_of_w` is the lobe's own `Lambda(w)` for a finite `w > 0`.
+#[inline]
+pub(crate) fn smith_lambda(ax: f64, ay: f64, theta_z: f64, u: Vector3<f64>, lambda_of_w: impl FnOnce(f64) -> f64) -> f64 {
+    let w = inv_a2(ax, ay, theta_z, u);
+    // On the horizon a = 0 (w = inf, or 0/0 for a zero vector) and Lambda = +inf: saturate (see Masking::lambda).
+    if !w.is_finite() || w == 0.0 && u.z == 0.0 {
+        return f64::MAX;
+    }
+    // Along the normal a = inf: nothing is masked.
+    if w == 0.0 {
+        return 0.0;
+    }
+    lambda_of_w(w)
+}
+
 impl Ndf for Ggx {
     /// Heitz eq. 85 (eq. 71 isotropic) multiplied through by `cos^4`:
     /// `D(m) = X+(m.n) / (pi ax ay (x'^2/ax^2 + y'^2/ay^2 + z^2)^2)` with `m' = Rz m` (Burley eq. 13,
@@ -99,12 +116,7 @@ impl Masking for Ggx {
     /// Heitz eq. 86 (eq. 72 isotropic): `Lambda = (-1 + sqrt(1 + 1/a^2)) / 2`, `a = 1/(alpha_o tan theta_o)`,
     /// evaluated as `w / (2 (1 + sqrt(1 + w)))` with `w = 1/a^2` (no cancellation near the normal).
     fn lambda(&self, u: Vector3<f64>) -> f64 {
-        let w = inv_a2(self.alpha_x, self.alpha_y, self.theta_z, u);
-        // On the horizon w = inf (or 0/0 for a zero vector): Lambda saturates (see Masking::lambda).
-        if !w.is_finite() {
-            return f64::MAX;
-        }
-        w / (2.0 * (1.0 + (1.0 + w).sqrt()))
+        smith_lambda(self.alpha_x, self.alpha_y, self.theta_z, u, |w| w / (2.0 * (1.0 + (1.0 + w).sqrt())))
     }
 
     /// Heitz eq. 43: `X+(u.m) / (1 + Lambda(u))`.

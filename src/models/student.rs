@@ -37,7 +37,7 @@
 
 use nalgebra::{Vector2, Vector3};
 
-use super::ggx::{inv_a2, projected_roughness};
+use super::ggx::{projected_roughness, smith_lambda};
 use super::{canonical, checked_alpha, checked_angle, rotate_z, smith_g1, Masking, Ndf};
 use crate::error::{Error, Result};
 
@@ -241,16 +241,7 @@ impl Ndf for Student {
 impl Masking for Student {
     /// Smith's `Lambda` in closed form (module docs), of `a = 1/(alpha_o tan theta_o)` (Heitz eq. 80).
     fn lambda(&self, u: Vector3<f64>) -> f64 {
-        let w = inv_a2(self.alpha_x, self.alpha_y, self.theta_z, u);
-        // On the horizon a = 0 and Lambda = +inf: saturate (see Masking::lambda).
-        if !w.is_finite() || w == 0.0 && u.z == 0.0 {
-            return f64::MAX;
-        }
-        // Along the normal a = inf: nothing is masked.
-        if w == 0.0 {
-            return 0.0;
-        }
-        lambda_of_w(self.gamma, w)
+        smith_lambda(self.alpha_x, self.alpha_y, self.theta_z, u, |w| lambda_of_w(self.gamma, w))
     }
 
     /// Heitz eq. 43: `X+(u.m) / (1 + Lambda(u))`.
