@@ -14,3 +14,4 @@ mod jacobian;
 mod mixture;
 mod recovery;
 mod schema;
+mod student;
