@@ -37,7 +37,7 @@ use std::time::Instant;
 use nalgebra::DMatrix;
 
 pub use objective::{FitData, Objective};
-pub use report::{Candidate, FitReport, InputInfo, Quality, Selection, SolverInfo, Timings};
+pub use report::{Candidate, FitReport, Quality, Selection, SolverInfo, Timings};
 pub use solve::{Solver, Tolerances};
 
 use crate::error::{Error, ErrorKind, Result};

@@ -255,7 +255,7 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
             };
             whole.meta.file_grid = Some([whole.nx, whole.ny]);
             if stride > 1 {
-                crate::preprocess::subsample(&whole, stride)?
+                whole.subsample(stride)?
             } else {
                 whole
             }
@@ -303,10 +303,10 @@ impl FileBytes {
 /// Map every page of `map` now, in one call (`MADV_POPULATE_READ`): no fault per page while a reader
 /// decodes it in order (a `madvise(MADV_SEQUENTIAL)` would come too late to matter). A scan read as
 /// tiles (larger than the tiling threshold) is faulted in band by band instead, and its pages released
-/// after use (`crate::ndf::bands`). Best effort: a kernel without the advice faults pages as they come.
+/// after use (`crate::scan::bands`). Best effort: a kernel without the advice faults pages as they come.
 pub(crate) fn populate(map: &memmap2::Mmap) {
     #[cfg(target_os = "linux")]
-    if map.len() as u64 <= crate::ndf::bands::release_threshold() {
+    if map.len() as u64 <= crate::scan::bands::release_threshold() {
         let _ = map.advise(memmap2::Advice::PopulateRead);
     }
 }

@@ -24,7 +24,6 @@
 //! the midpoint rule `E_k = N D(m_k) W_k` of `data_formats/objective.md` exact for any `D` that is linear
 //! over the cell in Lambert coordinates (second-order error).
 
-pub mod bands;
 mod cells;
 pub mod frame;
 pub mod grid;
@@ -38,16 +37,16 @@ pub mod precision;
 pub mod quantum;
 pub mod resolution;
 
-pub use bands::{Band, BandSource, GridShape};
 pub use frame::SlopeFrame;
 pub use grid::{BinGrid, QuadOrder, RimShape};
 use nalgebra::Vector3;
-pub use normals::{HeightRows, NormalScheme};
+pub use normals::NormalScheme;
 pub use precision::{F32Storage, HeightsF32, Precision};
 pub use quantum::{HeightQuantum, SlopeLattice};
 use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
+use crate::scan::bands::{self, BandSource, HeightRows};
 use crate::scan::Scan;
 pub(crate) use cells::build_bins;
 pub use cells::CHEAP_RULE_EPS;

@@ -14,12 +14,12 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::error::Result;
-use crate::fit::{FitOptions, FitReport, InputInfo};
+use crate::fit::{FitOptions, FitReport};
 use crate::io::ReadOptions;
 use crate::models::ModelChoice;
 use crate::ndf::{EmpiricalNdf, NdfOptions};
 use crate::preprocess::{Prepared, Preprocess};
-use crate::scan::{Heightfield, Scan};
+use crate::scan::{Heightfield, InputInfo, Scan};
 pub use preset::Preset;
 
 /// Everything the pipeline needs besides the scan. `Default` is what `ndfit fit` does without flags:

@@ -12,6 +12,7 @@ mod fit;
 mod fused_resolution;
 mod grid_turn;
 mod hostile;
+mod layers;
 mod models;
 mod ndf;
 mod ndf_storage;
