@@ -80,6 +80,22 @@ impl std::str::FromStr for Crop {
     }
 }
 
+impl Preprocess {
+    /// Refuse out-of-range values ([`crate::ErrorKind::InvalidInput`], the message naming the field): a
+    /// `subsample` step of 0, an empty crop window. Whether a crop fits is known only with the scan.
+    pub fn validate(&self) -> Result<()> {
+        if self.subsample == 0 {
+            return Err(Error::invalid("subsample 0 must be at least 1"));
+        }
+        if let Some(c) = self.crop {
+            if c.nx == 0 || c.ny == 0 {
+                return Err(Error::invalid(format!("crop {}x{}+{}+{} is empty", c.nx, c.ny, c.x, c.y)));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Default for Preprocess {
     fn default() -> Self {
         Preprocess { form: FormRemoval::Plane, crop: None, subsample: 1, despike: Despike::Median }

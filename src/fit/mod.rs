@@ -19,6 +19,7 @@ pub mod lnd_mixture;
 pub mod metric;
 pub mod mixture;
 pub mod objective;
+pub mod options;
 pub mod params;
 #[cfg(feature = "plot")]
 pub mod plot;
@@ -116,6 +117,7 @@ struct Session {
 
 impl Session {
     fn new(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<Session> {
+        opts.validate()?;
         let data = FitData::with_tail(ndf, opts.objective, opts.max_theta, opts.tail)?;
         let summary = start::summarize(&data);
         let coarse = if data.bins.len() >= COARSE_PASS_MIN_BINS { data.coarsened(ndf, 50) } else { None };

@@ -239,7 +239,7 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
     if stride <= 2 && format != Format::X3p {
         file.populate();
     }
-    // Large native float64 NPY files are read in place (zero-copy, `crate::heights`); every other case
+    // Large native float64 NPY files are read in place (zero-copy, `crate::scan::heights`); every other case
     // decodes into an owned buffer.
     let strided = match (&file, format) {
         (FileBytes::Mapped(map), f) if f == Format::Npy && stride > 1 => npy::read_npy_strided(map, opts, stride)?,

@@ -153,6 +153,25 @@ impl Default for NdfOptions {
 }
 
 impl NdfOptions {
+    /// Refuse out-of-range values ([`ErrorKind::InvalidInput`], the message naming the field): a
+    /// `cells_across` that is even or outside 3 to [`grid::MAX_CELLS_ACROSS`], a `target_count` below 1
+    /// or not finite. [`crate::pipeline::Options::validate`] calls it on the options a user gives; the
+    /// NDF stage itself rounds a computed grid size to the next odd one ([`BinGrid::new`]).
+    pub fn validate(&self) -> Result<()> {
+        if let Some(c) = self.cells_across {
+            if !(3..=grid::MAX_CELLS_ACROSS).contains(&c) {
+                return Err(Error::invalid(format!("cells_across {c} must be between 3 and {}", grid::MAX_CELLS_ACROSS)));
+            }
+            if c % 2 == 0 {
+                return Err(Error::invalid(format!("cells_across {c} must be odd (the grid has a centre cell)")));
+            }
+        }
+        if !(self.target_count.is_finite() && self.target_count >= 1.0) {
+            return Err(Error::invalid(format!("target_count {} must be at least 1", self.target_count)));
+        }
+        Ok(())
+    }
+
     /// The grid size used for `n` samples.
     pub fn cells_for(&self, n: u64) -> usize {
         match self.cells_across {

@@ -16,6 +16,7 @@ mod layers;
 mod models;
 mod ndf;
 mod ndf_storage;
+mod options;
 mod plane_fold;
 mod quantized;
 mod readers;
