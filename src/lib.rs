@@ -37,10 +37,11 @@
 //!
 //! ## The layers
 //!
-//! Each apart from the next (docs/ARCHITECTURE.md draws the data flow and says where new code goes):
+//! From the bottom up; a module uses only the layers below it (docs/ARCHITECTURE.md has the table, which
+//! a test enforces, draws the data flow and says where new code goes):
 //! - [`models`]: pure math of the analytic NDFs (no I/O), the roughness-matrix algebra included;
-//! - [`scan`]: the one in-memory scan type; [`io`]: readers and writers of scan files into it;
-//! - [`preprocess`], [`ndf`]: form removal, normals and the binned empirical NDF;
+//! - [`scan`]: the one in-memory scan type and its row bands; [`io`]: readers and writers of scan files;
+//! - [`ndf`], [`preprocess`]: normals and the binned empirical NDF; form removal and despiking;
 //! - [`fit`]: least-squares fits, model selection (QBIC) and uncertainty;
 //! - [`pipeline`]: the facade above, its stages and the presets;
 //! - [`synth`]: synthetic scans with known truth; [`export`]: renderer parameters for a fit;
@@ -48,9 +49,9 @@
 //! - with the `cli` feature (on by default): `batch` (the regression runner) and `bench` (measurements),
 //!   and the `ndfit` binary (`src/cli/`), a thin layer that parses arguments into [`Options`]. The
 //!   `plot` feature (part of `cli`) adds the PNG plots. `default-features = false` builds the library
-//!   without clap, indicatif or plotters.
+//!   without clap, indicatif, anyhow or plotters.
 
-#![warn(missing_docs)]
+#![deny(missing_docs)]
 // `!(x > 0.0)` guards are deliberate throughout: unlike `x <= 0.0` they also catch NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
@@ -78,13 +79,3 @@ pub use error::{Error, ErrorKind, Result};
 pub use models::ModelChoice;
 pub use pipeline::{read, Options, Outcome, Pipeline, Preset};
 pub use scan::{Heightfield, Scan, ScanMeta};
-
-/// Old home of the scan type, kept so existing paths compile; the type lives in [`scan`].
-pub mod heightfield {
-    pub use crate::scan::{Heightfield, ScanMeta};
-}
-
-/// Old home of the heights storage, kept so existing paths compile; it lives in [`scan::heights`].
-pub mod heights {
-    pub use crate::scan::heights::Heights;
-}

@@ -8,8 +8,8 @@ pub mod despike;
 pub mod form;
 pub mod prepared;
 
-pub use despike::{Despike, DespikeReport};
-pub use prepared::{prepare, Prepared, RawMasked};
+pub use despike::Despike;
+pub use prepared::{prepare, Prepared};
 
 use crate::error::{Error, Result};
 use crate::scan::{Heightfield, Scan};
@@ -80,6 +80,22 @@ impl std::str::FromStr for Crop {
     }
 }
 
+impl Preprocess {
+    /// Refuse out-of-range values ([`crate::ErrorKind::InvalidInput`], the message naming the field): a
+    /// `subsample` step of 0, an empty crop window. Whether a crop fits is known only with the scan.
+    pub fn validate(&self) -> Result<()> {
+        if self.subsample == 0 {
+            return Err(Error::invalid("subsample 0 must be at least 1"));
+        }
+        if let Some(c) = self.crop {
+            if c.nx == 0 || c.ny == 0 {
+                return Err(Error::invalid(format!("crop {}x{}+{}+{} is empty", c.nx, c.ny, c.x, c.y)));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Default for Preprocess {
     fn default() -> Self {
         Preprocess { form: FormRemoval::Plane, crop: None, subsample: 1, despike: Despike::Median }
@@ -113,18 +129,5 @@ pub fn crop(hf: &Scan, c: Crop) -> Result<Heightfield> {
 /// Every `step`-th point along both axes (point picking, no averaging: averaging would mix invalid
 /// points into valid ones or invent values). Spacing grows by `step`.
 pub fn subsample(hf: &Scan, step: usize) -> Result<Heightfield> {
-    if step == 0 {
-        return Err(Error::invalid("subsampling step must be at least 1"));
-    }
-    let nx = hf.nx.div_ceil(step);
-    let ny = hf.ny.div_ceil(step);
-    let mut z = Vec::with_capacity(nx * ny);
-    for i in (0..hf.ny).step_by(step) {
-        z.extend(hf.row(i).iter().step_by(step).copied());
-    }
-    let mut out = Heightfield::new(nx, ny, hf.dx * step as f64, hf.dy * step as f64, z)?;
-    out.x0 = hf.x0;
-    out.y0 = hf.y0;
-    out.meta = hf.meta.clone();
-    Ok(out)
+    hf.subsample(step)
 }

@@ -6,9 +6,8 @@
 //!   eq. 61-62), so no invalid point is ever filled in. Called `Sdq_central` in the peer readings.
 
 use crate::error::Result;
-use crate::ndf::bands::{bands_of, BandSource, GridShape};
-use crate::ndf::HeightRows;
 use crate::preprocess::form::{fit_polynomial, remove_plane};
+use crate::scan::bands::{bands_of, BandSource, GridShape, HeightRows};
 use crate::scan::Heightfield;
 
 /// Statistics reported by `ndfit info`.

@@ -115,7 +115,7 @@ def ndf(
     despike: Literal["median", "none"] = "median",
     normals: Literal["central", "triangles"] = "central",
     ndf_cells: Optional[int] = None,
-    target_count: Optional[float] = None,
+    target_count: float = 64.0,
     threads: Optional[int] = None,
 ) -> Ndf: ...
 def fit(
@@ -133,7 +133,7 @@ def fit(
     despike: Literal["median", "none"] = "median",
     normals: Literal["central", "triangles"] = "central",
     ndf_cells: Optional[int] = None,
-    target_count: Optional[float] = None,
+    target_count: float = 64.0,
     objective: Literal["poisson", "logd"] = "poisson",
     solver: Literal["lm", "nelder-mead", "lbfgs"] = "lm",
     extra_starts: int = 0,

@@ -322,9 +322,9 @@ impl ScanOpts {
 }
 
 /// The NDF options of `normals`, `ndf_cells`, `target_count`, range-checked as the CLI does.
-fn ndf_options(normals: &str, ndf_cells: Option<usize>, target_count: Option<f64>) -> PyResult<NdfOptions> {
+fn ndf_options(normals: &str, ndf_cells: Option<usize>, target_count: f64) -> PyResult<NdfOptions> {
     let scheme: NormalScheme = check::parse("normals", normals, Spelling::Keyword).map_err(to_py)?;
-    check::ndf_options(scheme, ndf_cells, target_count, Spelling::Keyword).map_err(to_py)
+    check::ndf_options(scheme, ndf_cells, Some(target_count), Spelling::Keyword).map_err(to_py)
 }
 
 fn parse_preset(s: Option<&str>) -> PyResult<Option<Preset>> {
@@ -428,7 +428,7 @@ impl Ndf {
 /// `ndf_cells` odd 3-1023, `target_count` mean samples per bin, default 64); `threads` caps the work's threads (default: all cores).
 #[pyfunction]
 #[pyo3(signature = (source, form="plane", *, dx=None, dy=None, z_scale=None, format=None, crop=None, subsample=1,
-    despike="median", normals="central", ndf_cells=None, target_count=None, threads=None))]
+    despike="median", normals="central", ndf_cells=None, target_count=64.0, threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn ndf(
     py: Python<'_>,
@@ -443,13 +443,14 @@ fn ndf(
     despike: &str,
     normals: &str,
     ndf_cells: Option<usize>,
-    target_count: Option<f64>,
+    target_count: f64,
     threads: Option<usize>,
 ) -> PyResult<Ndf> {
     let src = Source::from_py(source)?;
     let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample, despike)?;
     let ndf = ndf_options(normals, ndf_cells, target_count)?;
     let pipeline = Pipeline::new(Options { read: so.read, preprocess: so.pre, ndf, ..Options::default() });
+    pipeline.options().validate().map_err(to_py)?;
     let label = match &src {
         Source::File(p) => p.display().to_string(),
         Source::Scan(s) => s.get().label(),
@@ -622,7 +623,7 @@ fn finish<'py>(py: Python<'py>, out: Vec<f64>, single: bool) -> PyResult<Bound<'
 /// - `threads`: threads for this call (default: all cores, as the CLI).
 #[pyfunction]
 #[pyo3(signature = (source, model="auto", form="plane", preset=None, *, dx=None, dy=None, z_scale=None, format=None, crop=None,
-    subsample=1, despike="median", normals="central", ndf_cells=None, target_count=None, objective="poisson", solver="lm",
+    subsample=1, despike="median", normals="central", ndf_cells=None, target_count=64.0, objective="poisson", solver="lm",
     extra_starts=0, max_theta=None, na=None, tail="rim", tolerance=None, threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
@@ -640,7 +641,7 @@ fn fit(
     despike: &str,
     normals: &str,
     ndf_cells: Option<usize>,
-    target_count: Option<f64>,
+    target_count: f64,
     objective: &str,
     solver: &str,
     extra_starts: usize,
@@ -669,6 +670,7 @@ fn fit(
     let model = model.parse::<ModelChoice>().map_err(|e| invalid(format!("model: {}", e.message())))?;
     let preset = parse_preset(preset)?;
     let pipeline = Pipeline::new(Options { read: so.read, preprocess: so.pre, preset, ndf, model, fit });
+    pipeline.options().validate().map_err(to_py)?;
     let outcome = src.run(py, threads, |p| pipeline.run_path(p), |scan, label| pipeline.run(scan, label))?;
     Fit::from_report(outcome.fit)
 }

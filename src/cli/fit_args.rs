@@ -57,7 +57,7 @@ pub struct FitArgs {
 
 impl FitArgs {
     /// The pipeline options these flags ask for, fitting `model`; out-of-range values are refused here,
-    /// naming the flag.
+    /// naming the flag, and the result passes [`Options::validate`].
     pub fn options(&self, model: ModelChoice) -> ndfit::Result<Options> {
         let bad = |flag: &str, e: ndfit::Error| ndfit::Error::invalid(format!("{flag}: {}", e.message()));
         let objective = self.objective.parse::<Objective>().map_err(|e| bad("--objective", e))?;
@@ -69,7 +69,10 @@ impl FitArgs {
         let tolerance = check::tolerance(self.tolerance, Spelling::Flag)?;
         let fit =
             FitOptions { objective, solver, extra_starts, max_theta: max_theta.to_radians(), tail, tolerance, ..FitOptions::default() };
-        Ok(Options { read: self.scan.read_options(), preprocess: self.scan.preprocess(), preset: self.preset, ndf, model, fit })
+        let options = Options { read: self.scan.read_options(), preprocess: self.scan.preprocess(), preset: self.preset, ndf, model, fit };
+        // What the flags' own checks leave (a --subsample of 0) is refused naming the scan.
+        options.validate().map_err(|e| e.with_path(&self.scan.scan))?;
+        Ok(options)
     }
 }
 

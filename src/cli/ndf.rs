@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
-use ndfit::fit::InputInfo;
 use ndfit::ndf::{output, plot, EmpiricalNdf, NdfOptions, NormalScheme};
 use ndfit::pipeline::check::{self, Spelling};
+use ndfit::scan::InputInfo;
 use ndfit::{Options, Pipeline};
 
 use super::scan_args::ScanArgs;

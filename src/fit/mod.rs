@@ -19,6 +19,7 @@ pub mod lnd_mixture;
 pub mod metric;
 pub mod mixture;
 pub mod objective;
+pub mod options;
 pub mod params;
 #[cfg(feature = "plot")]
 pub mod plot;
@@ -37,7 +38,7 @@ use std::time::Instant;
 use nalgebra::DMatrix;
 
 pub use objective::{FitData, Objective};
-pub use report::{Candidate, FitReport, InputInfo, Quality, Selection, SolverInfo, Timings};
+pub use report::{Candidate, FitReport, Quality, Selection, SolverInfo, Timings};
 pub use solve::{Solver, Tolerances};
 
 use crate::error::{Error, ErrorKind, Result};
@@ -121,6 +122,7 @@ struct Session {
 
 impl Session {
     fn new(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<Session> {
+        opts.validate()?;
         let data = FitData::with_tail(ndf, opts.objective, opts.max_theta, opts.tail)?;
         let summary = start::summarize(&data);
         let coarse = if data.bins.len() >= COARSE_PASS_MIN_BINS { data.coarsened(ndf, 50) } else { None };

@@ -239,7 +239,7 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
     if stride <= 2 && format != Format::X3p {
         file.populate();
     }
-    // Large native float64 NPY files are read in place (zero-copy, `crate::heights`); every other case
+    // Large native float64 NPY files are read in place (zero-copy, `crate::scan::heights`); every other case
     // decodes into an owned buffer.
     let strided = match (&file, format) {
         (FileBytes::Mapped(map), f) if f == Format::Npy && stride > 1 => npy::read_npy_strided(map, opts, stride)?,
@@ -255,7 +255,7 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
             };
             whole.meta.file_grid = Some([whole.nx, whole.ny]);
             if stride > 1 {
-                crate::preprocess::subsample(&whole, stride)?
+                whole.subsample(stride)?
             } else {
                 whole
             }
@@ -303,10 +303,10 @@ impl FileBytes {
 /// Map every page of `map` now, in one call (`MADV_POPULATE_READ`): no fault per page while a reader
 /// decodes it in order (a `madvise(MADV_SEQUENTIAL)` would come too late to matter). A scan read as
 /// tiles (larger than the tiling threshold) is faulted in band by band instead, and its pages released
-/// after use (`crate::ndf::bands`). Best effort: a kernel without the advice faults pages as they come.
+/// after use (`crate::scan::bands`). Best effort: a kernel without the advice faults pages as they come.
 pub(crate) fn populate(map: &memmap2::Mmap) {
     #[cfg(target_os = "linux")]
-    if map.len() as u64 <= crate::ndf::bands::release_threshold() {
+    if map.len() as u64 <= crate::scan::bands::release_threshold() {
         let _ = map.advise(memmap2::Advice::PopulateRead);
     }
 }

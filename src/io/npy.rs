@@ -163,7 +163,7 @@ pub fn read_npy_strided(map: &memmap2::Mmap, opts: &ReadOptions, stride: usize) 
     finish(hf, h.descr).map(Some)
 }
 
-/// The zero-copy read of a memory-mapped NPY file (see [`crate::heights`]): the heights are the file's
+/// The zero-copy read of a memory-mapped NPY file (see [`crate::scan::heights`]): the heights are the file's
 /// bytes when the array is C-ordered little-endian float64, `--z-scale` is exactly 1 (heights already in
 /// metres), the data start is 8-byte aligned and no height is infinite (the heightfield masks those as
 /// NaN, which a read-only view cannot). When any of these fails the file is decoded as [`read_npy`] does

@@ -102,7 +102,7 @@ pub fn read_x3p_mapped(map: &std::sync::Arc<memmap2::Mmap>) -> Result<Heightfiel
 fn mapped_heights(map: &std::sync::Arc<memmap2::Mmap>, raw: &[u8], n: usize, crc: u32) -> Result<Option<Heights<'static>>> {
     let offset = (raw.as_ptr() as usize).wrapping_sub(map.as_ptr() as usize);
     let Some(z) = Heights::mapped(map.clone(), offset, n) else { return Ok(None) };
-    let release = (raw.len() as u64) > crate::ndf::bands::release_threshold();
+    let release = (raw.len() as u64) > crate::scan::bands::release_threshold();
     // One pass, 1 MiB at a time: the CRC-32 and the infinity check (an infinity needs the decoding
     // copy, which masks it). A scan read as tiles goes in order, its pages released after each block;
     // otherwise the blocks are hashed on every thread (the first touch of each page is most of the cost)
@@ -119,7 +119,7 @@ fn mapped_heights(map: &std::sync::Arc<memmap2::Mmap>, raw: &[u8], n: usize, crc
             .map(|(block, vals)| {
                 let part = hash(block, vals);
                 crate::scan::heights::release_pages(block.as_ptr(), block.len());
-                crate::ndf::bands::report_tiled_progress(block.len() as u64);
+                crate::scan::bands::report_tiled_progress(block.len() as u64);
                 part
             })
             .collect()

@@ -3,10 +3,11 @@
 
 use rayon::prelude::*;
 
-use super::bands::bands_of;
 use super::frame::LAMBERT_RADIUS;
 use super::resolution::{RowSlopes, RowTest, Tally, COUNTED, UNRESOLVED, VALID};
-use super::{BandSource, BinGrid, NormalScheme, SlopeFrame};
+use super::{BinGrid, NormalScheme, SlopeFrame};
+use crate::scan::bands::bands_of;
+use crate::scan::bands::BandSource;
 
 /// Per-task accumulator: counts per cell and slope moments about the frame centre.
 ///

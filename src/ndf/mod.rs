@@ -24,7 +24,6 @@
 //! the midpoint rule `E_k = N D(m_k) W_k` of `data_formats/objective.md` exact for any `D` that is linear
 //! over the cell in Lambert coordinates (second-order error).
 
-pub mod bands;
 mod cells;
 pub mod frame;
 pub mod grid;
@@ -38,16 +37,16 @@ pub mod precision;
 pub mod quantum;
 pub mod resolution;
 
-pub use bands::{Band, BandSource, GridShape};
 pub use frame::SlopeFrame;
 pub use grid::{BinGrid, QuadOrder, RimShape};
 use nalgebra::Vector3;
-pub use normals::{HeightRows, NormalScheme};
+pub use normals::NormalScheme;
 pub use precision::{F32Storage, HeightsF32, Precision};
 pub use quantum::{HeightQuantum, SlopeLattice};
 use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
+use crate::scan::bands::{self, BandSource, HeightRows};
 use crate::scan::Scan;
 pub(crate) use cells::build_bins;
 pub use cells::CHEAP_RULE_EPS;
@@ -154,6 +153,25 @@ impl Default for NdfOptions {
 }
 
 impl NdfOptions {
+    /// Refuse out-of-range values ([`ErrorKind::InvalidInput`], the message naming the field): a
+    /// `cells_across` that is even or outside 3 to [`grid::MAX_CELLS_ACROSS`], a `target_count` below 1
+    /// or not finite. [`crate::pipeline::Options::validate`] calls it on the options a user gives; the
+    /// NDF stage itself rounds a computed grid size to the next odd one ([`BinGrid::new`]).
+    pub fn validate(&self) -> Result<()> {
+        if let Some(c) = self.cells_across {
+            if !(3..=grid::MAX_CELLS_ACROSS).contains(&c) {
+                return Err(Error::invalid(format!("cells_across {c} must be between 3 and {}", grid::MAX_CELLS_ACROSS)));
+            }
+            if c % 2 == 0 {
+                return Err(Error::invalid(format!("cells_across {c} must be odd (the grid has a centre cell)")));
+            }
+        }
+        if !(self.target_count.is_finite() && self.target_count >= 1.0) {
+            return Err(Error::invalid(format!("target_count {} must be at least 1", self.target_count)));
+        }
+        Ok(())
+    }
+
     /// The grid size used for `n` samples.
     pub fn cells_for(&self, n: u64) -> usize {
         match self.cells_across {

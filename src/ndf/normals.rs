@@ -4,53 +4,8 @@
 //! stencil, `dx dy / 2` per triangle), so a count of samples is a projected-area measure and the
 //! empirical NDF is `D_k = count_k / (N W_k)` (Heitz eq. 9; Walter et al. eq. 9).
 
-use crate::scan::Scan;
-
-/// Row access to a grid of stored heights, generic over the stored float type: the NDF pass runs over
-/// [`crate::Scan`] (f64) and [`super::HeightsF32`] (f32 storage) with the same kernel. Every
-/// height is widened to f64 before it is differenced.
-pub trait HeightRows: Sync {
-    /// The stored float type.
-    type T: Copy + Into<f64> + Sync;
-    /// Columns.
-    fn nx(&self) -> usize;
-    /// Rows.
-    fn ny(&self) -> usize;
-    /// Spacing along x (m).
-    fn dx(&self) -> f64;
-    /// Spacing along y (m).
-    fn dy(&self) -> f64;
-    /// Row `i`.
-    fn row(&self, i: usize) -> &[Self::T];
-    /// The height quantum found before form removal, when the heights were on a lattice then
-    /// ([`crate::scan::ScanMeta::height_quantum`]); `None` lets the NDF look for one itself.
-    fn known_quantum(&self) -> Option<f64> {
-        None
-    }
-}
-
-impl HeightRows for Scan<'_> {
-    type T = f64;
-    fn nx(&self) -> usize {
-        self.nx
-    }
-    fn ny(&self) -> usize {
-        self.ny
-    }
-    fn dx(&self) -> f64 {
-        self.dx
-    }
-    fn dy(&self) -> f64 {
-        self.dy
-    }
-    #[inline(always)]
-    fn row(&self, i: usize) -> &[f64] {
-        Scan::row(self, i)
-    }
-    fn known_quantum(&self) -> Option<f64> {
-        self.meta.height_quantum
-    }
-}
+// Row access to the heights belongs to the scan layer; the NDF passes name it from here too.
+pub(crate) use crate::scan::bands::HeightRows;
 
 /// How normals are taken from the heights.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]

@@ -8,7 +8,7 @@
 //! two heights over `2 dx`; triangles: the same over `dx`, doubled), reported in [`F32Storage`] and
 //! refused by [`super::empirical_ndf_f32`] when it exceeds [`MAX_ROUNDING_FRACTION`] of the slope scale.
 
-use super::normals::HeightRows;
+use crate::scan::bands::{Band, BandSource, GridShape, HeightRows};
 use crate::scan::Scan;
 
 /// The largest slope rounding bound accepted, as a fraction of the robust slope scale (smallest
@@ -113,4 +113,15 @@ pub struct F32Storage {
     pub slope_rounding_bound: f64,
     /// The bound over the smallest robust slope standard deviation of the binning frame.
     pub fraction_of_slope_scale: f64,
+}
+
+impl BandSource for HeightsF32 {
+    type T = f32;
+    fn shape(&self) -> GridShape {
+        GridShape { nx: self.nx, ny: self.ny, dx: self.dx, dy: self.dy, quantum: None }
+    }
+    #[inline]
+    fn band<'b>(&'b self, lo: usize, hi: usize, _buf: &'b mut Vec<f32>) -> Band<'b, f32> {
+        Band::new(&self.z[lo * self.nx..hi * self.nx], lo, self.shape())
+    }
 }

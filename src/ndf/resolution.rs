@@ -13,8 +13,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use rayon::prelude::*;
 
-use super::bands::bands_of;
-use super::{Band, BandSource, BinGrid, HeightRows, SlopeFrame};
+use super::{BinGrid, SlopeFrame};
+use crate::scan::bands::{bands_of, Band, BandSource, GridShape, HeightRows};
 
 /// Largest relative slope error (whitened, against `max(|s'|, 1)`) of a resolved normal. A relative
 /// error `eps` of the slopes that grows as `|s'|^4` (the rim of a bump, `h ~ sqrt(d)`) changes the
@@ -204,7 +204,7 @@ impl Tally {
 
 impl RowTest {
     /// The test for central differences binned on `grid` in `frame`; `stencils` bounds the valid samples.
-    pub(super) fn new(frame: SlopeFrame, grid: BinGrid, shape: super::bands::GridShape, stencils: u64) -> Self {
+    pub(super) fn new(frame: SlopeFrame, grid: BinGrid, shape: GridShape, stencils: u64) -> Self {
         RowTest {
             frame,
             tol: RESOLUTION_TOLERANCE,

@@ -4,6 +4,7 @@
 
 use crate::error::{Error, Result};
 use crate::fit::objective::DEFAULT_MAX_THETA_DEG;
+use crate::fit::options::MAX_EXTRA_STARTS;
 use crate::ndf::grid::MAX_CELLS_ACROSS;
 use crate::ndf::{NdfOptions, NormalScheme, DEFAULT_TARGET_COUNT};
 
@@ -80,10 +81,10 @@ pub fn tolerance(t: Option<f64>, s: Spelling) -> Result<f64> {
     }
 }
 
-/// Extra ellipsoid starts beyond the default two: 0 to 4.
+/// Extra ellipsoid starts beyond the default two: 0 to [`MAX_EXTRA_STARTS`].
 pub fn extra_starts(n: usize, s: Spelling) -> Result<usize> {
-    if n > 4 {
-        return Err(Error::invalid(format!("{} {n} must be between 0 and 4", s.name("extra_starts"))));
+    if n > MAX_EXTRA_STARTS {
+        return Err(Error::invalid(format!("{} {n} must be between 0 and {MAX_EXTRA_STARTS}", s.name("extra_starts"))));
     }
     Ok(n)
 }

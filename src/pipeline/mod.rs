@@ -14,12 +14,12 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::error::Result;
-use crate::fit::{FitOptions, FitReport, InputInfo};
+use crate::fit::{FitOptions, FitReport};
 use crate::io::ReadOptions;
 use crate::models::ModelChoice;
 use crate::ndf::{EmpiricalNdf, NdfOptions};
 use crate::preprocess::{Prepared, Preprocess};
-use crate::scan::{Heightfield, Scan};
+use crate::scan::{Heightfield, InputInfo, Scan};
 pub use preset::Preset;
 
 /// Everything the pipeline needs besides the scan. `Default` is what `ndfit fit` does without flags:
@@ -55,6 +55,15 @@ impl Default for Options {
 }
 
 impl Options {
+    /// Refuse out-of-range options ([`crate::ErrorKind::InvalidInput`], the message naming the field):
+    /// [`Preprocess::validate`], [`NdfOptions::validate`], [`FitOptions::validate`]. Every [`Pipeline`]
+    /// run calls it first; the CLI and the Python binding call it when they build the options.
+    pub fn validate(&self) -> Result<()> {
+        self.preprocess.validate()?;
+        self.ndf.validate()?;
+        self.fit.validate()
+    }
+
     /// The preprocessing with the preset's stride folded into the subsampling (a `subsample` of 0 stays
     /// 0, for [`crate::preprocess::apply`] to refuse).
     pub fn preprocess(&self) -> Preprocess {
@@ -124,6 +133,7 @@ impl Pipeline {
     /// Read `path` (subsampling while reading where possible), preprocess, build the NDF and fit. Every
     /// error names `path`.
     pub fn run_path(&self, path: &Path) -> Result<Outcome> {
+        self.options.validate()?;
         let t0 = Instant::now();
         let scan = read_prepared(path, &self.options.read, &self.options.preprocess())?;
         let ndf_opts = self.ndf_options_of(&scan);
@@ -136,6 +146,7 @@ impl Pipeline {
     /// [`Pipeline::run_path`] for a scan in memory (preprocessing included); `label` stands for the path
     /// in the report's `input` and in error messages.
     pub fn run(&self, scan: Scan<'_>, label: &str) -> Result<Outcome> {
+        self.options.validate()?;
         let path = Path::new(label);
         let t0 = Instant::now();
         let scan = crate::preprocess::prepare(scan, &self.options.preprocess()).map_err(|e| e.with_path(path))?;
@@ -149,6 +160,7 @@ impl Pipeline {
     /// Read `path`, preprocess and build the NDF only (`ndfit ndf`); the scan is described by the
     /// returned [`InputInfo`]. Errors name `path`.
     pub fn ndf_path(&self, path: &Path) -> Result<(InputInfo, EmpiricalNdf)> {
+        self.options.validate()?;
         let scan = read_prepared(path, &self.options.read, &self.options.preprocess())?;
         let ndf = ndf_prepared(&scan, &self.ndf_options_of(&scan)).map_err(|e| e.with_path(path))?;
         let input = scan.input_info(path);
@@ -158,6 +170,7 @@ impl Pipeline {
 
     /// Preprocess a scan in memory and build its NDF only.
     pub fn ndf(&self, scan: Scan<'_>) -> Result<EmpiricalNdf> {
+        self.options.validate()?;
         let scan = crate::preprocess::prepare(scan, &self.options.preprocess())?;
         ndf_prepared(&scan, &self.ndf_options_of(&scan))
     }

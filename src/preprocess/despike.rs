@@ -13,9 +13,8 @@
 
 use rayon::prelude::*;
 
-use crate::ndf::bands::{bands_of, Band, BandSource};
-use crate::ndf::HeightRows;
-use crate::scan::Scan;
+use crate::scan::bands::{bands_of, Band, BandSource, HeightRows};
+use crate::scan::{DespikeReport, Scan};
 
 use super::form::FormModel;
 
@@ -45,21 +44,6 @@ impl std::str::FromStr for Despike {
             other => Err(crate::Error::invalid(format!("unknown despike {other:?}: use median or none"))),
         }
     }
-}
-
-/// What the despiking did (the fit JSON's `input.despike`).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct DespikeReport {
-    /// `median`.
-    pub method: String,
-    /// Points masked.
-    pub masked: usize,
-    /// Of them, above their neighbours (the rest below).
-    pub masked_high: usize,
-    /// Why: the rule in one line.
-    pub rule: String,
-    /// The spread floor used (metres).
-    pub floor: f64,
 }
 
 /// Per point: `Some((departure, spread))` when the point is valid with enough valid neighbours.
@@ -577,7 +561,7 @@ fn tested(rows: [&[f64]; 3], j: usize, limit: f64, floor: f64) -> Option<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ndf::bands::GridShape;
+    use crate::scan::bands::GridShape;
 
     /// The whole grid `z` as one band.
     fn whole(z: &[f64], nx: usize, ny: usize) -> Band<'_, f64> {
@@ -685,10 +669,10 @@ mod tests {
             let form = super::super::form::fit_polynomial(&raw, 1).unwrap();
             let rz = form.residual(&raw);
             let residual = Scan::from_view(ndarray::ArrayView2::from_shape((ny, nx), &rz).unwrap(), 1e-6, 1e-6).unwrap();
-            crate::ndf::bands::set_band_rows(band);
+            crate::scan::bands::set_band_rows(band);
             let want = find_spikes(&residual, Despike::Median, None).unwrap();
             let got = find_spikes_over(&residual, Some(RawPlane { raw: &raw, form: &form }), Despike::Median, None).unwrap();
-            crate::ndf::bands::set_band_rows(None);
+            crate::scan::bands::set_band_rows(None);
             assert!(want.0.len() > 20, "{nx} x {ny}: {} spikes", want.0.len());
             assert_eq!(got.0, want.0, "{nx} x {ny}, offset {offset}");
             assert_eq!(got.1, want.1);

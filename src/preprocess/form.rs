@@ -10,8 +10,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::ndf::bands::{BandSource, GridShape};
-use crate::ndf::HeightRows;
+use crate::scan::bands::{BandSource, GridShape, HeightRows};
 use crate::scan::Scan;
 
 /// Legendre polynomials P_0..P_3 at `u`.

@@ -18,9 +18,8 @@
 //! removed into a residual buffer as before (its fit holds every point anyway).
 
 use crate::error::Result;
-use crate::ndf::bands::{Band, BandSource, GridShape};
-use crate::ndf::HeightRows;
-use crate::scan::{Scan, ScanMeta};
+use crate::scan::bands::{bands_of, masked_band, Band, BandSource, GridShape, RawMasked};
+use crate::scan::{InputInfo, Scan, ScanMeta};
 
 use super::form::FormModel;
 use super::{despike, FormRemoval, Preprocess};
@@ -94,7 +93,7 @@ impl<'a> Prepared<'a> {
             return self.raw.nx * self.raw.ny - f.valid() + self.masked.len();
         }
         let step = self.raw.band_rows();
-        let bands: Vec<std::ops::Range<usize>> = crate::ndf::bands::bands_of(0..self.raw.ny, step).collect();
+        let bands: Vec<std::ops::Range<usize>> = bands_of(0..self.raw.ny, step).collect();
         let nan: usize = bands
             .into_par_iter()
             .map_init(Vec::new, |buf, b| self.raw.band(b.start, b.end, buf).values().iter().filter(|h| h.is_nan()).count())
@@ -116,73 +115,31 @@ impl<'a> Prepared<'a> {
     }
 }
 
-/// The heights as read with the despiked points masked, and no form removed: what a [`Prepared`] scan
-/// whose form is a plane hands to the passes that need only slopes ([`BandSource::plane_folded`]). A
-/// band with no masked point is a view of the stored rows (no copy, no arithmetic).
-pub struct RawMasked<'p> {
-    raw: &'p Scan<'p>,
-    masked: &'p [usize],
-}
-
-impl BandSource for RawMasked<'_> {
-    type T = f64;
-    fn shape(&self) -> GridShape {
-        self.raw.shape()
-    }
-    fn band<'b>(&'b self, lo: usize, hi: usize, buf: &'b mut Vec<f64>) -> Band<'b, f64> {
-        masked_band(self.raw, None, self.masked, lo, hi, buf)
-    }
-}
-
-/// Rows `lo..hi` of `raw`, less `form` (if any), with the points `masked` (sorted flat indices) set to
-/// NaN: a view of the stored rows when there is nothing to change.
-fn masked_band<'b>(
-    raw: &'b Scan<'_>,
-    form: Option<&FormModel>,
-    masked: &[usize],
-    lo: usize,
-    hi: usize,
-    buf: &'b mut Vec<f64>,
-) -> Band<'b, f64> {
-    let nx = raw.nx;
-    let m = masked.partition_point(|&k| k < lo * nx)..masked.partition_point(|&k| k < hi * nx);
-    if form.is_none() && m.is_empty() {
-        return raw.band(lo, hi, buf);
-    }
-    buf.clear();
-    buf.reserve(nx * (hi - lo));
-    {
-        let mut rbuf = Vec::new();
-        let rows = raw.band(lo, hi, &mut rbuf);
-        match form {
-            Some(f) => (lo..hi).for_each(|i| f.residual_row(i, rows.row(i), buf)),
-            None => buf.extend_from_slice(rows.values()),
-        }
-    }
-    for &k in &masked[m] {
-        buf[k - lo * nx] = f64::NAN;
-    }
-    Band::new(buf, lo, raw.shape())
-}
-
 impl BandSource for Prepared<'_> {
     type T = f64;
     fn shape(&self) -> GridShape {
         self.raw.shape()
     }
     fn band<'b>(&'b self, lo: usize, hi: usize, buf: &'b mut Vec<f64>) -> Band<'b, f64> {
-        masked_band(&self.raw, self.form.as_ref(), &self.masked, lo, hi, buf)
+        masked_band(
+            &self.raw,
+            self.form.as_ref().map(|f| move |i, row: &[f64], buf: &mut Vec<f64>| f.residual_row(i, row, buf)),
+            &self.masked,
+            lo,
+            hi,
+            buf,
+        )
     }
     fn plane_folded(&self) -> Option<(RawMasked<'_>, [f64; 2])> {
         let g = self.form.as_ref()?.plane_slope(self.raw.dx, self.raw.dy)?;
-        Some((RawMasked { raw: &self.raw, masked: &self.masked }, g))
+        Some((RawMasked::new(&self.raw, &self.masked), g))
     }
 }
 
 impl Prepared<'_> {
-    /// The fit report's description of this scan read from `path` (as [`crate::fit::InputInfo::new`]
-    /// gives for the scan [`Prepared::into_scan`] makes).
-    pub fn input_info(&self, path: &std::path::Path) -> crate::fit::InputInfo {
-        crate::fit::InputInfo::with_invalid(path, &self.raw, self.invalid_count())
+    /// The fit report's description of this scan read from `path` (as [`InputInfo::new`] gives for the
+    /// scan [`Prepared::into_scan`] makes).
+    pub fn input_info(&self, path: &std::path::Path) -> InputInfo {
+        InputInfo::with_invalid(path, &self.raw, self.invalid_count())
     }
 }

@@ -4,12 +4,15 @@
 //! `z = h[i][j]`, all in metres; row index grows with y, column index with x; the macro normal is `+z`.
 //! Invalid points are stored as NaN and are never read as heights.
 
+pub mod bands;
 pub mod heights;
+mod input;
 
 use std::collections::BTreeMap;
 
 use crate::error::{Error, Result};
 pub use heights::Heights;
+pub use input::InputInfo;
 
 /// What a reader learned about the file besides the heights (for `ndfit info`).
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -33,7 +36,23 @@ pub struct ScanMeta {
     pub file_grid: Option<[usize; 2]>,
     /// What spike removal masked ([`crate::preprocess::despike`]), when it ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub despike: Option<crate::preprocess::DespikeReport>,
+    pub despike: Option<DespikeReport>,
+}
+
+/// What the despiking did (the fit JSON's `input.despike`): the scan's metadata carries it from the
+/// preprocessing to the report.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DespikeReport {
+    /// `median`.
+    pub method: String,
+    /// Points masked.
+    pub masked: usize,
+    /// Of them, above their neighbours (the rest below).
+    pub masked_high: usize,
+    /// Why: the rule in one line.
+    pub rule: String,
+    /// The spread floor used (metres).
+    pub floor: f64,
 }
 
 /// A regular grid of heights in metres with a validity mask (NaN = invalid): what every reader returns
@@ -155,6 +174,26 @@ impl Scan<'_> {
     #[inline]
     pub fn row(&self, i: usize) -> &[f64] {
         &self.z[i * self.nx..(i + 1) * self.nx]
+    }
+
+    /// Every `step`-th point along both axes from the first (point picking, no averaging: averaging would
+    /// mix invalid points into valid ones or invent values); the spacing grows by `step`, the metadata is
+    /// kept ([`crate::preprocess::subsample`]).
+    pub fn subsample(&self, step: usize) -> Result<Heightfield> {
+        if step == 0 {
+            return Err(Error::invalid("subsampling step must be at least 1"));
+        }
+        let nx = self.nx.div_ceil(step);
+        let ny = self.ny.div_ceil(step);
+        let mut z = Vec::with_capacity(nx * ny);
+        for i in (0..self.ny).step_by(step) {
+            z.extend(self.row(i).iter().step_by(step).copied());
+        }
+        let mut out = Heightfield::new(nx, ny, self.dx * step as f64, self.dy * step as f64, z)?;
+        out.x0 = self.x0;
+        out.y0 = self.y0;
+        out.meta = self.meta.clone();
+        Ok(out)
     }
 
     /// Number of invalid (masked) points.

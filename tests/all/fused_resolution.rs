@@ -4,11 +4,11 @@
 //! with bands of 1 and 3 rows and the default, through a lazily formed scan ([`prepare`]) and through
 //! f32 storage; on both sides of [`MAX_UNRESOLVED_SHARE`] (per-bin counts kept or dropped).
 
-use ndfit::ndf::bands::set_band_rows;
 use ndfit::ndf::resolution::{assess, MAX_UNRESOLVED_SHARE};
 use ndfit::ndf::{empirical_ndf, empirical_ndf_f32, EmpiricalNdf, HeightsF32, NdfOptions};
 use ndfit::pipeline::ndf_prepared;
 use ndfit::preprocess::{prepare, Preprocess};
+use ndfit::scan::bands::set_band_rows;
 use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
 use ndfit::Heightfield;
 
@@ -45,7 +45,7 @@ fn bumps(nx: usize, ny: usize, noise: f64) -> Heightfield {
 }
 
 /// The two-pass assessment of `src` for the bins of `ndf` (its fields reset first).
-fn reference<S: ndfit::ndf::BandSource>(src: &S, ndf: &EmpiricalNdf) -> EmpiricalNdf {
+fn reference<S: ndfit::scan::bands::BandSource>(src: &S, ndf: &EmpiricalNdf) -> EmpiricalNdf {
     let mut r = ndf.clone();
     r.unresolved = vec![u64::MAX; 3];
     r.unresolved_share = None;

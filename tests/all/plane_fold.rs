@@ -5,11 +5,11 @@
 //! cell edge; moments within 1e-9 relative. On odd grids with holes and masked spikes, with bands of 1
 //! and 3 rows and the default. And the CSV: every number parses back to the same bits.
 
-use ndfit::ndf::bands::set_band_rows;
 use ndfit::ndf::output::write_csv_to;
-use ndfit::ndf::{empirical_ndf, BandSource, EmpiricalNdf, NdfOptions, NormalScheme};
+use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions, NormalScheme};
 use ndfit::pipeline::ndf_prepared;
 use ndfit::preprocess::{prepare, Preprocess};
+use ndfit::scan::bands::{set_band_rows, BandSource};
 use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
 use ndfit::Heightfield;
 

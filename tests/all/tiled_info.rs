@@ -3,8 +3,8 @@
 //! with holes and masked spikes, on odd grid sizes, with bands of 1 and 3 rows and the default; and the
 //! command on a stored X3P (heights mapped) prints the whole-grid statistics of the same heights.
 
-use ndfit::ndf::bands::set_band_rows;
 use ndfit::preprocess::{apply, prepare, FormRemoval, Preprocess};
+use ndfit::scan::bands::set_band_rows;
 use ndfit::stats::{surface_stats, surface_stats_of};
 use ndfit::Heightfield;
 

@@ -5,10 +5,10 @@
 //! [`ndfit::preprocess::apply`] makes, whatever the band size; the slope moments agree to rounding (a
 //! plane form is folded into the slopes, see `plane_fold`).
 
-use ndfit::ndf::bands::{set_band_rows, set_release_threshold};
 use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions, NormalScheme};
 use ndfit::pipeline::{ndf_prepared, read_prepared};
 use ndfit::preprocess::{apply, prepare, FormRemoval, Preprocess};
+use ndfit::scan::bands::{set_band_rows, set_release_threshold};
 use ndfit::synth::{gaussian_surface, GaussianParams, SynthSettings};
 use ndfit::Heightfield;
 

@@ -71,7 +71,7 @@ fn flat_tilted_plane_is_a_finite_specular_fit() {
     let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
     for id in [ModelId::Ggx, ModelId::Ellipsoid] {
         let mut rep = fit_model(&ndf, id, &FitOptions::default()).expect("a plane is a usable fit");
-        rep.input = Some(ndfit::fit::InputInfo::new(std::path::Path::new("plane"), &hf));
+        rep.input = Some(ndfit::scan::InputInfo::new(std::path::Path::new("plane"), &hf));
         assert!(rep.specular, "{id}: not flagged specular");
         assert_eq!(rep.quality.verdict, ndfit::fit::verdict::Verdict::Unresolved, "{id}: a lobe inside one bin is not resolved");
         let v = serde_json::to_value(&rep).expect("json");

@@ -9,10 +9,10 @@ use ndfit::fit::objective::{FitData, Objective};
 use ndfit::fit::params::{to_internal, to_public};
 use ndfit::fit::problem::{jacobian_into, residuals_into};
 use ndfit::fit::{fit_auto, fit_model, FitOptions};
-use ndfit::heightfield::Heightfield;
 use ndfit::models::{Model, ModelId, Ndf};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
 use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings};
+use ndfit::Heightfield;
 
 use rand::{RngExt, SeedableRng};
 

@@ -96,7 +96,7 @@ fn theta_z_of_a_near_isotropic_lobe_is_reported_unidentified() {
     let mut flagged = 0;
     for seed in 0..8 {
         let mut rep = fit_model(&ndf_on(&iso, 96, N_1024, 50 + seed), ModelId::Ellipsoid, &FitOptions::default()).expect("fit");
-        rep.input = Some(ndfit::fit::InputInfo {
+        rep.input = Some(ndfit::scan::InputInfo {
             path: "synthetic".into(),
             format: "binned".into(),
             nx: 1024,

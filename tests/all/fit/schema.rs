@@ -20,8 +20,9 @@ pub fn assert_valid(v: &Value) {
 
 #[test]
 fn library_reports_of_every_model_validate() {
-    use ndfit::fit::{fit_auto, fit_model, FitOptions, InputInfo};
+    use ndfit::fit::{fit_auto, fit_model, FitOptions};
     use ndfit::models::ModelId;
+    use ndfit::scan::InputInfo;
     let truth = super::fixtures::model(ModelId::Ellipsoid, &[0.3, 0.1, 0.1, -0.1, 0.4]);
     let ndf = ndfit::fit::synthetic::binned_ndf(&truth, &ndfit::fit::synthetic::Grid::for_model(&truth, 63), 2e5, 9);
     let input = InputInfo {

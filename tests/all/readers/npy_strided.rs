@@ -4,9 +4,9 @@
 //! decode only the kept points from their memory map; every other file (Fortran order, small files,
 //! other formats) is read whole and subsampled.
 
-use ndfit::heightfield::Heightfield;
 use ndfit::io::{read_scan, read_scan_subsampled, ReadOptions};
 use ndfit::preprocess::subsample;
+use ndfit::Heightfield;
 
 /// Large enough (4 MiB and more at 4 or 8 bytes per value) for the memory-mapped read.
 const NY: usize = 1100;

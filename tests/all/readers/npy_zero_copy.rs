@@ -37,7 +37,7 @@ fn npy(pad: usize, inf_at: Option<(usize, usize)>) -> Vec<u8> {
     b
 }
 
-fn read(bytes: &[u8], z_scale: f64) -> (tempfile::TempDir, std::path::PathBuf, ndfit::heightfield::Heightfield) {
+fn read(bytes: &[u8], z_scale: f64) -> (tempfile::TempDir, std::path::PathBuf, ndfit::Heightfield) {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("a.npy");
     std::fs::write(&path, bytes).expect("write");
@@ -46,7 +46,7 @@ fn read(bytes: &[u8], z_scale: f64) -> (tempfile::TempDir, std::path::PathBuf, n
     (dir, path, hf)
 }
 
-fn assert_heights(hf: &ndfit::heightfield::Heightfield, scale: f64, inf_at: Option<(usize, usize)>) {
+fn assert_heights(hf: &ndfit::Heightfield, scale: f64, inf_at: Option<(usize, usize)>) {
     assert_eq!((hf.nx, hf.ny), (NX, NY));
     for i in 0..NY {
         for j in 0..NX {

@@ -16,8 +16,53 @@
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::OnceLock;
 
-use super::HeightRows;
-use crate::scan::Scan;
+use super::Scan;
+
+/// Row access to a grid of stored heights, generic over the stored float type: the NDF pass runs over
+/// [`Scan`] (f64) and [`crate::ndf::HeightsF32`] (f32 storage) with the same kernel. Every
+/// height is widened to f64 before it is differenced.
+pub trait HeightRows: Sync {
+    /// The stored float type.
+    type T: Copy + Into<f64> + Sync;
+    /// Columns.
+    fn nx(&self) -> usize;
+    /// Rows.
+    fn ny(&self) -> usize;
+    /// Spacing along x (m).
+    fn dx(&self) -> f64;
+    /// Spacing along y (m).
+    fn dy(&self) -> f64;
+    /// Row `i`.
+    fn row(&self, i: usize) -> &[Self::T];
+    /// The height quantum found before form removal, when the heights were on a lattice then
+    /// ([`super::ScanMeta::height_quantum`]); `None` lets the NDF look for one itself.
+    fn known_quantum(&self) -> Option<f64> {
+        None
+    }
+}
+
+impl HeightRows for Scan<'_> {
+    type T = f64;
+    fn nx(&self) -> usize {
+        self.nx
+    }
+    fn ny(&self) -> usize {
+        self.ny
+    }
+    fn dx(&self) -> f64 {
+        self.dx
+    }
+    fn dy(&self) -> f64 {
+        self.dy
+    }
+    #[inline(always)]
+    fn row(&self, i: usize) -> &[f64] {
+        Scan::row(self, i)
+    }
+    fn known_quantum(&self) -> Option<f64> {
+        self.meta.height_quantum
+    }
+}
 
 /// Bytes of heights a band aims at: a few bands per thread stay in the L2 cache.
 pub const BAND_BYTES: usize = 1 << 20;
@@ -131,7 +176,7 @@ impl<'b, T> Band<'b, T> {
 impl<T> Drop for Band<'_, T> {
     fn drop(&mut self) {
         if let Some((start, len)) = self.release {
-            crate::scan::heights::release_pages(start as *const u8, len);
+            super::heights::release_pages(start as *const u8, len);
             report_tiled_progress(std::mem::size_of_val(self.z) as u64);
         }
     }
@@ -170,11 +215,11 @@ pub trait BandSource: Sync {
     /// Rows `lo..hi` (`lo < hi <= ny`): a view of stored rows, or computed into `buf`.
     fn band<'b>(&'b self, lo: usize, hi: usize, buf: &'b mut Vec<Self::T>) -> Band<'b, Self::T>;
     /// The same heights up to a plane, read with no arithmetic per band: a source each of whose slopes
-    /// (by any [`super::NormalScheme`], all exact on a plane) exceeds this one's by the returned constant
+    /// (by any [`crate::ndf::NormalScheme`], all exact on a plane) exceeds this one's by the returned constant
     /// `grad h`, up to rounding. Passes that need only slopes (the histogram and the resolution test)
     /// read it and subtract the constant: the plane is folded into the slopes, not removed from every
     /// height. `None` (the default): read this source itself.
-    fn plane_folded(&self) -> Option<(crate::preprocess::RawMasked<'_>, [f64; 2])> {
+    fn plane_folded(&self) -> Option<(RawMasked<'_>, [f64; 2])> {
         None
     }
     /// Rows per band for passes over the whole grid.
@@ -182,7 +227,7 @@ pub trait BandSource: Sync {
         band_rows(self.shape().nx, std::mem::size_of::<Self::T>())
     }
     /// The grid's shape as a [`HeightRows`] that holds no row (for the shape-only helpers of
-    /// [`super::NormalScheme`]).
+    /// [`crate::ndf::NormalScheme`]).
     fn outline(&self) -> Band<'static, Self::T> {
         Band::new(&[], 0, self.shape())
     }
@@ -217,15 +262,61 @@ impl BandSource for Scan<'_> {
     }
 }
 
-impl BandSource for super::HeightsF32 {
-    type T = f32;
+/// The heights as read with some points masked and no form removed: what a scan whose form is a plane
+/// hands to the passes that need only slopes ([`BandSource::plane_folded`]). A band with no masked point
+/// is a view of the stored rows (no copy, no arithmetic).
+pub struct RawMasked<'p> {
+    raw: &'p Scan<'p>,
+    masked: &'p [usize],
+}
+
+impl<'p> RawMasked<'p> {
+    /// The heights of `raw` with the points `masked` (sorted flat indices `i * nx + j`) read as NaN.
+    pub fn new(raw: &'p Scan<'p>, masked: &'p [usize]) -> Self {
+        RawMasked { raw, masked }
+    }
+}
+
+impl BandSource for RawMasked<'_> {
+    type T = f64;
     fn shape(&self) -> GridShape {
-        GridShape { nx: self.nx, ny: self.ny, dx: self.dx, dy: self.dy, quantum: None }
+        self.raw.shape()
     }
-    #[inline]
-    fn band<'b>(&'b self, lo: usize, hi: usize, _buf: &'b mut Vec<f32>) -> Band<'b, f32> {
-        Band::new(&self.z[lo * self.nx..hi * self.nx], lo, self.shape())
+    fn band<'b>(&'b self, lo: usize, hi: usize, buf: &'b mut Vec<f64>) -> Band<'b, f64> {
+        masked_band(self.raw, None::<fn(usize, &[f64], &mut Vec<f64>)>, self.masked, lo, hi, buf)
     }
+}
+
+/// Rows `lo..hi` of `raw`, each pushed onto `buf` by `rows` (`rows(i, row, buf)`; `None`: as stored), with
+/// the points `masked` (sorted flat indices) set to NaN: a view of the stored rows when there is nothing to
+/// change.
+pub fn masked_band<'b>(
+    raw: &'b Scan<'_>,
+    rows: Option<impl Fn(usize, &[f64], &mut Vec<f64>)>,
+    masked: &[usize],
+    lo: usize,
+    hi: usize,
+    buf: &'b mut Vec<f64>,
+) -> Band<'b, f64> {
+    let nx = raw.nx;
+    let m = masked.partition_point(|&k| k < lo * nx)..masked.partition_point(|&k| k < hi * nx);
+    if rows.is_none() && m.is_empty() {
+        return raw.band(lo, hi, buf);
+    }
+    buf.clear();
+    buf.reserve(nx * (hi - lo));
+    {
+        let mut rbuf = Vec::new();
+        let band = raw.band(lo, hi, &mut rbuf);
+        match rows {
+            Some(f) => (lo..hi).for_each(|i| f(i, band.row(i), buf)),
+            None => buf.extend_from_slice(band.values()),
+        }
+    }
+    for &k in &masked[m] {
+        buf[k - lo * nx] = f64::NAN;
+    }
+    Band::new(buf, lo, raw.shape())
 }
 
 /// The bands `[lo, hi)` of `rows` (each at most `step` rows), in order.
