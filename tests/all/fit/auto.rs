@@ -3,7 +3,7 @@
 //! one and keeps one lobe on Gaussian surfaces (an anisotropic Beckmann NDF exactly) and ellipsoid caps.
 
 use ndfit::fit::{fit_auto, fit_auto_pruned, FitOptions};
-use ndfit::heightfield::Heightfield;
+use ndfit::Heightfield;
 use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, NdfOptions};
 use ndfit::synth::ellipsoid::EllipsoidParams;

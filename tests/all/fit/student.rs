@@ -3,7 +3,7 @@
 //! path independent of the binning code), from the default starts (the GGX parent, `gamma = 2`).
 
 use ndfit::fit::{fit_auto, fit_model, FitOptions};
-use ndfit::heightfield::Heightfield;
+use ndfit::Heightfield;
 use ndfit::models::{Model, ModelId, Student};
 use ndfit::ndf::{empirical_ndf, NdfOptions, NormalScheme};
 use rand::{RngExt, SeedableRng};
