@@ -101,8 +101,8 @@ pub fn beyond_noise(delta2: f64, noise2: f64) -> f64 {
 /// The default tolerance on the NDF error beyond noise: what a renderer can show.
 ///
 /// A highlight's radiance is `D(h) G F / (4 |i.n| |o.n|)`, linear in `D`, so a relative error `e` of `D`
-/// changes the highlight's luminance `Y` by the factor `1 + e`. CIELAB's lightness `L* = 116 (Y/Y_n)^(1/3)
-/// - 16` gives `dL* = (L* + 16) / 3 * dY / Y`; a just-noticeable colour difference is `dE*ab ~ 2.3`
+/// changes the highlight's luminance `Y` by the factor `1 + e`. CIELAB's lightness
+/// `L* = 116 (Y/Y_n)^(1/3) - 16` gives `dL* = (L* + 16) / 3 * dY / Y`; a just-noticeable colour difference is `dE*ab ~ 2.3`
 /// (Mahy, Van Eycken and Oosterlinck 1994), so at a highlight's lightness `L* = 100` a relative
 /// luminance change of `3 x 2.3 / 116 = 0.059` is just visible (more at darker tones, where `L* + 16` is
 /// smaller). The NDF error is a root-mean-square over the directions where the normals are, so the

@@ -3,12 +3,12 @@
 //! one and keeps one lobe on Gaussian surfaces (an anisotropic Beckmann NDF exactly) and ellipsoid caps.
 
 use ndfit::fit::{fit_auto, fit_auto_pruned, FitOptions};
-use ndfit::Heightfield;
 use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, NdfOptions};
 use ndfit::synth::ellipsoid::EllipsoidParams;
 use ndfit::synth::gaussian::GaussianParams;
 use ndfit::synth::{ellipsoid_surface, gaussian_surface, SynthSettings};
+use ndfit::Heightfield;
 
 use super::fixtures::{delta_to_truth, model};
 

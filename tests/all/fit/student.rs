@@ -3,9 +3,9 @@
 //! path independent of the binning code), from the default starts (the GGX parent, `gamma = 2`).
 
 use ndfit::fit::{fit_auto, fit_model, FitOptions};
-use ndfit::Heightfield;
 use ndfit::models::{Model, ModelId, Student};
 use ndfit::ndf::{empirical_ndf, NdfOptions, NormalScheme};
+use ndfit::Heightfield;
 use rand::{RngExt, SeedableRng};
 
 use super::fixtures::{delta_to_truth, model, ndf_of, N_1024};
