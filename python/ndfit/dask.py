@@ -15,7 +15,7 @@ from typing import Any, Dict, Iterable, List, Optional, Union
 
 #: Parameter columns, in this order, for every model (a model fills the ones it has).
 # Every parameter of every model (ndfit models): the single lobes, then the mixtures' own names.
-PARAM_COLUMNS = ["alpha", "alpha_x", "alpha_y", "theta_x", "theta_y", "theta_z", "alpha_x1", "alpha_y1", "alpha_x2", "alpha_y2", "alpha2", "weight"]
+PARAM_COLUMNS = ["alpha", "alpha_x", "alpha_y", "theta_x", "theta_y", "theta_z", "alpha_x1", "alpha_y1", "alpha_x2", "alpha_y2", "alpha2", "weight", "gamma"]
 #: Every column of :func:`fit_many`'s DataFrame, in order.
 COLUMNS = ["path", "status", "model", *PARAM_COLUMNS, "verdict", "reduced_chi2", "n_samples", "error_kind", "error"]
 
@@ -69,7 +69,7 @@ def fit_many(
     One row per scan, in the order of ``paths``: ``path``, ``status`` (ok|error), ``model``, the parameters
     (``alpha`` for the isotropic models; ``alpha_x``, ``alpha_y``, ``theta_z`` and for the ellipsoid
     ``theta_x``, ``theta_y``; for the mixtures ``alpha_x1``, ``alpha_y1``, ``alpha_x2``, ``alpha_y2`` or ``alpha2``,
-    ``theta_z`` and ``weight``; NaN where a model has none), ``verdict``, ``reduced_chi2``, ``n_samples``,
+    ``theta_z`` and ``weight``; ``gamma`` for the Student-t lobes; NaN where a model has none), ``verdict``, ``reduced_chi2``, ``n_samples``,
     ``error_kind`` and ``error``. These are the fits ``ndfit batch`` makes with the same model and options.
     The ``alpha_x`` axis lies along ``(cos theta_z, -sin theta_z)`` in the scan frame (azimuth ``-theta_z``).
 

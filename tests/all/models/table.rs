@@ -51,6 +51,19 @@ fn the_python_stubs_list_the_table() {
 }
 
 /// Names and aliases parse to their model, and a model rebuilt from its own parameters is itself.
+/// `fit_many`'s DataFrame has a column for every parameter name of the table (a model fills its own).
+#[test]
+fn the_dask_frame_has_a_column_for_every_parameter() {
+    let src = read("python/ndfit/dask.py");
+    let line = src.lines().find(|l| l.starts_with("PARAM_COLUMNS = [")).expect("PARAM_COLUMNS in dask.py");
+    let columns: Vec<&str> = line.split('"').skip(1).step_by(2).collect();
+    for id in ModelId::EVERY {
+        for name in id.param_names() {
+            assert!(columns.contains(name), "{id}: parameter {name} has no column in python/ndfit/dask.py PARAM_COLUMNS {columns:?}");
+        }
+    }
+}
+
 #[test]
 fn names_parse_and_parameters_round_trip() {
     for id in ModelId::EVERY {
