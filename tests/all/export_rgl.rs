@@ -221,6 +221,11 @@ fn rgl_reader_refuses_damage() {
             let _ = check_structure(&t, Flavour::Rgb);
         }
     }
+    // A field name holding a line break (found by the `rgl` fuzz target): the error is still one line.
+    let mut named = b"tensor_file\0\x01\x00\x01\x00\x00\x00\x03\x00a\nb\x00\x00\x63".to_vec();
+    named.extend_from_slice(&[0; 8]);
+    let e = TensorFile::parse(&named).unwrap_err().to_string();
+    assert!(!e.contains('\n') && e.contains("a\\nb") && e.contains("unknown type code 99"), "{e}");
     let mut wrong = bytes.clone();
     wrong[12] = 2;
     assert!(TensorFile::parse(&wrong).unwrap_err().to_string().contains("version"));

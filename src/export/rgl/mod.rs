@@ -321,7 +321,7 @@ pub fn check_structure(t: &TensorFile, flavour: Flavour) -> Result<()> {
     }
     for f in &t.fields {
         if f.shape.contains(&0) {
-            return Err(bad(format!("field '{}' is empty", f.name)));
+            return Err(bad(format!("field '{}' is empty", f.name.escape_debug())));
         }
     }
     Ok(())

@@ -170,19 +170,21 @@ impl TensorFile {
             let len = cur.u16().ok_or_else(trunc)? as usize;
             let name = cur.take(len).ok_or_else(trunc)?;
             let name = std::str::from_utf8(name).map_err(|_| corrupt(format!("field {i}: name is not UTF-8")))?.to_string();
+            // The name as the messages show it: escaped, so an error stays one line whatever the file holds.
+            let quoted = name.escape_debug().to_string();
             let ndim = cur.u16().ok_or_else(trunc)? as usize;
             let code = cur.take(1).ok_or_else(trunc)?[0];
-            let dtype = Dtype::from_code(code).ok_or_else(|| corrupt(format!("field '{name}': unknown type code {code}")))?;
+            let dtype = Dtype::from_code(code).ok_or_else(|| corrupt(format!("field '{quoted}': unknown type code {code}")))?;
             let offset = cur.u64().ok_or_else(trunc)?;
             let mut shape = Vec::with_capacity(ndim.min(16));
             let mut total = dtype.size() as u64;
             for _ in 0..ndim {
                 let s = cur.u64().ok_or_else(trunc)?;
-                total = total.checked_mul(s).ok_or_else(|| corrupt(format!("field '{name}': shape overflows")))?;
+                total = total.checked_mul(s).ok_or_else(|| corrupt(format!("field '{quoted}': shape overflows")))?;
                 shape.push(s);
             }
             let end = offset.checked_add(total).filter(|&e| e <= bytes.len() as u64).ok_or_else(|| {
-                corrupt(format!("field '{name}': {total} bytes at offset {offset} run past the end of the {}-byte file", bytes.len()))
+                corrupt(format!("field '{quoted}': {total} bytes at offset {offset} run past the end of the {}-byte file", bytes.len()))
             })?;
             let data = bytes[offset as usize..end as usize].to_vec();
             fields.push(Field { name, dtype, shape, data });
