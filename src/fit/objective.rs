@@ -99,6 +99,60 @@ pub struct FitData {
     pub lm_compressed: bool,
     /// The tail bins left out of the region ([`super::tail`]; nothing cut for [`FitData::new`]).
     pub tail: super::tail::TailCut,
+    /// The rounding of a quantized scan's heights, which every bin's model carries (`None` when the
+    /// heights are not on a material lattice: then `D` is evaluated at `m_k` alone).
+    pub rounding: Option<Rounding>,
+}
+
+/// The rounding of quantized heights in the model. Each slope is the true one plus the rounding error
+/// of its heights ([`crate::ndf::quantum::rounding_kernel`], covariance `K`), so a bin's count
+/// estimates the slope density `P22 = D m_z^4` (Heitz eq. 64) smoothed by that kernel, not `P22`
+/// itself; a model evaluated at `m_k` alone fits a lobe wider by `K` (alpha by `r^2 / 12` relative at a
+/// whitened step `r`). The bin's model is therefore `P22 * K` at its slope `s_k`, by the four-point rule
+/// `s_k + L (+-1, +-1)` (`L L^T = K`, weights 1/4; exact for cubics):
+/// `E_k = N W_k sum_q D(m_q) (m_z(s_q) / m_z(s_k))^4 / 4` before the normalization.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rounding {
+    /// The kernel's lower Cholesky factor `L`.
+    pub chol: [[f64; 2]; 2],
+    /// Per bin of the region, the rule's four directions `m_q` and `ln((m_z(s_q) / m_z(s_k))^4 / 4)`.
+    pub points: Vec<[(Vector3<f64>, f64); 4]>,
+}
+
+impl Rounding {
+    /// The rule of the kernel `k` (a 2 x 2 covariance) for `bins`; `None` for a kernel that is zero or
+    /// not a finite positive semi-definite matrix.
+    pub fn new(k: [[f64; 2]; 2], bins: &[Bin]) -> Option<Rounding> {
+        let l00 = k[0][0].sqrt();
+        // Guard: a zero or degenerate kernel has nothing to model (and no Cholesky factor).
+        if !(l00 > 0.0 && l00.is_finite()) {
+            return None;
+        }
+        let l10 = k[1][0] / l00;
+        let l11 = (k[1][1] - l10 * l10).sqrt();
+        if !(l11 > 0.0 && l11.is_finite()) {
+            return None;
+        }
+        let chol = [[l00, 0.0], [l10, l11]];
+        Some(Rounding { chol, points: bins.iter().map(|b| rule(&chol, &b.m)).collect() })
+    }
+
+    /// The same rule for other bins (the merged bins of [`FitData::coarsened`]).
+    fn for_bins(&self, bins: &[Bin]) -> Rounding {
+        Rounding { chol: self.chol, points: bins.iter().map(|b| rule(&self.chol, &b.m)).collect() }
+    }
+}
+
+/// The four points of [`Rounding`] around the bin direction `m` (unit, `z > 0`).
+fn rule(l: &[[f64; 2]; 2], m: &Vector3<f64>) -> [(Vector3<f64>, f64); 4] {
+    // Slopes s = -(m_x, m_y) / m_z, and back: m = (-s_x, -s_y, 1) / sqrt(1 + |s|^2), so m_z^4 = (1 + |s|^2)^-2.
+    let s = [-m.x / m.z, -m.y / m.z];
+    let t0 = 1.0 + s[0] * s[0] + s[1] * s[1];
+    [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)].map(|(u, v)| {
+        let q = [s[0] + l[0][0] * u, s[1] + l[1][0] * u + l[1][1] * v];
+        let t = 1.0 + q[0] * q[0] + q[1] * q[1];
+        (Vector3::new(-q[0], -q[1], 1.0) / t.sqrt(), 2.0 * (t0 / t).ln() - 4f64.ln())
+    })
 }
 
 impl FitData {
@@ -156,7 +210,11 @@ impl FitData {
             return Err(Error::new(ErrorKind::BadData, format!("no NDF bin qualifies for the {} objective", objective.as_str())));
         }
         let lm_compressed = bins.len() >= super::problem::COMPRESS_MIN_BINS;
-        Ok(FitData { bins, n, n_total, k_nonzero, n_residual_bins, max_theta, objective, lm_compressed, tail })
+        let rounding = ndf
+            .quantization
+            .as_ref()
+            .and_then(|q| Rounding::new(crate::ndf::quantum::rounding_kernel(ndf.scheme, q.slope_step), &bins));
+        Ok(FitData { bins, n, n_total, k_nonzero, n_residual_bins, max_theta, objective, lm_compressed, tail, rounding })
     }
 
     /// The same region on a grid twice as coarse: the fine bins of `ndf` in the region merged 2 x 2 by
@@ -191,7 +249,6 @@ impl FitData {
         let k_nonzero = bins.iter().filter(carries).filter(|b| b.c > 0.0).count();
         let n_residual_bins = bins.iter().filter(carries).count();
         (n_residual_bins > 0).then_some(FitData {
-            bins,
             n: self.n,
             n_total: self.n_total,
             k_nonzero,
@@ -200,6 +257,8 @@ impl FitData {
             objective: self.objective,
             lm_compressed: self.lm_compressed,
             tail: self.tail.clone(),
+            rounding: self.rounding.as_ref().map(|r| r.for_bins(&bins)),
+            bins,
         })
     }
 

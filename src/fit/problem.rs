@@ -71,9 +71,19 @@ fn residual_pass(data: &FitData, id: ModelId, x: &[f64], ws: &mut Workspace) -> 
     ws.r.resize(nb, 0.0);
     let f = LnD::new(id, x);
     let mut shift = f64::NEG_INFINITY;
-    for (a, bin) in ws.a.iter_mut().zip(&data.bins) {
-        *a = f.value(&bin.m) + bin.ln_w;
-        shift = shift.max(*a);
+    match &data.rounding {
+        None => {
+            for (a, bin) in ws.a.iter_mut().zip(&data.bins) {
+                *a = f.value(&bin.m) + bin.ln_w;
+                shift = shift.max(*a);
+            }
+        }
+        Some(rounding) => {
+            for ((a, bin), pts) in ws.a.iter_mut().zip(&data.bins).zip(&rounding.points) {
+                *a = smoothed(pts.map(|(m, lw)| f.value(&m) + lw)).0 + bin.ln_w;
+                shift = shift.max(*a);
+            }
+        }
     }
     // Guard: a model with no finite mass anywhere in R; the caller reports a failed evaluation.
     if !shift.is_finite() {
@@ -129,8 +139,23 @@ fn jacobian_pass(data: &FitData, id: ModelId, x: &[f64], jac: &mut DMatrix<f64>,
     let js = jac.as_mut_slice();
     let mut g = [0.0; 8];
     let mut gbar = [0.0; 8];
+    let mut gq = [0.0; 8];
     for (k, (bin, pk)) in data.bins.iter().zip(&ws.p).enumerate() {
-        f.grad(&bin.m, &mut g[..np]);
+        match &data.rounding {
+            None => f.grad(&bin.m, &mut g[..np]),
+            Some(rounding) => {
+                // The gradient of the smoothed ln D: the points' gradients weighted by their shares.
+                let pts = &rounding.points[k];
+                let (_, w) = smoothed(pts.map(|(m, lw)| f.value(&m) + lw));
+                g[..np].fill(0.0);
+                for ((m, _), wq) in pts.iter().zip(w) {
+                    f.grad(m, &mut gq[..np]);
+                    for j in 0..np {
+                        g[j] += wq * gq[j];
+                    }
+                }
+            }
+        }
         for j in 0..np {
             js[j * nb + k] = g[j];
             gbar[j] += pk * g[j];
@@ -141,6 +166,20 @@ fn jacobian_pass(data: &FitData, id: ModelId, x: &[f64], jac: &mut DMatrix<f64>,
             *jk = dr * (*jk - gb);
         }
     }
+}
+
+/// `ln sum_q exp(v_q)` of the rounding rule's terms `v_q = ln D(m_q) + ln w_q`
+/// ([`super::objective::Rounding`]), and each term's share `exp(v_q) / sum` (the weights of its gradient).
+#[inline]
+fn smoothed(v: [f64; 4]) -> (f64, [f64; 4]) {
+    let top = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    // Guard: no finite term (the model has no mass at any point); the caller reports the pass.
+    if !top.is_finite() {
+        return (top, [0.25; 4]);
+    }
+    let e = v.map(|t| (t - top).exp());
+    let s: f64 = e.iter().sum();
+    (top + s.ln(), e.map(|t| t / s))
 }
 
 /// `sum_k a_k b_k` in four interleaved partial sums (so the loop pipelines and vectorizes; the order

@@ -31,11 +31,26 @@ pub const MATERIAL_STEP: f64 = 1e-3;
 /// Resultant length of the slopes' lattice phase (per axis) above which the lattice is rigid: every
 /// slope sits on `offset + k step` up to rounding (1), against ~0 for a lattice smeared by a curved form.
 pub const RIGID: f64 = 0.9;
-/// Largest whitened lattice step at which the scan resolves its NDF. Rounding puts the triangular kernel
-/// of two height roundings (variance `step^2 / 6`) on each slope axis where the bins model a box
-/// (`step^2 / 12`): the fitted slope variance grows by `step^2 / 12`, alpha by `step^2 / 24` relative,
-/// 1% at half the slope scale. Coarser lattices leave a fit the data cannot support (`unresolved`).
+/// Largest whitened lattice step at which the scan resolves its NDF. Rounding smooths the slope
+/// distribution by the triangular kernel of two height roundings ([`rounding_kernel`]), which the fit
+/// models ([`crate::fit::objective::FitData`]); the model is exact to second order in the step, and
+/// the fourth-order remainder and the rounding's dependence on the slope grow quickly past half the slope
+/// scale. Coarser lattices leave a fit the data cannot support (`unresolved`).
 pub const MAX_RESOLVED_STEP: f64 = 0.5;
+
+/// Covariance of the slope error that rounding the heights to the lattice adds, for the lattice
+/// `step` of `scheme`: each slope is a difference of two heights, each rounded by an error uniform over
+/// one quantum (variance `q^2 / 12`), so each slope axis gets the triangle of half-width `step`
+/// (variance `step^2 / 6`). Central differences read four distinct heights (the axes are independent);
+/// a triangle's two differences share a corner, whose error enters both with the same sign.
+pub fn rounding_kernel(scheme: NormalScheme, step: [f64; 2]) -> [[f64; 2]; 2] {
+    let (vx, vy) = (step[0] * step[0] / 6.0, step[1] * step[1] / 6.0);
+    let c = match scheme {
+        NormalScheme::Central => 0.0,
+        NormalScheme::Triangles => step[0] * step[1] / 12.0,
+    };
+    [[vx, c], [c, vy]]
+}
 
 /// The slope lattice of a rigidly quantized scan: every slope is `offset + (i step_x, j step_y)`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
