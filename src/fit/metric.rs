@@ -36,7 +36,7 @@ pub fn delta_to_model(d: &Model, reference: &Model) -> Option<f64> {
 
 /// `delta(D_model; D_empirical)` over the bins of `ndf` (the fit error against the data; it includes
 /// the counting noise of the bins, [`counting_noise2`]).
-pub fn delta_to_data(model: &Model, ndf: &EmpiricalNdf) -> Option<f64> {
+pub fn delta_to_data(model: &impl Ndf, ndf: &EmpiricalNdf) -> Option<f64> {
     let n: f64 = ndf.bins.iter().map(|b| b.count as f64).sum();
     // Guard: an NDF without counts has no reference distribution.
     if n <= 0.0 {
@@ -59,7 +59,7 @@ pub fn delta_to_data(model: &Model, ndf: &EmpiricalNdf) -> Option<f64> {
 /// `(1/N) sum_k E[(lambda_k - c_k)^2 / c_k; c_k >= 1]` ([`poisson_relative_noise`]). About `K / N` where
 /// every bin holds many normals, less where bins hold one or two (an empty bin has no weight), so a
 /// model's error is not hidden by noise that sparse bins do not have. `None` for an NDF without counts.
-pub fn counting_noise2(model: &Model, ndf: &EmpiricalNdf) -> Option<f64> {
+pub fn counting_noise2(model: &impl Ndf, ndf: &EmpiricalNdf) -> Option<f64> {
     let n: f64 = ndf.bins.iter().map(|b| b.count as f64).sum();
     // Guard: an NDF without counts has no noise to speak of.
     if n <= 0.0 {

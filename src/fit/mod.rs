@@ -442,8 +442,10 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
         warnings.push("specular: over half of the normals fall in one NDF bin; alpha is bounded by the bin size, not measured".into());
     }
     let dispersion = verdict::data_dispersion(ndf, s.data.max_theta);
-    let delta_data = metric::delta_to_data(&model, ndf);
-    let delta_excess = delta_data.and_then(|d| verdict::excess_delta(d, metric::counting_noise2(&model, ndf)));
+    // The error against the data of the model as the bins see it (smoothed by a modelled rounding).
+    let seen = objective::Seen { model: &model, rounding: s.data.rounding.as_ref() };
+    let delta_data = metric::delta_to_data(&seen, ndf);
+    let delta_excess = delta_data.and_then(|d| verdict::excess_delta(d, metric::counting_noise2(&seen, ndf)));
     let evidence = verdict::Evidence {
         n_params: p,
         n_samples: s.data.n,
@@ -472,6 +474,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
         matrix_a,
         axes: model.canonical().axes(),
         input: None,
+        rounding: s.data.rounding.clone(),
         std_errors: id.param_names().iter().zip(&se).map(|(n, v)| (n.to_string(), *v)).collect(),
         unidentified,
         param_order: id.param_names().iter().map(|n| n.to_string()).collect(),
@@ -624,9 +627,10 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Res
             warnings.extend(w);
             if let Some(f) = f {
                 let m = Model::from_params(f.id, &public(&f)).ok();
-                let d = m.as_ref().and_then(|m| metric::delta_to_data(m, ndf));
+                let seen = m.as_ref().map(|m| objective::Seen { model: m, rounding: s.data.rounding.as_ref() });
+                let d = seen.as_ref().and_then(|m| metric::delta_to_data(m, ndf));
                 deltas.push(d);
-                errors.push(d.and_then(|d| verdict::excess_delta(d, metric::counting_noise2(m.as_ref()?, ndf))));
+                errors.push(d.and_then(|d| verdict::excess_delta(d, metric::counting_noise2(seen.as_ref()?, ndf))));
                 fits.push(f);
             }
         }

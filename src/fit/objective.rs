@@ -4,7 +4,9 @@
 use nalgebra::Vector3;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::ndf::EmpiricalNdf;
+use crate::models::Ndf;
+use crate::ndf::quantum::{rounding_kernel, HeightQuantum};
+use crate::ndf::{EmpiricalNdf, NormalScheme};
 
 /// Which residuals the fit minimizes (both defined in `data_formats/objective.md`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -111,18 +113,27 @@ pub struct FitData {
 /// whitened step `r`). The bin's model is therefore `P22 * K` at its slope `s_k`, by the four-point rule
 /// `s_k + L (+-1, +-1)` (`L L^T = K`, weights 1/4; exact for cubics):
 /// `E_k = N W_k sum_q D(m_q) (m_z(s_q) / m_z(s_k))^4 / 4` before the normalization.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Rounding {
+    /// The height step `q` (m) of the scan.
+    pub quantum: f64,
+    /// The slope lattice's spacing along x and y.
+    pub slope_step: [f64; 2],
+    /// The covariance `K` of the slope error (per slope axis; x, y).
+    pub kernel: [[f64; 2]; 2],
     /// The kernel's lower Cholesky factor `L`.
-    pub chol: [[f64; 2]; 2],
+    #[serde(skip)]
+    chol: [[f64; 2]; 2],
     /// Per bin of the region, the rule's four directions `m_q` and `ln((m_z(s_q) / m_z(s_k))^4 / 4)`.
+    #[serde(skip)]
     pub points: Vec<[(Vector3<f64>, f64); 4]>,
 }
 
 impl Rounding {
-    /// The rule of the kernel `k` (a 2 x 2 covariance) for `bins`; `None` for a kernel that is zero or
-    /// not a finite positive semi-definite matrix.
-    pub fn new(k: [[f64; 2]; 2], bins: &[Bin]) -> Option<Rounding> {
+    /// The rule of the lattice `quantum` of `scheme` for `bins`; `None` for a kernel that is zero or
+    /// not a finite positive definite matrix.
+    pub fn new(quantum: &HeightQuantum, scheme: NormalScheme, bins: &[Bin]) -> Option<Rounding> {
+        let k = rounding_kernel(scheme, quantum.slope_step);
         let l00 = k[0][0].sqrt();
         // Guard: a zero or degenerate kernel has nothing to model (and no Cholesky factor).
         if !(l00 > 0.0 && l00.is_finite()) {
@@ -134,12 +145,38 @@ impl Rounding {
             return None;
         }
         let chol = [[l00, 0.0], [l10, l11]];
-        Some(Rounding { chol, points: bins.iter().map(|b| rule(&chol, &b.m)).collect() })
+        let points = bins.iter().map(|b| rule(&chol, &b.m)).collect();
+        Some(Rounding { quantum: quantum.quantum, slope_step: quantum.slope_step, kernel: k, chol, points })
     }
 
     /// The same rule for other bins (the merged bins of [`FitData::coarsened`]).
     fn for_bins(&self, bins: &[Bin]) -> Rounding {
-        Rounding { chol: self.chol, points: bins.iter().map(|b| rule(&self.chol, &b.m)).collect() }
+        Rounding { points: bins.iter().map(|b| rule(&self.chol, &b.m)).collect(), ..self.clone() }
+    }
+
+    /// `D` of `model` as the bins see it at `m`: the rule's mean of `P22` around the slope of `m`, over
+    /// `m_z^4`.
+    pub fn seen_d(&self, model: &impl Ndf, m: Vector3<f64>) -> f64 {
+        rule(&self.chol, &m).iter().map(|(q, lw)| model.d(*q) * lw.exp()).sum()
+    }
+}
+
+/// A model as the bins of its fit see it: smoothed by the height rounding where the fit models one
+/// ([`Rounding`]), the model itself otherwise. The fit error against the data is measured on this.
+#[derive(Debug, Clone, Copy)]
+pub struct Seen<'a, N> {
+    /// The fitted model.
+    pub model: &'a N,
+    /// The rounding the fit modelled, if any.
+    pub rounding: Option<&'a Rounding>,
+}
+
+impl<N: Ndf> Ndf for Seen<'_, N> {
+    fn d(&self, m: Vector3<f64>) -> f64 {
+        match self.rounding {
+            Some(r) => r.seen_d(self.model, m),
+            None => self.model.d(m),
+        }
     }
 }
 
@@ -210,10 +247,7 @@ impl FitData {
             return Err(Error::new(ErrorKind::BadData, format!("no NDF bin qualifies for the {} objective", objective.as_str())));
         }
         let lm_compressed = bins.len() >= super::problem::COMPRESS_MIN_BINS;
-        let rounding = ndf
-            .quantization
-            .as_ref()
-            .and_then(|q| Rounding::new(crate::ndf::quantum::rounding_kernel(ndf.scheme, q.slope_step), &bins));
+        let rounding = ndf.quantization.as_ref().and_then(|q| Rounding::new(q, ndf.scheme, &bins));
         Ok(FitData { bins, n, n_total, k_nonzero, n_residual_bins, max_theta, objective, lm_compressed, tail, rounding })
     }
 

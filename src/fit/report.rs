@@ -193,6 +193,9 @@ pub struct FitReport {
     /// The input scan (set by the caller that read it).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub input: Option<InputInfo>,
+    /// The height rounding the fit modelled (a quantized scan; objective.md, "Quantized heights").
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub rounding: Option<super::objective::Rounding>,
     /// Standard errors by parameter name; `null` for a parameter the data do not determine.
     pub std_errors: BTreeMap<String, Option<f64>>,
     /// Parameters the data do not identify, with their standard errors `null`: a null direction of the

@@ -32,10 +32,9 @@ pub const MATERIAL_STEP: f64 = 1e-3;
 /// slope sits on `offset + k step` up to rounding (1), against ~0 for a lattice smeared by a curved form.
 pub const RIGID: f64 = 0.9;
 /// Largest whitened lattice step at which the scan resolves its NDF. Rounding smooths the slope
-/// distribution by the triangular kernel of two height roundings ([`rounding_kernel`]), which the fit
-/// models ([`crate::fit::objective::FitData`]); the model is exact to second order in the step, and
-/// the fourth-order remainder and the rounding's dependence on the slope grow quickly past half the slope
-/// scale. Coarser lattices leave a fit the data cannot support (`unresolved`).
+/// distribution by the kernel of two height roundings ([`rounding_kernel`]), which the fit models; past
+/// half the slope scale a few nodes carry the lobe and the rounding error depends on the slope, so
+/// coarser lattices leave a fit the data cannot support (`unresolved`).
 pub const MAX_RESOLVED_STEP: f64 = 0.5;
 
 /// Covariance of the slope error that rounding the heights to the lattice adds, for the lattice

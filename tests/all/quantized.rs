@@ -9,7 +9,8 @@ use nalgebra::Vector3;
 use ndfit::fit::verdict::{data_dispersion, judge, Evidence, Verdict};
 use ndfit::fit::{fit_model, FitOptions, FitReport};
 use ndfit::models::{ModelId, Ndf};
-use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfBin, NdfOptions};
+use ndfit::ndf::quantum::rounding_kernel;
+use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfBin, NdfOptions, NormalScheme};
 use ndfit::preprocess::{apply, Preprocess};
 use ndfit::synth::{gaussian_surface, GaussianParams, SynthSettings};
 use ndfit::Heightfield;
@@ -42,8 +43,13 @@ fn quantized(hf: &Heightfield, q: f64) -> Heightfield {
 
 /// Read-side pipeline of `ndfit fit` (plane removal) -> NDF -> a fixed model.
 fn fit(hf: &Heightfield, id: ModelId) -> (EmpiricalNdf, FitReport) {
+    fit_with(hf, id, NormalScheme::Central)
+}
+
+/// [`fit`] with the normals of `scheme`.
+fn fit_with(hf: &Heightfield, id: ModelId, scheme: NormalScheme) -> (EmpiricalNdf, FitReport) {
     let hf = apply(hf.clone(), &Preprocess::default()).unwrap();
-    let ndf = empirical_ndf(&hf, &NdfOptions::default()).unwrap();
+    let ndf = empirical_ndf(&hf, &NdfOptions { scheme, ..NdfOptions::default() }).unwrap();
     let rep = fit_model(&ndf, id, &FitOptions::default()).unwrap();
     (ndf, rep)
 }
@@ -123,7 +129,6 @@ fn clean_surface() -> Heightfield {
 /// lattice is found at every size; up to half the spread the fit is within 1% of the unquantized fit
 /// (the rounding bias of `MAX_RESOLVED_STEP`), and at 1 and 2 the verdict is `unresolved` with the reason.
 #[test]
-#[ignore = "pending: the rounding model in FitData is not yet built or run against this test"]
 fn clean_scans_at_every_lattice_size() {
     let hf = clean_surface();
     let (ndf0, ref0) = fit(&hf, ModelId::BeckmannAniso);
@@ -150,14 +155,73 @@ fn clean_scans_at_every_lattice_size() {
             [ref0.params["alpha_x"], ref0.params["alpha_y"]]
         );
         if f <= 0.5 {
+            // The fit modelled the rounding, and states it.
+            let r = rep.rounding.as_ref().unwrap_or_else(|| panic!("lattice {f}: the fit reports no rounding"));
+            assert_eq!(r.kernel, rounding_kernel(NormalScheme::Central, found.slope_step));
             for n in ["alpha_x", "alpha_y"] {
                 let (a, b) = (rep.params[n], ref0.params[n]);
                 assert!((a / b - 1.0).abs() < 0.01, "lattice {f}: {n} quantized {a} against {b}");
+            }
+            assert_eq!(rep.quality.verdict, Verdict::Ok, "lattice {f}: {:?}", rep.quality.reasons);
+            // Triangle facets (their kernel has a covariance; forward differences make their lattice
+            // twice as coarse): the same bound where their own lattice resolves the NDF.
+            let (_, t0) = fit_with(&hf, ModelId::BeckmannAniso, NormalScheme::Triangles);
+            let (tn, t) = fit_with(&hq, ModelId::BeckmannAniso, NormalScheme::Triangles);
+            let tq = tn.quantization.expect("the lattice of the triangles");
+            eprintln!(
+                "lattice {f}, triangles: whitened step {:?}, verdict {}, alpha {:?} against {:?}",
+                tq.whitened_step,
+                t.quality.verdict,
+                [t.params["alpha_x"], t.params["alpha_y"]],
+                [t0.params["alpha_x"], t0.params["alpha_y"]]
+            );
+            if tq.resolves_ndf() {
+                for n in ["alpha_x", "alpha_y"] {
+                    let (a, b) = (t.params[n], t0.params[n]);
+                    assert!((a / b - 1.0).abs() < 0.01, "lattice {f}, triangles: {n} quantized {a} against {b}");
+                }
+            } else {
+                assert_eq!(t.quality.verdict, Verdict::Unresolved, "lattice {f}, triangles: {:?}", t.quality.reasons);
             }
         } else {
             assert_eq!(rep.quality.verdict, Verdict::Unresolved, "lattice {f}: {:?}", rep.quality.reasons);
             assert!(rep.quality.reasons.iter().any(|r| r.contains("quantized")), "lattice {f}: {:?}", rep.quality.reasons);
         }
+    }
+}
+
+/// The rounding kernel against the slope errors themselves: the slopes of a smooth surface's rounded
+/// heights minus its own, by both stencils written out here, have the covariance that
+/// `rounding_kernel` states (a box kernel, `step^2 / 12`, or a wrong sign of the triangles' shared
+/// corner would be off by half).
+#[test]
+fn rounding_kernel_is_the_covariance_of_the_slope_errors() {
+    let hf = clean_surface();
+    let (nx, ny, dx, dy) = (hf.nx, hf.ny, hf.dx, hf.dy);
+    let q = 0.3 * 0.1 * 2.0 * dx;
+    let hq = quantized(&hf, q);
+    let (z, zq) = (&hf.z, &hq.z);
+    let e = |k: usize| zq[k] - z[k];
+    for scheme in [NormalScheme::Central, NormalScheme::Triangles] {
+        let (mut sxx, mut sxy, mut syy, mut n) = (0.0, 0.0, 0.0, 0.0);
+        for i in 1..ny - 1 {
+            for j in 1..nx - 1 {
+                let k = i * nx + j;
+                let (ex, ey) = match scheme {
+                    NormalScheme::Central => ((e(k + 1) - e(k - 1)) / (2.0 * dx), (e(k + nx) - e(k - nx)) / (2.0 * dy)),
+                    NormalScheme::Triangles => ((e(k + 1) - e(k)) / dx, (e(k + nx) - e(k)) / dy),
+                };
+                sxx += ex * ex;
+                sxy += ex * ey;
+                syy += ey * ey;
+                n += 1.0;
+            }
+        }
+        let k = rounding_kernel(scheme, scheme.slope_step(q, dx, dy));
+        let (vx, vy, c) = (sxx / n, syy / n, sxy / n);
+        assert!((vx / k[0][0] - 1.0).abs() < 0.02, "{scheme:?}: var x {vx} against {}", k[0][0]);
+        assert!((vy / k[1][1] - 1.0).abs() < 0.02, "{scheme:?}: var y {vy} against {}", k[1][1]);
+        assert!((c - k[0][1]).abs() < 0.02 * (k[0][0] * k[1][1]).sqrt(), "{scheme:?}: covariance {c} against {}", k[0][1]);
     }
 }
 

@@ -6,10 +6,12 @@
 
 use nalgebra::{DMatrix, Vector3};
 use ndfit::fit::lnd::LnD;
-use ndfit::fit::objective::{FitData, Objective};
+use ndfit::fit::objective::{FitData, Objective, Rounding};
 use ndfit::fit::params::{to_internal, to_public};
 use ndfit::fit::problem::{jacobian_into, residuals_into};
 use ndfit::models::{ModelId, Ndf, Role};
+use ndfit::ndf::quantum::HeightQuantum;
+use ndfit::ndf::NormalScheme;
 use rand::{RngExt, SeedableRng};
 
 use super::fixtures::model;
@@ -90,28 +92,46 @@ fn residual_jacobian_matches_central_differences() {
         ] {
             let t = model(id, &truth);
             let ndf = ndfit::fit::synthetic::binned_ndf(&t, &ndfit::fit::synthetic::Grid::for_model(&t, 48), 2e4, 3);
-            let data = FitData::new(&ndf, objective, max_theta.to_radians()).expect("data");
-            let x = to_internal(id, &at);
-            let k = data.bins.len();
-            let mut r = vec![0.0; k];
-            let mut j = DMatrix::zeros(k, x.len());
-            jacobian_into(&data, id, &x, &mut r, &mut j);
-            for p in 0..x.len() {
-                let (mut xp, mut xm) = (x.clone(), x.clone());
-                xp[p] += H;
-                xm[p] -= H;
-                let (mut rp, mut rm) = (vec![0.0; k], vec![0.0; k]);
-                residuals_into(&data, id, &xp, &mut rp);
-                residuals_into(&data, id, &xm, &mut rm);
-                for b in 0..k {
-                    let fd = (rp[b] - rm[b]) / (2.0 * H);
-                    // The Poisson residual has a kink in its second derivative only where c = 0 and
-                    // E -> 0 (sqrt(2E)); relative tolerance as above on |r| and |J|.
-                    let tol = 2e-5 * (1.0 + j[(b, p)].abs() + r[b].abs());
-                    assert!((fd - j[(b, p)]).abs() < tol, "{objective:?} {id} bin {b} param {p}: {} vs {fd}", j[(b, p)]);
+            let plain = FitData::new(&ndf, objective, max_theta.to_radians()).expect("data");
+            // And with the height rounding of a quantized scan modelled (the rule's four points per bin):
+            // a lattice of a third of the truth's smaller alpha, for both normal schemes.
+            let step = truth.iter().take(2).copied().fold(f64::INFINITY, f64::min) / 3.0;
+            let quantum = HeightQuantum {
+                quantum: 1e-8,
+                slope_step: [step, 0.8 * step],
+                whitened_step: [0.3, 0.3],
+                on_lattice: 1.0,
+                max_cells: 99,
+                coarsened_from: None,
+                rigidity: [1.0, 1.0],
+                lattice: None,
+            };
+            for rounding in [None, Some(NormalScheme::Central), Some(NormalScheme::Triangles)] {
+                let mut data = plain.clone();
+                data.rounding = rounding.map(|scheme| Rounding::new(&quantum, scheme, &data.bins).expect("kernel"));
+                let x = to_internal(id, &at);
+                let k = data.bins.len();
+                let mut r = vec![0.0; k];
+                let mut j = DMatrix::zeros(k, x.len());
+                jacobian_into(&data, id, &x, &mut r, &mut j);
+                for p in 0..x.len() {
+                    let (mut xp, mut xm) = (x.clone(), x.clone());
+                    xp[p] += H;
+                    xm[p] -= H;
+                    let (mut rp, mut rm) = (vec![0.0; k], vec![0.0; k]);
+                    residuals_into(&data, id, &xp, &mut rp);
+                    residuals_into(&data, id, &xm, &mut rm);
+                    for b in 0..k {
+                        let fd = (rp[b] - rm[b]) / (2.0 * H);
+                        // The Poisson residual has a kink in its second derivative only where c = 0 and
+                        // E -> 0 (sqrt(2E)); relative tolerance as above on |r| and |J|.
+                        let tol = 2e-5 * (1.0 + j[(b, p)].abs() + r[b].abs());
+                        assert!((fd - j[(b, p)]).abs() < tol, "{objective:?} {id} {rounding:?} bin {b} param {p}: {} vs {fd}", j[(b, p)]);
+                    }
                 }
             }
             // Parameter maps round-trip.
+            let x = to_internal(id, &at);
             let back = to_internal(id, &to_public(id, &x));
             for (a, b) in x.iter().zip(&back) {
                 assert!((a - b).abs() < 1e-12);
