@@ -49,6 +49,7 @@ from ndfitpy.bins import read_ndf_csv  # noqa: E402
 from ndfitpy.tail import cut_rim  # noqa: E402
 from ndfitpy.tail import cut_unresolved as tail_cut  # noqa: E402
 from ndfitpy.fit import fit  # noqa: E402
+from ndfitpy.rounding import from_docs as rounding_of  # noqa: E402
 
 REPO = os.path.dirname(HERE)
 DELTA_TOL = 1e-3  # the 0.1% on the NDF
@@ -189,16 +190,17 @@ def check_scan(ndfit: str, scan: str, name: str, model_list, work: str, ndf_args
     except ValueError as e:
         return [Row(scan=name, model=m, notes=[f"reading ndfit's NDF: {e}"]) for m in model_list]
     fit_args = []
+    # The NDF's JSON carries what the CSV does not: the normal scheme (for the rule of a height rounding the
+    # fit states it modelled, ndfitpy.rounding) and the binning frame the default tail rule (rim) needs.
+    js = os.path.join(work, f"{name}.ndf.json")
+    ok, _, msg = run([ndfit, "ndf", scan, "-o", js, *ndf_args], timeout)
+    if not ok:
+        return [Row(scan=name, model=m, notes=[f"ndfit ndf (json) failed: {msg}"]) for m in model_list]
+    with open(js, encoding="utf-8") as fh:
+        ndf_doc = json.load(fh)
     if not tail and bins.extra.get("unresolved") is not None:
-        # The default tail rule (rim) needs the binning frame: the NDF's JSON carries it. (Without the
-        # CSV's unresolved counts no rule applies.)
-        js = os.path.join(work, f"{name}.ndf.json")
-        ok, _, msg = run([ndfit, "ndf", scan, "-o", js, *ndf_args], timeout)
-        if not ok:
-            return [Row(scan=name, model=m, notes=[f"ndfit ndf (json) failed: {msg}"]) for m in model_list]
-        with open(js, encoding="utf-8") as fh:
-            frame = json.load(fh)["frame"]
-        bins, _ = cut_rim(bins, frame)
+        # (Without the CSV's unresolved counts no tail rule applies.)
+        bins, _ = cut_rim(bins, ndf_doc["frame"])
     if tail:
         bins, info = tail_cut(bins)
         fit_args = ["--tail", "unresolved"]
@@ -212,6 +214,7 @@ def check_scan(ndfit: str, scan: str, name: str, model_list, work: str, ndf_args
             continue
         try:
             doc = fitjson.read_fit(out)
+            bins.rounding = rounding_of(ndf_doc, doc)
             py = fit(bins, m)
             row = compare(name, m, bins, doc, py, t_rust)
         except Exception as e:  # one broken row must not stop the others

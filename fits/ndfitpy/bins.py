@@ -13,6 +13,8 @@ from typing import Optional
 
 import numpy as np
 
+from .rounding import Rounding
+
 REQUIRED = ("mx", "my", "mz", "d")
 #: The columns the fit needs besides the contract's four (data_formats/ndf_csv.md).
 FIT_COLUMNS = ("count", "proj_solid_angle")
@@ -30,6 +32,7 @@ class Bins:
     path: str = "<memory>"
     extra: dict = field(default_factory=dict)
     n_total: Optional[float] = None  #: N when some counted rows were dropped (used()); else the sum of counts
+    rounding: Optional[Rounding] = None  #: the height rounding of a quantized scan, which the model carries
 
     @property
     def n_samples(self) -> float:
@@ -53,6 +56,7 @@ class Bins:
             solid_angle=None if self.solid_angle is None else self.solid_angle[keep],
             path=self.path,
             n_total=self.n_samples,
+            rounding=self.rounding,
         )
 
 

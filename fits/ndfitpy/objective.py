@@ -3,7 +3,7 @@
 Symbols as there: bins k with count c_k, direction m_k, projected solid angle W_k. The fit region R: bins with
 W_k > 0 and a central direction within max_theta (default 70 deg) of n; N_in = sum_{k in R} c_k; expected counts
 E_k = N_in D(m_k) W_k / S with S = sum_{j in R} D(m_j) W_j (the likelihood conditional on the normals falling in R,
-midpoint rule).
+midpoint rule); on a quantized scan D is the lobe smoothed by the height rounding (ndfitpy.rounding).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from . import models
+from . import models, rounding
 from .bins import Bins
 
 OBJECTIVES = ("poisson", "logd")
@@ -36,7 +36,14 @@ def region(bins: Bins, max_theta_deg: float = DEFAULT_MAX_THETA_DEG) -> Bins:
     keep = b.m[:, 2] >= cos_max * np.linalg.norm(b.m, axis=1)
     if not np.any(keep & (b.count > 0)):
         raise ValueError(f"{bins.path}: no normal within max_theta = {max_theta_deg:g} deg of n")
-    return Bins(m=b.m[keep], count=b.count[keep], proj_solid_angle=b.proj_solid_angle[keep], path=b.path)
+    return Bins(m=b.m[keep], count=b.count[keep], proj_solid_angle=b.proj_solid_angle[keep], path=b.path,
+                rounding=b.rounding)
+
+
+def log_d_seen(model: str, params, b: Bins, want_grad: bool = False):
+    """ln D of ``model`` as the bins ``b`` count it (smoothed by their height rounding, ndfitpy.rounding), and
+    its gradient."""
+    return rounding.seen_log_d_and_grad(models.log_d_and_grad, model, params, b.m, b.rounding, want_grad)
 
 
 def _log_norm(logd: np.ndarray, w: np.ndarray):
@@ -52,7 +59,7 @@ def log_expected(model: str, params, bins: Bins, want_grad: bool = False, max_th
     """ln E_k = ln N_in + ln D(m_k) + ln W_k - ln S over the region R, and d ln E / d params
     (= g_k - sum_j (D_j W_j / S) g_j with g = d ln D / d params)."""
     b = region(bins, max_theta_deg)
-    logd, g = models.log_d_and_grad(model, params, b.m, want_grad)
+    logd, g = log_d_seen(model, params, b, want_grad)
     ln_s, wts = _log_norm(logd, b.proj_solid_angle)
     ln_e = math.log(b.n_samples) + logd + np.log(b.proj_solid_angle) - ln_s
     if want_grad:
@@ -103,7 +110,7 @@ def logd_objective(model: str, params, bins: Bins, want_grad: bool = False, min_
     sel = b.count >= min_count
     if not np.any(sel):
         raise ValueError(f"{bins.path}: objective 'logd' needs bins with count >= {min_count:g}; there are none")
-    logd_all, g_all = models.log_d_and_grad(model, params, b.m, want_grad)
+    logd_all, g_all = log_d_seen(model, params, b, want_grad)
     ln_s, wts = _log_norm(logd_all, b.proj_solid_angle)
     c, w = b.count[sel], b.proj_solid_angle[sel]
     ln_data = np.log(c) - math.log(b.n_samples) - np.log(w)

@@ -5,7 +5,7 @@ use nalgebra::Vector3;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::models::Ndf;
-use crate::ndf::quantum::{rounding_kernel, HeightQuantum};
+use crate::ndf::quantum::{rounding_kernel, HeightQuantum, MAX_RESOLVED_STEP, MODELLED_STEP};
 use crate::ndf::{EmpiricalNdf, NormalScheme};
 
 /// Which residuals the fit minimizes (both defined in `data_formats/objective.md`).
@@ -108,11 +108,13 @@ pub struct FitData {
 
 /// The rounding of quantized heights in the model. Each slope is the true one plus the rounding error
 /// of its heights ([`crate::ndf::quantum::rounding_kernel`], covariance `K`), so a bin's count
-/// estimates the slope density `P22 = D m_z^4` (Heitz eq. 64) smoothed by that kernel, not `P22`
+/// estimates the slope density `P22 = D m_z^4` (Heitz eq. 64) smoothed by that error, not `P22`
 /// itself; a model evaluated at `m_k` alone fits a lobe wider by `K` (alpha by `r^2 / 12` relative at a
-/// whitened step `r`). The bin's model is therefore `P22 * K` at its slope `s_k`, by the four-point rule
-/// `s_k + L (+-1, +-1)` (`L L^T = K`, weights 1/4; exact for cubics):
-/// `E_k = N W_k sum_q D(m_q) (m_z(s_q) / m_z(s_k))^4 / 4` before the normalization.
+/// whitened step `r`). The bin's model is therefore the mean of `P22` over `s_k + L (u, v)` (`L L^T = K`)
+/// by the product of the three-point Gauss rule of the unit-variance triangle density per axis (nodes 0
+/// and `+-sqrt(12/5)`, weights 7/12 and 5/24; exact for polynomials of degree 5 in each of `u`, `v`),
+/// which is the error's own law for central differences (two independent triangles):
+/// `E_k = N W_k sum_q w_q D(m_q) (m_z(s_q) / m_z(s_k))^4` before the normalization.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Rounding {
     /// The height step `q` (m) of the scan.
@@ -124,15 +126,22 @@ pub struct Rounding {
     /// The kernel's lower Cholesky factor `L`.
     #[serde(skip)]
     chol: [[f64; 2]; 2],
-    /// Per bin of the region, the rule's four directions `m_q` and `ln((m_z(s_q) / m_z(s_k))^4 / 4)`.
+    /// Per bin of the region, the rule's directions `m_q` and `ln(w_q (m_z(s_q) / m_z(s_k))^4)`.
     #[serde(skip)]
-    pub points: Vec<[(Vector3<f64>, f64); 4]>,
+    pub points: Vec<[(Vector3<f64>, f64); RULE_POINTS]>,
 }
 
 impl Rounding {
-    /// The rule of the lattice `quantum` of `scheme` for `bins`; `None` for a kernel that is zero or
-    /// not a finite positive definite matrix.
+    /// The rule of the lattice `quantum` of `scheme` for `bins`; `None` for a lattice finer than
+    /// [`MODELLED_STEP`] or coarser than [`MAX_RESOLVED_STEP`], and for a kernel that is zero or not a
+    /// finite positive definite matrix.
     pub fn new(quantum: &HeightQuantum, scheme: NormalScheme, bins: &[Bin]) -> Option<Rounding> {
+        // Guard: a lattice too fine to matter is not modelled (its cost is nine lobe evaluations per bin),
+        // nor one too coarse to resolve the NDF, where the errors depend on the slope (the fit is `unresolved`).
+        let r = quantum.whitened_step[0].max(quantum.whitened_step[1]);
+        if !(MODELLED_STEP..=MAX_RESOLVED_STEP).contains(&r) {
+            return None;
+        }
         let k = rounding_kernel(scheme, quantum.slope_step);
         let l00 = k[0][0].sqrt();
         // Guard: a zero or degenerate kernel has nothing to model (and no Cholesky factor).
@@ -180,15 +189,21 @@ impl<N: Ndf> Ndf for Seen<'_, N> {
     }
 }
 
-/// The four points of [`Rounding`] around the bin direction `m` (unit, `z > 0`).
-fn rule(l: &[[f64; 2]; 2], m: &Vector3<f64>) -> [(Vector3<f64>, f64); 4] {
+/// Points of [`Rounding`]'s rule per bin.
+pub const RULE_POINTS: usize = 9;
+
+/// The rule's points around the bin direction `m` (unit, `z > 0`) for the kernel's Cholesky factor `l`.
+fn rule(l: &[[f64; 2]; 2], m: &Vector3<f64>) -> [(Vector3<f64>, f64); RULE_POINTS] {
     // Slopes s = -(m_x, m_y) / m_z, and back: m = (-s_x, -s_y, 1) / sqrt(1 + |s|^2), so m_z^4 = (1 + |s|^2)^-2.
     let s = [-m.x / m.z, -m.y / m.z];
     let t0 = 1.0 + s[0] * s[0] + s[1] * s[1];
-    [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)].map(|(u, v)| {
+    let a = (12.0f64 / 5.0).sqrt();
+    let node: [(f64, f64); 3] = [(0.0, 7.0 / 12.0), (a, 5.0 / 24.0), (-a, 5.0 / 24.0)];
+    std::array::from_fn(|i| {
+        let ((u, wu), (v, wv)) = (node[i / 3], node[i % 3]);
         let q = [s[0] + l[0][0] * u, s[1] + l[1][0] * u + l[1][1] * v];
         let t = 1.0 + q[0] * q[0] + q[1] * q[1];
-        (Vector3::new(-q[0], -q[1], 1.0) / t.sqrt(), 2.0 * (t0 / t).ln() - 4f64.ln())
+        (Vector3::new(-q[0], -q[1], 1.0) / t.sqrt(), 2.0 * (t0 / t).ln() + (wu * wv).ln())
     })
 }
 

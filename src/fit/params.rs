@@ -115,12 +115,19 @@ pub fn gamma_slot(id: ModelId) -> Option<usize> {
 /// LM moves, as for the roughnesses.
 #[inline]
 pub fn gamma_of(g: f64) -> f64 {
-    GAMMA_MIN + (GAMMA_MAX - GAMMA_MIN) * weight_of(g)
+    GAMMA_MIN + (GAMMA_MAX - GAMMA_MIN) * weight_of(g.max(G_LOW))
 }
 
-/// `d gamma / d g` of [`gamma_of`].
+/// Lowest `g` that [`gamma_of`] follows: below about -48 `GAMMA_MIN + (GAMMA_MAX - GAMMA_MIN) exp(g)` rounds
+/// to `GAMMA_MIN` itself, which no lobe may take; at -30 `gamma` is 3/2 + 9e-9, the bound for every purpose.
+pub const G_LOW: f64 = -30.0;
+
+/// `d gamma / d g` of [`gamma_of`] (0 below [`G_LOW`], where the map is flat).
 #[inline]
 pub fn gamma_dg(g: f64) -> f64 {
+    if g < G_LOW {
+        return 0.0;
+    }
     (GAMMA_MAX - GAMMA_MIN) * weight_of(g) * weight_of(-g)
 }
 

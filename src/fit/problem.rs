@@ -171,11 +171,11 @@ fn jacobian_pass(data: &FitData, id: ModelId, x: &[f64], jac: &mut DMatrix<f64>,
 /// `ln sum_q exp(v_q)` of the rounding rule's terms `v_q = ln D(m_q) + ln w_q`
 /// ([`super::objective::Rounding`]), and each term's share `exp(v_q) / sum` (the weights of its gradient).
 #[inline]
-fn smoothed(v: [f64; 4]) -> (f64, [f64; 4]) {
+fn smoothed<const N: usize>(v: [f64; N]) -> (f64, [f64; N]) {
     let top = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     // Guard: no finite term (the model has no mass at any point); the caller reports the pass.
     if !top.is_finite() {
-        return (top, [0.25; 4]);
+        return (top, [1.0 / N as f64; N]);
     }
     let e = v.map(|t| (t - top).exp());
     let s: f64 = e.iter().sum();

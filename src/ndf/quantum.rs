@@ -36,6 +36,9 @@ pub const RIGID: f64 = 0.9;
 /// half the slope scale a few nodes carry the lobe and the rounding error depends on the slope, so
 /// coarser lattices leave a fit the data cannot support (`unresolved`).
 pub const MAX_RESOLVED_STEP: f64 = 0.5;
+/// Smallest whitened lattice step whose rounding the fit models: below it the rounding widens alpha by
+/// under `r^2 / 12` = 1e-4 relative, far inside any scan's counting noise.
+pub const MODELLED_STEP: f64 = 0.035;
 
 /// Covariance of the slope error that rounding the heights to the lattice adds, for the lattice
 /// `step` of `scheme`: each slope is a difference of two heights, each rounded by an error uniform over

@@ -93,7 +93,7 @@ fn residual_jacobian_matches_central_differences() {
             let t = model(id, &truth);
             let ndf = ndfit::fit::synthetic::binned_ndf(&t, &ndfit::fit::synthetic::Grid::for_model(&t, 48), 2e4, 3);
             let plain = FitData::new(&ndf, objective, max_theta.to_radians()).expect("data");
-            // And with the height rounding of a quantized scan modelled (the rule's four points per bin):
+            // And with the height rounding of a quantized scan modelled (the rule of nine points per bin):
             // a lattice of a third of the truth's smaller alpha, for both normal schemes.
             let step = truth.iter().take(2).copied().fold(f64::INFINITY, f64::min) / 3.0;
             let quantum = HeightQuantum {

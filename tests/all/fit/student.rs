@@ -97,3 +97,18 @@ fn auto_on_a_heavy_tail_is_within_the_tolerance() {
     assert!(dg > ndfit::fit::verdict::DEFAULT_TOLERANCE, "GGX is within the tolerance of this truth ({dg}): no test");
     assert!(d <= ndfit::fit::verdict::DEFAULT_TOLERANCE, "auto's {} is {d} from the truth", auto.model);
 }
+
+/// A scan whose best Student lobe sits at the Smith bound `gamma -> 3/2` (the shared TMD scan; the
+/// independent nlopt fit, fits/crosscheck.py, ends at gamma 1.5 + 6e-13 with alpha 0.03360) is fitted, not
+/// refused: the fit's gamma map stays above the bound however far the solver pushes it.
+#[test]
+fn fit_at_the_tail_bound_needs_shared() {
+    let Some(dir) = crate::common::shared_scans("fit_at_the_tail_bound_needs_shared") else { return };
+    let scan = ndfit::io::read_scan(&dir.join("st_tmd-1_dime.tmd"), &Default::default()).expect("read");
+    let scan = ndfit::preprocess::apply(scan, &ndfit::preprocess::Preprocess::default()).expect("preprocess");
+    let ndf = empirical_ndf(&scan, &NdfOptions::default()).expect("ndf");
+    let rep = fit_model(&ndf, ModelId::Student, &FitOptions::default()).expect("a fit at the bound");
+    let (alpha, gamma) = (rep.params["alpha"], rep.params["gamma"]);
+    assert!(gamma > ndfit::models::student::GAMMA_MIN && gamma < 1.5 + 1e-6, "gamma {gamma}");
+    assert!((alpha / 0.03360 - 1.0).abs() < 2e-3, "alpha {alpha} against nlopt's 0.03360");
+}
