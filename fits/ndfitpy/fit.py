@@ -108,10 +108,10 @@ def gamma_du(u):
 
 def u_of_gamma(gamma):
     """The inverse of gamma_of_u; a gamma at (or beyond) either end maps to +-LOGIT_MAX."""
-    t = (np.log(np.asarray(gamma, dtype=float) - 1.0) - _LG0) / (_LG1 - _LG0)
-    lim = 1.0 / (1.0 + math.exp(LOGIT_MAX))
-    t = np.clip(np.nan_to_num(t, nan=0.0), lim, 1.0 - lim)
-    return np.log(t / (1.0 - t))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (np.log(np.asarray(gamma, dtype=float) - 1.0) - _LG0) / (_LG1 - _LG0)
+    t = np.clip(np.nan_to_num(t, nan=0.0), 1e-300, 1.0 - 2.0**-53)  # guard: finite logit at and beyond the ends
+    return np.clip(np.log(t) - np.log1p(-t), -LOGIT_MAX, LOGIT_MAX)
 
 
 def to_search(model: str, params) -> np.ndarray:
