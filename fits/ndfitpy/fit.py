@@ -299,7 +299,7 @@ def _local(model: str, bins: Bins, objective: str, x0: np.ndarray, method: str, 
     opt.set_ftol_rel(stop.ftol_rel)
     opt.set_maxeval(stop.maxeval)
     if method in ("bobyqa", "sbplx"):
-        # First trust radius: 35% in alpha and gamma - 1 (at gamma 2-5), ~6 degrees in theta_z, a third of the
+        # First trust radius: 35% in alpha, 20% in gamma - 1 at gamma = 2, ~6 degrees in theta_z, a third of the
         # lobe width in tilt (<= 0.1 rad).
         step = np.where(lg | _is_gamma(model), 0.3, 0.1)
         names = models.PARAM_NAMES[model]
