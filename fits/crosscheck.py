@@ -271,7 +271,8 @@ def main(argv=None) -> int:
     ap.add_argument("--ndfit", required=True, help="path of the ndfit binary")
     ap.add_argument("--scans", default=os.path.join(REPO, "..", "shared", "data", "scans"),
                     help="folder of real scans (default: ../shared/data/scans from the repository root)")
-    ap.add_argument("--models", default=",".join(models.MODELS + models.MIXTURES), help="comma-separated model ids")
+    ap.add_argument("--models", default=",".join(models.MODELS + models.STUDENTS + models.MIXTURES),
+                    help="comma-separated model ids (default: every one, the Student-t lobes and mixtures included)")
     ap.add_argument("--size", type=int, default=384, help="synthetic scan size in pixels (square)")
     ap.add_argument("--no-real", action="store_true", help="skip the real scans")
     ap.add_argument("--no-synth", action="store_true", help="skip the synthetic scans")

@@ -11,7 +11,8 @@ principal axes of the ellipsoid (eq. 8) with eigenvalues alpha_x^2, alpha_y^2, 1
 4. the Euler angles of R = Rx Ry Rz (eq. 3): R[0,2] = sin(theta_y), R[1,2] = -sin(theta_x) cos(theta_y),
    R[2,2] = cos(theta_x) cos(theta_y), R[0,0] = cos(theta_y) cos(theta_z), R[0,1] = -cos(theta_y) sin(theta_z).
 
-Beckmann-aniso and ggx-aniso use rules 2-3 (their tilt is 0 by definition); the isotropic models are canonical.
+Beckmann-aniso, ggx-aniso and student-aniso use rules 2-3 (their tilt is 0 by definition); the isotropic models are
+canonical.
 """
 
 from __future__ import annotations
@@ -65,10 +66,12 @@ def _aniso(p: np.ndarray) -> np.ndarray:
 def canonical(model: str, params) -> Dict[str, float]:
     """Canonical parameters of ``model`` (module notes), as a name -> value mapping."""
     p = models.params_to_array(model, params)
-    if model in ("ggx", "beckmann"):
+    if model in ("ggx", "beckmann", "student"):
         return models.params_to_dict(model, p)
     if model in ("ggx-aniso", "beckmann-aniso"):
         return models.params_to_dict(model, _aniso(p))
+    if model == "student-aniso":  # rules 2-3 on the lobe's axes; the tail exponent gamma is unchanged
+        return models.params_to_dict(model, np.append(_aniso(p[:3]), p[3]))
     if model in mixtures.PARAM_NAMES:
         ell = lambda q: canonical_from_matrix(models.ellipsoid_matrix(*q))  # noqa: E731
         return models.params_to_dict(model, mixtures.canonical(model, p, ell))

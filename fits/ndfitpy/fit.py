@@ -1,7 +1,8 @@
 """Fit an analytic NDF to empirical NDF bins with nlopt (data_formats/objective.md objectives).
 
 Search coordinates: ln(alpha) for every roughness (alpha spans 1e-4..10, and ln keeps it positive and evenly
-scaled) and the angles in radians. Stopping criteria are explicit (nlopt sets none by default): ``xtol_abs`` on
+scaled), the angles in radians, the logit of a mixture weight, and for a Student-t tail a bounded logistic in
+ln(gamma - 1) (gamma_of_u says why). Stopping criteria are explicit (nlopt sets none by default): ``xtol_abs`` on
 every coordinate (a relative x tolerance would never be met by an angle near 0), ``ftol_rel`` on the objective and
 a ``maxeval`` cap. Methods:
 
@@ -71,17 +72,57 @@ def _is_weight(model: str) -> np.ndarray:
     return np.array([n == "weight" for n in models.PARAM_NAMES[model]])
 
 
-#: Bound of a mixture weight's logit in the search (weights within 1e-13 of 0 or 1).
+def _is_gamma(model: str) -> np.ndarray:
+    return np.array([n == "gamma" for n in models.PARAM_NAMES[model]])
+
+
+#: Bound of a mixture weight's logit in the search (weights within 1e-13 of 0 or 1), and of gamma's u (gamma within
+#: 6e-13 of 3/2 and 1e-12 relative of its largest value).
 LOGIT_MAX = 30.0
+
+# gamma's search coordinate: ln(gamma - 1) runs over (_LG0, _LG1) as the logistic of u.
+_LG0 = math.log(models.STUDENT_GAMMA_MIN - 1.0)
+_LG1 = math.log(models.STUDENT_GAMMA_MAX - 1.0)
+
+
+def _logistic(u):
+    return 0.5 * (1.0 + np.tanh(0.5 * np.asarray(u, dtype=float)))  # 1/(1 + e^-u) without overflow
+
+
+def gamma_of_u(u):
+    """Student-t tail exponent of search coordinate u: ln(gamma - 1) = _LG0 + (_LG1 - _LG0) / (1 + e^-u), so gamma
+    lies in (STUDENT_GAMMA_MIN, STUDENT_GAMMA_MAX) for every real u.
+
+    Why this map: the normals' information about gamma per unit of ln(gamma - 1) is largest near 3/2 and falls
+    as sqrt(2)/gamma once the lobe turns Beckmann; the logistic's slope in ln(gamma - 1), (_LG1 - _LG0) s (1 - s),
+    grows from 0.65 at gamma = 2 to 1.7 at 5 and 2.7 at 30, which evens that out, so a unit step of u moves D by
+    about as much anywhere from gamma 2 to 10, like a unit step of ln(alpha) (fits/README.md gives the Fisher
+    information per unit u against a logistic in gamma - 3/2)."""
+    return 1.0 + np.exp(_LG0 + (_LG1 - _LG0) * _logistic(u))
+
+
+def gamma_du(u):
+    """d gamma / d u of gamma_of_u: (gamma - 1) (_LG1 - _LG0) s (1 - s), s the logistic of u."""
+    return (gamma_of_u(u) - 1.0) * (_LG1 - _LG0) * _logistic(u) * _logistic(-np.asarray(u, dtype=float))
+
+
+def u_of_gamma(gamma):
+    """The inverse of gamma_of_u; a gamma at (or beyond) either end maps to +-LOGIT_MAX."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (np.log(np.asarray(gamma, dtype=float) - 1.0) - _LG0) / (_LG1 - _LG0)
+    t = np.clip(np.nan_to_num(t, nan=0.0), 1e-300, 1.0 - 2.0**-53)  # guard: finite logit at and beyond the ends
+    return np.clip(np.log(t) - np.log1p(-t), -LOGIT_MAX, LOGIT_MAX)
 
 
 def to_search(model: str, params) -> np.ndarray:
-    """Natural parameters to search coordinates (ln alpha, angles, logit of a mixture weight)."""
+    """Natural parameters to search coordinates (ln alpha, angles, logit of a mixture weight, gamma's u)."""
     p = models.params_to_array(model, params).copy()
     lg = _is_log(model)
     p[lg] = np.log(p[lg])
     wt = _is_weight(model)
     p[wt] = np.log(p[wt] / (1.0 - p[wt]))
+    gm = _is_gamma(model)
+    p[gm] = u_of_gamma(p[gm])
     return p
 
 
@@ -92,7 +133,24 @@ def from_search(model: str, x) -> np.ndarray:
     p[lg] = np.exp(p[lg])
     wt = _is_weight(model)
     p[wt] = 1.0 / (1.0 + np.exp(-p[wt]))
+    gm = _is_gamma(model)
+    p[gm] = gamma_of_u(p[gm])
     return p
+
+
+def search_objective(model: str, bins: Bins, objective: str, x, want_grad: bool = False):
+    """The objective at search coordinates ``x``, and with ``want_grad`` its gradient in x (the chain rule through
+    from_search's maps)."""
+    x = np.asarray(x, dtype=float)
+    p = from_search(model, x)
+    if not want_grad:
+        return obj.objective(objective, model, p, bins)
+    val, g = obj.objective(objective, model, p, bins, want_grad=True)
+    g = np.where(_is_log(model), g * p, g)  # d/d ln(alpha) = alpha d/d alpha
+    g = np.where(_is_weight(model), g * p * (1.0 - p), g)  # d/d logit(w) = w (1 - w) d/dw
+    gm = _is_gamma(model)
+    g[gm] = g[gm] * gamma_du(x[gm])
+    return val, g
 
 
 def wrap_theta_z(t: float) -> float:
@@ -173,7 +231,7 @@ def initial_guess(bins: Bins, model: str) -> np.ndarray:
 
 def _bounds(model: str, x0: np.ndarray):
     lg = _is_log(model)
-    wt = _is_weight(model)
+    wt = _is_weight(model) | _is_gamma(model)  # both logistic coordinates, bounded alike
     mix = model in mixtures.PARENT
     ln_alpha_min = math.log(mixtures.ALPHA_FLOOR) if mix else LN_ALPHA_MIN
     ln_alpha_max = math.log(mixtures.LOBE_ALPHA_MAX) if mix else LN_ALPHA_MAX
@@ -210,7 +268,6 @@ def _local(model: str, bins: Bins, objective: str, x0: np.ndarray, method: str, 
     sc = _scales(model, x0)
     best = {"x": x0.copy(), "f": math.inf, "n": 0}
     lg = _is_log(model)
-    wt = _is_weight(model)
 
     def f(y, grad):
         try:
@@ -221,15 +278,13 @@ def _local(model: str, bins: Bins, objective: str, x0: np.ndarray, method: str, 
 
     def _eval(x, grad):
         best["n"] += 1
-        p = from_search(model, x)
         if grad.size > 0:
-            val, g = obj.objective(objective, model, p, bins, want_grad=True)
-            g = np.where(lg, g * p, g) * sc  # chain rule: d/d ln(alpha) = alpha d/d alpha; d/dy = scale d/dx
-            g = np.where(wt, g * p * (1.0 - p), g)  # d/d logit(w) = w (1 - w) d/dw
+            val, g = search_objective(model, bins, objective, x, want_grad=True)
+            g = g * sc  # d/dy = scale d/dx
             # Guard: an overflowed gradient would derail L-BFGS; zero it and let the line search shrink the step.
             grad[:] = np.where(np.isfinite(g), g, 0.0)
         else:
-            val = obj.objective(objective, model, p, bins)
+            val = search_objective(model, bins, objective, x)
         if not math.isfinite(val):
             val = 1e300  # guard: nlopt needs a finite value to reject a step
         if val < best["f"]:
@@ -244,8 +299,9 @@ def _local(model: str, bins: Bins, objective: str, x0: np.ndarray, method: str, 
     opt.set_ftol_rel(stop.ftol_rel)
     opt.set_maxeval(stop.maxeval)
     if method in ("bobyqa", "sbplx"):
-        # First trust radius: 35% in alpha, ~6 degrees in theta_z, a third of the lobe width in tilt (<= 0.1 rad).
-        step = np.where(lg, 0.3, 0.1)
+        # First trust radius: 35% in alpha, 20% in gamma - 1 at gamma = 2, ~6 degrees in theta_z, a third of the
+        # lobe width in tilt (<= 0.1 rad).
+        step = np.where(lg | _is_gamma(model), 0.3, 0.1)
         names = models.PARAM_NAMES[model]
         if "theta_x" in names:
             for k in ("theta_x", "theta_y"):
@@ -374,6 +430,11 @@ def fit(
         ridge = mixtures.ridge_starts(model, pre.param_array, bins, obj.log_expected, models.log_d)
         ridges = set(range(len(starts), len(starts) + len(ridge)))
         starts.extend(ridge)
+    elif model in models.STUDENTS:
+        # Grown from this module's own GGX fit of the same bins: GGX is the STD at gamma = 2.
+        pre = fit(bins, "ggx" if model == "student" else "ggx-aniso", objective, method, stop=stop)
+        evaluations += pre.evaluations
+        starts.append(np.append(pre.param_array, 2.0))
     elif model == "ellipsoid":
         pre = fit(bins, "ggx-aniso", objective, method, stop=stop)
         evaluations += pre.evaluations

@@ -11,6 +11,9 @@ Models and parameters (CONTRACT.md, "Models and parameters"):
   ``alpha_x = alpha_y`` isotropic GGX, Heitz eq. 71 / 85).
 - ``beckmann-aniso`` / ``beckmann``: Heitz eq. 82 evaluated in the local frame ``m' = Rz(theta_z) m`` (the same
   theta_z convention as the ellipsoid, where ``A^-T m = S^-1 R m``).
+- ``student-aniso`` / ``student``: the Student-t slope distribution (Ribardiere et al. 2017, below) in the same
+  local frame, with the tail exponent ``gamma`` (GGX at 2, Beckmann as it grows). Not in the contract's list
+  (``MODELS``): ndfit's model table adds them; no matrix A (the lobe is not an ellipsoid).
 
 Everything is computed as ln D first: Beckmann's exponential underflows for narrow lobes (alpha 1e-4), and the
 fit's Poisson deviance needs ln E anyway.
@@ -32,11 +35,19 @@ PARAM_NAMES: Dict[str, tuple] = {
     "beckmann": ("alpha",),
     "beckmann-aniso": ("alpha_x", "alpha_y", "theta_z"),
     "ellipsoid": ("alpha_x", "alpha_y", "theta_x", "theta_y", "theta_z"),
+    "student": ("alpha", "gamma"),
+    "student-aniso": ("alpha_x", "alpha_y", "theta_z", "gamma"),
     **_mixtures.PARAM_NAMES,
 }
 
+#: The Student-t lobes (STD, Ribardiere et al. 2017): single lobes outside the contract's list.
+STUDENTS = ("student", "student-aniso")
+
+#: Parameter names of the STD lobes (a view of PARAM_NAMES).
+STUDENT_PARAM_NAMES: Dict[str, tuple] = {k: PARAM_NAMES[k] for k in STUDENTS}
+
 #: Every single-lobe model id of the contract.
-MODELS = tuple(k for k in PARAM_NAMES if k not in _mixtures.PARAM_NAMES)
+MODELS = tuple(k for k in PARAM_NAMES if k not in _mixtures.PARAM_NAMES and k not in STUDENTS)
 
 #: The two-lobe mixtures (mixtures.py).
 MIXTURES = tuple(_mixtures.PARAM_NAMES)
@@ -252,6 +263,8 @@ def log_d_and_grad(model: str, params, m, want_grad: bool = True):
     p = params_to_array(model, params)
     if model in _mixtures.PARAM_NAMES:
         return _mixtures.log_d_and_grad(model, p, _as_dirs(m), want_grad, log_d_and_grad)
+    if model in STUDENTS:
+        return student_log_d_and_grad(model, p, m, want_grad)
     if model in ("ggx", "beckmann", "ggx-aniso", "beckmann-aniso") and not (p[0] > 0.0):
         raise ValueError(f"model '{model}': alpha must be > 0, got {p[0]}")
     if model in ("ggx-aniso", "beckmann-aniso", "ellipsoid") and not (p[0] > 0.0 and p[1] > 0.0):
@@ -307,12 +320,6 @@ STUDENT_GAMMA_MIN = 1.5
 
 #: Largest gamma (the Rust model's bound): beyond it the lobe is Beckmann for any scan's counting noise.
 STUDENT_GAMMA_MAX = 1e5
-
-#: Parameter names of the STD lobes (kept apart from PARAM_NAMES until the fitter handles them).
-STUDENT_PARAM_NAMES: Dict[str, tuple] = {
-    "student": ("alpha", "gamma"),
-    "student-aniso": ("alpha_x", "alpha_y", "theta_z", "gamma"),
-}
 
 
 def _student_log_d_grad(ax: float, ay: float, tz: float, gamma: float, m: np.ndarray, want_grad: bool):
