@@ -20,6 +20,7 @@ import argparse
 import copy
 import glob
 import os
+import re
 import sys
 import time
 
@@ -76,7 +77,8 @@ def execute(path: str, timeout: int, out_dir: str = "", write: bool = False) -> 
     try:
         client.execute()
     except CellExecutionError as e:
-        lines = [ln for ln in str(e).splitlines() if ln.strip()]
+        # The kernel's traceback is coloured for a terminal: its escape codes would garble the one line.
+        lines = [ln for ln in re.sub(r"\x1b\[[0-9;]*m", "", str(e)).splitlines() if ln.strip()]
         err = lines[-1] if lines else "cell failed"
     except CellTimeoutError:
         err = f"a cell ran longer than {timeout} s"

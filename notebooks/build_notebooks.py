@@ -56,7 +56,7 @@ def ndfit(*args, check=True):
 def has_command(name):
     return subprocess.run([NDFIT, name, "--help"], capture_output=True).returncode == 0
 
-print("ndfit:", ndfit("--version").strip(), "| work folder:", WORK)
+print("ndfit:", ndfit("--version").strip())
 '''
 
 SYNTH = r'''
@@ -335,7 +335,7 @@ def tour():
             "HAVE_REAL = os.path.exists(real)\n"
             "if REQUIRE_SHARED and not HAVE_REAL:\n"
             '    raise RuntimeError(f"{real} is absent and NDFIT_REQUIRE_SHARED is set")\n'
-            'print("real scan:", real if HAVE_REAL else f"SKIP ({SCANS} absent; NDFIT_REQUIRE_SHARED=1 makes this an error)")'
+            'print("real scan:", os.path.relpath(real, ROOT) if HAVE_REAL else f"SKIP ({SCANS} absent; NDFIT_REQUIRE_SHARED=1 makes this an error)")'
         ),
         new_code_cell(
             "if HAVE_REAL:\n"
@@ -676,11 +676,12 @@ def find_root():
 ROOT = find_root()
 SCANS = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "scans"))
 REQUIRE_SHARED = os.environ.get("NDFIT_REQUIRE_SHARED", "") not in ("", "0")
-real = os.path.join(SCANS, "hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p")
+# Relative to the working directory: the scan keeps the path it was read from and prints it.
+real = os.path.relpath(os.path.join(SCANS, "hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p"))
 HAVE_REAL = os.path.exists(real)
 if REQUIRE_SHARED and not HAVE_REAL:
     raise RuntimeError(f"{real} is absent and NDFIT_REQUIRE_SHARED is set")
-print("ndfit", ndfit.__version__, "|", "real scan: " + real if HAVE_REAL else f"SKIP: {SCANS} absent, a numpy surface stands in")
+print("ndfit", ndfit.__version__, "|", "real scan: " + os.path.relpath(real, ROOT) if HAVE_REAL else f"SKIP: {SCANS} absent, a numpy surface stands in")
 """
 
 PY_READ = r"""
@@ -900,11 +901,11 @@ plt.tight_layout(); plt.show()
 """
 
 MEASURED_READING = r"""
-The scan (a bullet land, `misfit` as a two-lobe GGX) and its fit give highlights of the same size and
-elongation, but the measured table's core is tilted and split along the striations where the fitted lobes
-are symmetric: the difference image shows two off-centre blobs and a tilted ridge. Its mean over the lit
-pixels is about five times the seed-to-seed noise (printed above), so at 192 x 192 pixels and 256 samples
-per pixel the two materials are told apart by the image, not by the noise.
+The scan (a bullet land, `misfit` as the two-lobe mixture printed above) and its fit give highlights of the
+same size and elongation, but the measured table's core is less regular than the fitted lobes, which are
+symmetric: the difference image is structured (blobs along the highlight's long axis), not noise. Its mean
+over the lit pixels is several times the seed-to-seed noise (the ratio printed above), so at 192 x 192
+pixels and 256 samples per pixel the two materials are told apart by the image, not by the noise.
 """
 
 
