@@ -11,6 +11,7 @@ use nalgebra::{DMatrix, DVector};
 use super::objective::FitData;
 use super::problem::{jacobian_into, residuals_into, Problem};
 use crate::error::{Error, ErrorKind, Result};
+use crate::models::student::GAMMA_MIN;
 use crate::models::ModelId;
 
 /// The local optimizer.
@@ -84,11 +85,23 @@ pub struct Local {
 
 /// Minimize from `x0` with `solver`.
 pub fn minimize(data: &FitData, id: ModelId, x0: &[f64], solver: Solver, tol: Tolerances) -> Result<Local> {
-    match solver {
-        Solver::Lm => lm(data, id, x0, tol),
-        Solver::NelderMead => nelder_mead(data, id, x0, tol),
-        Solver::Lbfgs => lbfgs(data, id, x0, tol),
-    }
+    let run = |x: &[f64]| match solver {
+        Solver::Lm => lm(data, id, x, tol),
+        Solver::NelderMead => nelder_mead(data, id, x, tol),
+        Solver::Lbfgs => lbfgs(data, id, x, tol),
+    };
+    let local = run(x0)?;
+    // A Student tail driven onto the flat end of its map (gamma at the Smith bound to within 1e-6, where
+    // d gamma / d g vanishes) cannot come back by itself: rerun from just inside the bound, keep the better.
+    let Some(i) = super::params::gamma_slot(id).filter(|&i| super::params::gamma_of(local.x[i]) - GAMMA_MIN < 1e-6) else {
+        return Ok(local);
+    };
+    let mut x = local.x.clone();
+    x[i] = super::params::g_of(GAMMA_MIN + 0.05);
+    let again = run(&x)?;
+    let evaluations = local.evaluations + again.evaluations;
+    let best = if again.f < local.f { again } else { local };
+    Ok(Local { evaluations, ..best })
 }
 
 fn lm(data: &FitData, id: ModelId, x0: &[f64], tol: Tolerances) -> Result<Local> {
