@@ -12,7 +12,7 @@
 pub mod accuracy;
 pub mod analysis;
 pub mod floors;
-pub mod knobs;
+pub(crate) mod knobs;
 pub mod mem;
 pub mod numpy;
 pub mod pipeline;

@@ -29,7 +29,7 @@ const LN_PI: f64 = 1.144_729_885_849_400_2;
 pub(crate) type Shape = Form;
 
 /// A model frozen at one internal parameter vector: one lobe ([`LobeLnD`]) or a two-lobe mixture
-/// ([`super::lnd_mixture`]).
+/// (`lnd_mixture`).
 // Built once per residual or Jacobian pass and read per bin: its size costs nothing, a box would cost a
 // pointer chase per bin.
 #[allow(clippy::large_enum_variant)]
@@ -115,7 +115,7 @@ pub struct LobeLnD {
 
 impl LobeLnD {
     /// Freeze single-lobe model `id` at internal vector `x` (length [`ModelId::n_params`]). A mixture id
-    /// gives its first lobe's kind ([`super::lnd_mixture`] builds mixtures lobe by lobe).
+    /// gives its first lobe's kind (`lnd_mixture` builds mixtures lobe by lobe).
     pub fn new(id: ModelId, x: &[f64]) -> LobeLnD {
         let lobe = id.spec().lobes[0];
         Self::with_shape(lobe.form, lobe.kernel, false, x)

@@ -15,7 +15,7 @@
 
 pub mod covariance;
 pub mod lnd;
-pub mod lnd_mixture;
+pub(crate) mod lnd_mixture;
 pub mod metric;
 pub mod mixture;
 pub mod objective;
@@ -24,7 +24,7 @@ pub mod params;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod problem;
-pub mod qbic;
+pub(crate) mod qbic;
 pub mod report;
 pub mod solve;
 pub mod start;
@@ -535,7 +535,7 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 /// ordered simplest first (rung, then parameters, then error), the first whose error exceeds the smallest
 /// by no more than the tolerance (in quadrature): the first within the tolerance, or when every model is
 /// visibly off, the simplest a renderer cannot tell from the closest. The likelihood is a guard, not the
-/// decider: a model enters the choice only when its quasi-likelihood BIC ([`qbic`], `F / c_data + p ln N`
+/// decider: a model enters the choice only when its quasi-likelihood BIC (`qbic`, `F / c_data + p ln N`
 /// with the data's own overdispersion) is below its parent's, so the data support its added parameters.
 pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
     fit_auto_pruned(ndf, opts, true)

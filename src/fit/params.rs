@@ -16,7 +16,7 @@
 //! ([`gamma_of`]).
 //!
 //! The mixtures' weight is logistic, `w = 1 / (1 + exp(-v))`, in `(0, 1)` for every real `v`
-//! ([`super::lnd_mixture`] gives their internal vectors). A mixture lobe's roughness is bounded above as
+//! (`lnd_mixture` gives their internal vectors). A mixture lobe's roughness is bounded above as
 //! well, `alpha = ALPHA_MIN + (LOBE_ALPHA_MAX - ALPHA_MIN) / (1 + exp(-u))` ([`LOBE_ALPHA_MAX`] says why);
 //! near the floor this is the single lobes' map scaled (`ALPHA_MIN + (LOBE_ALPHA_MAX - ALPHA_MIN) exp(u)`),
 //! and the single lobes keep theirs, so their fits do not move.

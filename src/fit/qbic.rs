@@ -15,7 +15,7 @@ pub fn overdispersion(reduced_chi2: impl IntoIterator<Item = f64>) -> f64 {
     }
 }
 
-/// `F / c + p ln N` with `c` from [`overdispersion`] (floored at 1) and `N` floored at 1.
+/// `F / c + p ln N` with `c` from `overdispersion` (floored at 1) and `N` floored at 1.
 pub fn qbic(objective: f64, c: f64, n_params: usize, n_samples: f64) -> f64 {
     objective / c.max(1.0) + n_params as f64 * n_samples.max(1.0).ln()
 }

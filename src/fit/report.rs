@@ -155,7 +155,7 @@ pub struct Candidate {
 pub struct Selection {
     /// The criterion: `qbic` = `F / c + p ln N` (BIC with the quasi-likelihood overdispersion `c`).
     pub criterion: String,
-    /// The overdispersion `c = max(1, smallest reduced_chi2 among the candidates)` ([`crate::fit::qbic`]).
+    /// The overdispersion `c = max(1, smallest reduced_chi2 among the candidates)` (`fit::qbic`).
     pub overdispersion: f64,
     /// Every model fitted, simplest first (the single lobes, then the mixtures).
     pub candidates: Vec<Candidate>,

@@ -14,7 +14,7 @@
 //!
 //! Files, one job each: [`ellipsoid`] (D, G1, projected areas, pdf), [`sampling`] (Walter sec. 4.1),
 //! [`canonical`] (one labeling per distribution), [`ggx`] and [`beckmann`] (Heitz's slope-space forms and
-//! Smith Lambda), [`roughness_matrix`] (Tokuyoshi's 2x2 form), [`fresnel`], [`brdf`] (Walter eq. 4 with
+//! Smith Lambda), `roughness_matrix` (Tokuyoshi's 2x2 form), [`fresnel`], [`brdf`] (Walter eq. 4 with
 //! separable or height-correlated G2), [`sel`] (Tokuyoshi-Harada lobe), [`spec`] (JSON <-> [`Model`]).
 //!
 //! Conventions shared by every model: `D = 0` below the horizon; `G1` in `[0, 1]`; `Lambda >= 0`, saturated at
@@ -33,7 +33,7 @@ pub mod fresnel;
 pub mod ggx;
 pub mod mixture;
 pub mod roughness;
-pub mod roughness_matrix;
+pub(crate) mod roughness_matrix;
 pub mod sampling;
 pub mod sel;
 pub mod spec;

@@ -4,8 +4,7 @@
 //! stencil, `dx dy / 2` per triangle), so a count of samples is a projected-area measure and the
 //! empirical NDF is `D_k = count_k / (N W_k)` (Heitz eq. 9; Walter et al. eq. 9).
 
-// Row access to the heights belongs to the scan layer; the NDF passes name it from here too.
-pub(crate) use crate::scan::bands::HeightRows;
+use crate::scan::bands::HeightRows;
 
 /// How normals are taken from the heights.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]

@@ -8,8 +8,9 @@
 //! central bin spans at least two lattice cells. Derivation: `data_formats/objective.md` ("Quantized
 //! heights").
 
-use super::normals::{HeightRows, NormalScheme};
-use super::{BandSource, SlopeFrame};
+use super::normals::NormalScheme;
+use super::SlopeFrame;
+use crate::scan::bands::{BandSource, HeightRows};
 
 /// Height differences examined to find the quantum (a strided subsample of adjacent pairs).
 const QUANTUM_SAMPLE: usize = 1 << 16;
