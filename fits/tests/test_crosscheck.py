@@ -41,6 +41,10 @@ FAKE = textwrap.dedent(
         ax = float(opt("--alpha-x", 0.3))
         p = [ax, float(opt("--alpha-y", ax))] + [float(opt(k, 0)) for k in ("--theta-x", "--theta-y", "--theta-z")]
         json.dump({{"model": "ellipsoid", "params": p}}, open(sys.argv[2], "w"))
+    elif cmd == "ndf" and opt("-o").endswith(".json"):
+        # The NDF's JSON: what crosscheck reads of it (the normal scheme; no quantization, no frame needed).
+        bins_of(sys.argv[2])
+        json.dump({{"options": {{"normals": "central"}}, "quantization": None}}, open(opt("-o"), "w"))
     elif cmd == "ndf":
         write_ndf_csv(opt("-o"), bins_of(sys.argv[2]))
     elif cmd == "fit":
