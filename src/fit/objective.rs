@@ -123,9 +123,6 @@ pub struct Rounding {
     pub slope_step: [f64; 2],
     /// The covariance `K` of the slope error (per slope axis; x, y).
     pub kernel: [[f64; 2]; 2],
-    /// The kernel's lower Cholesky factor `L`.
-    #[serde(skip)]
-    chol: [[f64; 2]; 2],
     /// Per bin of the region, the rule's directions `m_q` and `ln(w_q (m_z(s_q) / m_z(s_k))^4)`.
     #[serde(skip)]
     pub points: Vec<[(Vector3<f64>, f64); RULE_POINTS]>,
@@ -143,30 +140,28 @@ impl Rounding {
             return None;
         }
         let k = rounding_kernel(scheme, quantum.slope_step);
-        let l00 = k[0][0].sqrt();
-        // Guard: a zero or degenerate kernel has nothing to model (and no Cholesky factor).
-        if !(l00 > 0.0 && l00.is_finite()) {
-            return None;
-        }
-        let l10 = k[1][0] / l00;
-        let l11 = (k[1][1] - l10 * l10).sqrt();
-        if !(l11 > 0.0 && l11.is_finite()) {
-            return None;
-        }
-        let chol = [[l00, 0.0], [l10, l11]];
+        let chol = cholesky(&k)?;
         let points = bins.iter().map(|b| rule(&chol, &b.m)).collect();
-        Some(Rounding { quantum: quantum.quantum, slope_step: quantum.slope_step, kernel: k, chol, points })
+        Some(Rounding { quantum: quantum.quantum, slope_step: quantum.slope_step, kernel: k, points })
+    }
+
+    /// The kernel's lower Cholesky factor `L` (zero for a kernel that has none: then the rule is the point
+    /// value, as for a rounding read back from a report of a degenerate lattice).
+    fn chol(&self) -> [[f64; 2]; 2] {
+        cholesky(&self.kernel).unwrap_or([[0.0; 2]; 2])
     }
 
     /// The same rule for other bins (the merged bins of [`FitData::coarsened`]).
     fn for_bins(&self, bins: &[Bin]) -> Rounding {
-        Rounding { points: bins.iter().map(|b| rule(&self.chol, &b.m)).collect(), ..self.clone() }
+        let chol = self.chol();
+        let points = bins.iter().map(|b| rule(&chol, &b.m)).collect();
+        Rounding { quantum: self.quantum, slope_step: self.slope_step, kernel: self.kernel, points }
     }
 
     /// `D` of `model` as the bins see it at `m`: the rule's mean of `P22` around the slope of `m`, over
     /// `m_z^4`.
     pub fn seen_d(&self, model: &impl Ndf, m: Vector3<f64>) -> f64 {
-        rule(&self.chol, &m).iter().map(|(q, lw)| model.d(*q) * lw.exp()).sum()
+        rule(&self.chol(), &m).iter().map(|(q, lw)| model.d(*q) * lw.exp()).sum()
     }
 }
 
@@ -187,6 +182,15 @@ impl<N: Ndf> Ndf for Seen<'_, N> {
             None => self.model.d(m),
         }
     }
+}
+
+/// The lower Cholesky factor of a 2 x 2 covariance; `None` for one that is zero, not finite or not
+/// positive definite (nothing to model, and no factor).
+fn cholesky(k: &[[f64; 2]; 2]) -> Option<[[f64; 2]; 2]> {
+    let l00 = k[0][0].sqrt();
+    let l10 = k[1][0] / l00;
+    let l11 = (k[1][1] - l10 * l10).sqrt();
+    (l00 > 0.0 && l00.is_finite() && l11 > 0.0 && l11.is_finite()).then_some([[l00, 0.0], [l10, l11]])
 }
 
 /// Points of [`Rounding`]'s rule per bin.

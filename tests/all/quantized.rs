@@ -158,6 +158,12 @@ fn clean_scans_at_every_lattice_size() {
             // The fit modelled the rounding, and states it.
             let r = rep.rounding.as_ref().unwrap_or_else(|| panic!("lattice {f}: the fit reports no rounding"));
             assert_eq!(r.kernel, rounding_kernel(NormalScheme::Central, found.slope_step));
+            // Read back from the report, the rounding smooths the lobe as the fit did.
+            let back: ndfit::fit::objective::Rounding = serde_json::from_value(serde_json::to_value(r).unwrap()).unwrap();
+            let lobe = rep.to_model().unwrap();
+            let m = nalgebra::Vector3::new(0.2, -0.1, 1.0).normalize();
+            assert_eq!(back.seen_d(&lobe, m), r.seen_d(&lobe, m));
+            assert!(r.seen_d(&lobe, m) != lobe.d(m), "the rounding smooths nothing");
             for n in ["alpha_x", "alpha_y"] {
                 let (a, b) = (rep.params[n], ref0.params[n]);
                 assert!((a / b - 1.0).abs() < 0.01, "lattice {f}: {n} quantized {a} against {b}");
