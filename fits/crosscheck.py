@@ -26,6 +26,7 @@ Usage: python fits/crosscheck.py --ndfit target/release/ndfit [--models ggx,elli
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import json
 import math
 import os
@@ -282,6 +283,8 @@ def main(argv=None) -> int:
     ap.add_argument("--only", default="", help="comma-separated substrings: check only scans whose name has one")
     ap.add_argument("--ndf-args", default="", help="extra NDF options passed to both ndfit ndf and ndfit fit")
     ap.add_argument("--timeout", type=float, default=600.0, help="seconds per ndfit command")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                    help="scans checked side by side (default: one per core; the nlopt fits run on one core each)")
     ap.add_argument("--work", help="keep intermediate files here (default: a temporary folder, removed)")
     ap.add_argument("--json", help="also write the rows as JSON to this file")
     ap.add_argument("--known", default=os.path.join(HERE, "crosscheck_known.json"),
@@ -349,15 +352,22 @@ def main(argv=None) -> int:
             else:
                 print(f"SKIP real scans: {os.path.normpath(args.scans)} is absent")
                 skipped.append("real scans")
+        # Every scan is one task (its CSV rows, or its end-to-end rows); tasks run side by side in --jobs worker
+        # processes and their rows are gathered in the order below, so the table reads the same at any --jobs.
+        tasks = []
         if not args.no_csv:
-            for path, name, case_ndf_args in scans:
-                print(f"-- {name}", file=sys.stderr, flush=True)
-                rows += check_scan(ndfit, path, name, model_list, work, case_ndf_args + ndf_args, args.timeout)
-            for path, name, case_ndf_args in tail_scans:
-                print(f"-- {name} (--tail unresolved)", file=sys.stderr, flush=True)
-                rows += check_scan(ndfit, path, name, model_list, work, case_ndf_args + ndf_args, args.timeout, tail=True)
+            tasks += [("csv", check_scan, (ndfit, path, name, model_list, work, case_ndf_args + ndf_args, args.timeout),
+                       name) for path, name, case_ndf_args in scans]
+            tasks += [("csv", check_scan, (ndfit, path, name, model_list, work, case_ndf_args + ndf_args, args.timeout,
+                                           True), name + " (--tail unresolved)")
+                      for path, name, case_ndf_args in tail_scans]
         if not args.no_e2e:
-            e2e_rows = run_e2e(ndfit, synth, real, work, args)
+            tasks += e2e_tasks(ndfit, synth, real, work, args)
+        for kind, result in run_tasks(tasks, args.jobs):
+            if kind == "csv":
+                rows += result
+            else:
+                e2e_rows += result
     finally:
         if not args.work:
             shutil.rmtree(work, ignore_errors=True)
@@ -398,38 +408,69 @@ def main(argv=None) -> int:
     return 0 if failed == 0 and e2e_failed == 0 and not missing and (rows or e2e_rows) else 1
 
 
-def run_e2e(ndfit: str, synth, real, work: str, args) -> List["endtoend.E2ERow"]:
-    """The end-to-end rows: each synthetic scan with its truth's model (two of them rewritten as NPY and GSF so that
-    those readers are compared too), each real X3P scan with --e2e-real-model."""
-    out: List[endtoend.E2ERow] = []
+def run_tasks(tasks, jobs: int):
+    """Runs each (kind, function, arguments, label) task, `jobs` at a time in worker processes; yields
+    (kind, rows) in the tasks' order. A task that dies (its worker crashed) yields no rows but a failure line."""
+    if jobs <= 1 or len(tasks) <= 1:
+        for kind, fn, fn_args, label in tasks:
+            print(f"-- {label}", file=sys.stderr, flush=True)
+            yield kind, fn(*fn_args)
+        return
+    # One thread per numpy process: the workers already fill the cores.
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    with concurrent.futures.ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures = [(kind, label, pool.submit(fn, *fn_args)) for kind, fn, fn_args, label in tasks]
+        for kind, label, fut in futures:
+            try:
+                result = fut.result()
+            except Exception as e:  # noqa: BLE001 (a crashed task must not hide the others' rows)
+                print(f"FAIL {label}: the task died: {type(e).__name__}: {e}", file=sys.stderr, flush=True)
+                result = [failed_task_row(kind, label, f"the task died: {type(e).__name__}: {e}")]
+            print(f"-- {label} done", file=sys.stderr, flush=True)
+            yield kind, result
+
+
+def failed_task_row(kind: str, label: str, note: str):
+    """The row that stands for a task with no rows of its own, so that the run fails naming it."""
+    if kind == "csv":
+        return Row(scan=label, model="-", notes=[note])
+    return endtoend.E2ERow(scan=label, model="-", errors=[note])
+
+
+def e2e_tasks(ndfit: str, synth, real, work: str, args):
+    """The end-to-end tasks: each synthetic scan with its truth's model (two of them rewritten as NPY and GSF so
+    that those readers are compared too), each real X3P scan with --e2e-real-model."""
+    tasks = [("e2e", e2e_synthetic, (ndfit, path, name, work, args.timeout), f"end to end: {name}")
+             for path, name in synth]
+    tasks += [("e2e", endtoend.check_scan, (ndfit, path, name, [args.e2e_real_model], work, "plane", [], None,
+                                            args.timeout), f"end to end: {name}")
+              for path, name in real if name.lower().endswith(".x3p")]
+    return tasks
+
+
+def e2e_synthetic(ndfit: str, path: str, name: str, work: str, timeout: float) -> List["endtoend.E2ERow"]:
+    """One synthetic scan end to end, against its truth's model."""
     as_format = {"synth-ggx": ".npy", "synth-mirror": ".gsf"}
-    for path, name in synth:
-        print(f"-- end to end: {name}", file=sys.stderr, flush=True)
-        try:
-            with open(os.path.splitext(path)[0] + ".truth.json", encoding="utf-8") as fh:
-                truth = json.load(fh)
-        except (OSError, ValueError) as e:
-            out.append(endtoend.E2ERow(scan=name, model="-", errors=[f"reading the truth: {e}"]))
-            continue
-        ext = as_format.get(name, ".x3p")
-        scan, rust_args, dx = path, [], None
-        if ext != ".x3p":
-            hm = scanio.read_scan(path)
-            scan = os.path.join(work, name + ext)
-            if ext == ".npy":
-                np.save(scan, hm.z)
-                dx = hm.dx
-                rust_args = ["--dx", repr(hm.dx), "--z-scale", "1"]
-            else:
-                scanio.write_gsf(scan, hm)
-        out += endtoend.check_scan(ndfit, scan, name + ext, [truth["model"]], work, "none", rust_args, truth,
-                                   args.timeout, dx=dx)
-    for path, name in real:
-        if not name.lower().endswith(".x3p"):
-            continue
-        print(f"-- end to end: {name}", file=sys.stderr, flush=True)
-        out += endtoend.check_scan(ndfit, path, name, [args.e2e_real_model], work, "plane", [], None, args.timeout)
-    return out
+    try:
+        with open(os.path.splitext(path)[0] + ".truth.json", encoding="utf-8") as fh:
+            truth = json.load(fh)
+    except (OSError, ValueError) as e:
+        return [endtoend.E2ERow(scan=name, model="-", errors=[f"reading the truth: {e}"])]
+    ext = as_format.get(name, ".x3p")
+    scan, rust_args, dx = path, [], None
+    if ext != ".x3p":
+        hm = scanio.read_scan(path)
+        scan = os.path.join(work, name + ext)
+        if ext == ".npy":
+            np.save(scan, hm.z)
+            dx = hm.dx
+            rust_args = ["--dx", repr(hm.dx), "--z-scale", "1"]
+        else:
+            scanio.write_gsf(scan, hm)
+    return endtoend.check_scan(ndfit, scan, name + ext, [truth["model"]], work, "none", rust_args, truth, timeout,
+                               dx=dx)
+
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -17,6 +17,7 @@ target/release/ndfit) may be relative to it. The last line sums up: `notebooks: 
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import copy
 import glob
 import os
@@ -97,12 +98,21 @@ def execute(path: str, timeout: int, out_dir: str = "", write: bool = False) -> 
     return err
 
 
+def timed_execute(path: str, timeout: int, out_dir: str, write: bool):
+    """`execute` and the seconds it took."""
+    t0 = time.perf_counter()
+    err = execute(path, timeout, out_dir, write)
+    return err, time.perf_counter() - t0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("folder")
     ap.add_argument("--write", action="store_true", help="write each notebook back with its outputs (when all its cells ran)")
     ap.add_argument("--timeout", type=int, default=900, help="seconds per cell")
     ap.add_argument("--out", default="", help="write the executed notebooks (with outputs) into this folder")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                    help="notebooks run side by side, each in its own kernel (default: one per core)")
     args = ap.parse_args(argv)
     paths = sorted(glob.glob(os.path.join(args.folder, "*.ipynb")))
     if not paths:
@@ -110,15 +120,19 @@ def main(argv=None) -> int:
         return 2
     os.environ.setdefault("NDFIT", "target/release/ndfit")
     failed = 0
-    for p in paths:
-        t0 = time.perf_counter()
-        err = execute(p, args.timeout, args.out, args.write)
-        dt = time.perf_counter() - t0
-        if err:
-            failed += 1
-            print(f"FAIL {p} ({dt:.0f} s): {err}")
-        else:
-            print(f"ok   {p} ({dt:.0f} s)")
+    # Each notebook runs in its own worker process and kernel; the lines come out in the notebooks' order.
+    with concurrent.futures.ProcessPoolExecutor(max_workers=max(1, min(args.jobs, len(paths)))) as pool:
+        runs = [(p, pool.submit(timed_execute, p, args.timeout, args.out, args.write)) for p in paths]
+        for p, run in runs:
+            try:
+                err, dt = run.result()
+            except Exception as e:  # noqa: BLE001 (a worker that died fails its notebook, not the others)
+                err, dt = f"the run died: {type(e).__name__}: {e}", float("nan")
+            if err:
+                failed += 1
+                print(f"FAIL {p} ({dt:.0f} s): {err}", flush=True)
+            else:
+                print(f"ok   {p} ({dt:.0f} s)", flush=True)
     print(f"notebooks: {len(paths) - failed} passed, {failed} failed")
     return 1 if failed else 0
 
