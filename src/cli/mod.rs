@@ -34,6 +34,10 @@ struct Cli {
     /// need more are refused before anything is allocated [default: half of the available memory]
     #[arg(long, global = true, value_name = "BYTES", value_parser = parse_bytes)]
     max_memory: Option<u64>,
+    /// When the command ends, print its peak resident memory on standard error (`VmHWM`, the process's
+    /// own since it started; Linux only), to size a machine for a scan
+    #[arg(long, global = true)]
+    report_memory: bool,
 }
 
 /// `--max-memory`: a byte count with an optional binary suffix (`512M`, `4G`).
@@ -142,6 +146,12 @@ pub fn main() -> ExitCode {
         Command::Scale(a) => scale::run(a),
     };
     progress::finish();
+    if cli.report_memory {
+        match ndfit::bench::mem::peak_rss() {
+            Some(b) => eprintln!("ndfit: peak resident memory {:.1} MiB", b as f64 / (1024.0 * 1024.0)),
+            None => eprintln!("ndfit: peak resident memory is not known on this system"),
+        }
+    }
     match result {
         Ok(code) => code,
         Err(err) if err.downcast_ref::<StdoutClosed>().is_some() => ExitCode::SUCCESS,

@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::{check_grid, checked_size, field_text, Cursor};
+use crate::io::mapped::Release;
 use crate::scan::{Heightfield, ScanMeta};
 
 /// The registry entry of the `al3d` format ([`crate::io::Reader`]).
@@ -91,13 +92,15 @@ pub fn read_al3d(bytes: &[u8]) -> Result<Heightfield> {
         )));
     }
     let data = &bytes[offset..offset + need];
-    let mut z = Vec::with_capacity(nx * ny);
+    let mut z = crate::scan::heights::with_capacity(nx * ny);
+    let mut release = Release::new(data);
     for i in 0..ny {
         for j in 0..nx {
             let k = 4 * (i * stride + j);
             let v = f32::from_le_bytes([data[k], data[k + 1], data[k + 2], data[k + 3]]);
             z.push(if v == invalid || v.is_nan() { f64::NAN } else { v as f64 });
         }
+        release.upto(4 * (i * stride + nx));
     }
     let mut hf = Heightfield::new(nx, ny, dx, dy, z).map_err(|e| Error::corrupt(format!("AL3D: {}", e.message())))?;
     let mut meta = ScanMeta { format: "al3d".into(), ..Default::default() };

@@ -7,6 +7,7 @@
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::check_grid;
+use crate::io::mapped::decode_values;
 use crate::io::units::metres_per;
 use crate::scan::{Heightfield, ScanMeta};
 
@@ -58,8 +59,7 @@ pub fn read_gsf(bytes: &[u8]) -> Result<Heightfield> {
     let fz = metres_per(&z_unit).map_err(|e| Error::new(ErrorKind::Unsupported, format!("GSF ZUnits: {}", e.message())))?;
     let xr = real("XReal", 1.0)?;
     let yr = real("YReal", 1.0)?;
-    let z: Vec<f64> =
-        bytes[data_start..data_start + n * 4].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64 * fz).collect();
+    let z = decode_values(&bytes[data_start..data_start + n * 4], 4, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64 * fz);
     let mut hf = Heightfield::new(nx, ny, xr / nx as f64 * fxy, yr / ny as f64 * fxy, z)
         .map_err(|e| Error::corrupt(format!("GSF: {}", e.message())))?;
     hf.x0 = real("XOffset", 0.0)? * fxy;

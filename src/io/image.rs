@@ -16,12 +16,8 @@ use crate::scan::{Heightfield, ScanMeta};
 pub const EXR_READER: crate::io::Reader =
     crate::io::Reader { id: "exr", extensions: &["exr"], magic: Some(|h| h.starts_with(&[0x76, 0x2f, 0x31, 0x01])), read: read_exr };
 /// The registry entry of the `png` format ([`crate::io::Reader`]).
-pub const PNG_READER: crate::io::Reader = crate::io::Reader {
-    id: "png",
-    extensions: &["png"],
-    magic: Some(|h| h.starts_with(b"\x89PNG\r\n\x1a\n")),
-    read: |b, o| read_image16(b, o, image::ImageFormat::Png, "PNG"),
-};
+pub const PNG_READER: crate::io::Reader =
+    crate::io::Reader { id: "png", extensions: &["png"], magic: Some(|h| h.starts_with(b"\x89PNG\r\n\x1a\n")), read: read_png16 };
 /// The registry entry of the `tiff` format ([`crate::io::Reader`]).
 pub const TIFF_READER: crate::io::Reader = crate::io::Reader {
     id: "tiff",
@@ -88,10 +84,100 @@ pub fn read_exr(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
     Ok(hf)
 }
 
+/// A 16-bit grey PNG decoded row by row into the heights (the file's pages given back behind the decoder,
+/// `io::mapped`): one copy of the heights, where decoding the whole image first holds its pixels
+/// and the heights together. Interlaced images and grey with a transparent level (`tRNS`) go through
+/// [`read_image16`], whose expansion they need.
+pub fn read_png16(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
+    let bad = |e: png::DecodingError| Error::corrupt(format!("PNG decode failed ({e})"));
+    let max_alloc = (bytes.len() as u64).saturating_mul(MAX_RATIO).clamp(1 << 20, 1 << 34).min(crate::budget::max_memory());
+    let limits = png::Limits { bytes: usize::try_from(max_alloc).unwrap_or(usize::MAX) };
+    let mut decoder = png::Decoder::new_with_limits(crate::io::mapped::ReleasingCursor::new(bytes), limits);
+    decoder.set_transformations(png::Transformations::IDENTITY);
+    let mut reader = decoder.read_info().map_err(|e| Error::corrupt(format!("PNG header is not readable ({e})")))?;
+    let info = reader.info();
+    let (nx, ny) = (info.width as usize, info.height as usize);
+    if info.interlaced || info.trns.is_some() {
+        return read_image16(bytes, opts, image::ImageFormat::Png, "PNG");
+    }
+    let channels = match (info.color_type, info.bit_depth) {
+        (png::ColorType::Grayscale, png::BitDepth::Sixteen) => 1,
+        (png::ColorType::GrayscaleAlpha, png::BitDepth::Sixteen) => 2,
+        (png::ColorType::Grayscale | png::ColorType::GrayscaleAlpha, depth) => {
+            return Err(Error::new(
+                ErrorKind::Unsupported,
+                format!("PNG is {}-bit: {} grey levels are too few for heights; use a 16-bit grey image", depth as u8, 1u32 << depth as u8),
+            ))
+        }
+        (colour, depth) => {
+            return Err(Error::new(
+                ErrorKind::Unsupported,
+                format!("PNG holds {colour:?} {}-bit colour pixels: heights need a 16-bit grey image", depth as u8),
+            ))
+        }
+    };
+    crate::budget::check_points(nx, ny, "PNG header")?;
+    let (dx, dy) = spacing(opts, "PNG")?;
+    let zs = z_scale(opts, "PNG")?;
+    let mut z = crate::scan::heights::with_capacity(nx * ny);
+    // Big-endian samples; with alpha, alpha 0 marks an invalid point.
+    while let Some(row) = reader.next_row().map_err(bad)? {
+        z.extend(row.data().chunks_exact(2 * channels).map(|p| match channels == 2 && p[2] == 0 && p[3] == 0 {
+            true => f64::NAN,
+            false => u16::from_be_bytes([p[0], p[1]]) as f64 * zs,
+        }));
+    }
+    if z.len() != nx * ny {
+        return Err(Error::corrupt(format!("PNG holds {} of its {nx} x {ny} pixels", z.len())));
+    }
+    let mut hf = Heightfield::new(nx, ny, dx, dy, z)?;
+    hf.meta = ScanMeta { format: "png".into(), ..Default::default() };
+    Ok(hf)
+}
+
+/// A plain 16-bit grey TIFF decoded strip by strip into the heights, each strip's file pages given back
+/// once decoded (`io::mapped`): one copy of the heights. `strips` are the file's strip ranges, checked.
+fn read_tiff16_strips(bytes: &[u8], opts: &ReadOptions, strips: &[(usize, usize)]) -> Result<Heightfield> {
+    let bad = |e: tiff::TiffError| Error::corrupt(format!("TIFF decode failed ({e})"));
+    let mut decoder = tiff::decoder::Decoder::new(std::io::Cursor::new(bytes))
+        .map_err(|e| Error::corrupt(format!("TIFF header is not readable ({e})")))?;
+    let (w, h) = decoder.dimensions().map_err(bad)?;
+    let (nx, ny) = (w as usize, h as usize);
+    crate::budget::check_points(nx, ny, "TIFF header")?;
+    if decoder.get_chunk_type() != tiff::decoder::ChunkType::Strip || decoder.strip_count().map_err(bad)? as usize != strips.len() {
+        return Err(Error::corrupt("TIFF strips do not match its directory"));
+    }
+    let (dx, dy) = spacing(opts, "TIFF")?;
+    let zs = z_scale(opts, "TIFF")?;
+    let mut z = crate::scan::heights::with_capacity(nx * ny);
+    // Strips in file order (as writers lay them out) are given back by the MiB behind the last one read.
+    let in_order = strips.windows(2).all(|p| p[0].0 <= p[1].0);
+    let mut release = crate::io::mapped::Release::new(bytes);
+    for (k, &(offset, count)) in strips.iter().enumerate() {
+        match decoder.read_chunk(k as u32).map_err(bad)? {
+            tiff::decoder::DecodingResult::U16(v) if z.len() + v.len() <= nx * ny => z.extend(v.iter().map(|&g| g as f64 * zs)),
+            _ => return Err(Error::corrupt(format!("TIFF strip {k} does not hold 16-bit grey rows of {nx} pixels"))),
+        }
+        match in_order {
+            true => release.upto(offset + count),
+            false => crate::io::mapped::Release::new(&bytes[offset..offset + count]).upto(count),
+        }
+    }
+    if z.len() != nx * ny {
+        return Err(Error::corrupt(format!("TIFF holds {} of its {nx} x {ny} pixels", z.len())));
+    }
+    let mut hf = Heightfield::new(nx, ny, dx, dy, z)?;
+    hf.meta = ScanMeta { format: "tiff".into(), ..Default::default() };
+    Ok(hf)
+}
+
 /// Read a 16-bit grayscale PNG or TIFF held in memory.
 pub fn read_image16(bytes: &[u8], opts: &ReadOptions, format: image::ImageFormat, id: &str) -> Result<Heightfield> {
     if format == image::ImageFormat::Tiff {
-        check_tiff_strips(bytes)?;
+        let strips = check_tiff_strips(bytes)?;
+        if !strips.is_empty() {
+            return read_tiff16_strips(bytes, opts, &strips);
+        }
     }
     // The header's dimensions against the memory budget before any pixel is decoded.
     let (w, h) = image::ImageReader::with_format(std::io::Cursor::new(bytes), format)
@@ -135,7 +221,9 @@ pub fn read_image16(bytes: &[u8], opts: &ReadOptions, format: image::ImageFormat
 /// Check a classic TIFF's first directory: every strip must lie inside the file and, uncompressed, hold
 /// the bytes its rows need. The decoder would otherwise fill a short strip from whatever bytes follow it
 /// (the directory itself). BigTIFF and tiled images are left to the decoder.
-fn check_tiff_strips(bytes: &[u8]) -> Result<()> {
+/// Where a TIFF's strips lie, `(offset, bytes)` each, when it is plain 16-bit grey: one sample per pixel
+/// (BlackIsZero, chunky), in strips. Empty otherwise: another layout, or a BigTIFF this check does not read.
+fn check_tiff_strips(bytes: &[u8]) -> Result<Vec<(usize, usize)>> {
     let le = bytes.starts_with(b"II");
     let u16at = |o: usize| -> Option<u64> {
         let b = bytes.get(o..o + 2)?;
@@ -147,7 +235,7 @@ fn check_tiff_strips(bytes: &[u8]) -> Result<()> {
     };
     let short = || Error::corrupt("TIFF directory is truncated");
     if u16at(2) != Some(42) {
-        return Ok(());
+        return Ok(Vec::new());
     }
     let ifd = u32at(4).ok_or_else(short)? as usize;
     let n = u16at(ifd).ok_or_else(short)? as usize;
@@ -178,7 +266,7 @@ fn check_tiff_strips(bytes: &[u8]) -> Result<()> {
             .map(Some)
             .ok_or_else(|| Error::corrupt(format!("TIFF tag {tag} runs past the end of the file")))
     };
-    let (Some(offsets), Some(counts)) = (values(273)?, values(279)?) else { return Ok(()) };
+    let (Some(offsets), Some(counts)) = (values(273)?, values(279)?) else { return Ok(Vec::new()) };
     if offsets.len() != counts.len() {
         return Err(Error::corrupt(format!("TIFF has {} strip offsets but {} strip byte counts", offsets.len(), counts.len())));
     }
@@ -203,5 +291,13 @@ fn check_tiff_strips(bytes: &[u8]) -> Result<()> {
             }
         }
     }
-    Ok(())
+    // Samples per pixel 1, 16 bits, BlackIsZero, chunky (absent tags take the baseline defaults).
+    let plain = values(277)?.is_none_or(|v| v == [1])
+        && values(258)?.is_some_and(|v| v == [16])
+        && values(262)?.is_some_and(|v| v == [1])
+        && values(284)?.is_none_or(|v| v == [1]);
+    Ok(match plain {
+        true => offsets.iter().zip(&counts).map(|(&o, &c)| (o as usize, c as usize)).collect(),
+        false => Vec::new(),
+    })
 }

@@ -16,6 +16,7 @@
 use std::io::Read;
 
 use crate::error::{Error, Result};
+use crate::io::mapped::Release;
 use crate::io::x3p::ZType;
 use crate::scan::heights;
 
@@ -69,7 +70,7 @@ pub(crate) fn read_deflated_points<R: Read + std::io::Seek>(
             .zip(usize::try_from(compressed).ok())
             .and_then(|(a, len)| a.checked_add(len).and_then(|b| file.get(a..b)))
             .ok_or_else(|| Error::corrupt(format!("{name}: truncated, its {compressed} compressed bytes are not all in the file")))?;
-        let src = SliceInflate { d: flate2::Decompress::new(false), input, pos: 0 };
+        let src = SliceInflate::new(input);
         return inflate_from(src, Some(entry.crc32()), name, n, t, inc, off, md5_want).map(Some);
     }
     inflate_heights(entry, name, n, t, inc, off, md5_want).map(Some)
@@ -110,9 +111,15 @@ struct SliceInflate<'a> {
     d: flate2::Decompress,
     input: &'a [u8],
     pos: usize,
+    /// The input's pages given back behind the inflate (when the input is the mapped file).
+    release: Release<'a>,
 }
 
-impl SliceInflate<'_> {
+impl<'a> SliceInflate<'a> {
+    fn new(input: &'a [u8]) -> SliceInflate<'a> {
+        SliceInflate { d: flate2::Decompress::new(false), input, pos: 0, release: Release::new(input) }
+    }
+
     /// One call: inflate into `out`, returning the bytes written, the input bytes used and whether the
     /// stream ended.
     fn step(&mut self, out: &mut [u8], name: &str) -> Result<(usize, usize, bool)> {
@@ -137,6 +144,7 @@ impl Source for SliceInflate<'_> {
                 return Err(Error::corrupt(format!("{name}: holds {} bytes, {need} expected", done + got)));
             }
         }
+        self.release.upto(self.pos);
         Ok(())
     }
 
@@ -198,29 +206,33 @@ fn inflate_from(
         }
     };
     let direct = t == ZType::D && cfg!(target_endian = "little");
-    let mut z = heights::with_capacity(n);
-    let mut raw: Vec<u8> = Vec::new();
-    let (bytes, mut dest): (&mut [u8], Option<&mut Vec<f64>>) = if direct {
-        z.resize(n, 0.0);
-        (as_bytes_mut(&mut z), None)
-    } else {
-        raw.resize(need, 0);
-        (&mut raw[..], Some(&mut z))
+    // Float64 is inflated into the heights' own bytes (zeroed pages the inflate touches in order); other
+    // types into one block that is decoded and reused. Either way the heights are the only whole copy.
+    let (mut z, mut block) = match direct {
+        true => (heights::zeroed(n), Vec::new()),
+        false => (heights::with_capacity(n), vec![0u8; BLOCK.min(need)]),
+    };
+    let (bytes, dest): (&mut [u8], Option<&mut Vec<f64>>) = match direct {
+        true => (as_bytes_mut(&mut z), None),
+        false => (&mut block[..], Some(&mut z)),
     };
     let sums = std::thread::scope(|s| -> Result<Option<(Option<String>, Option<u32>)>> {
         let (tx, hasher) = match md5_want.is_some() || crc_want.is_some() {
             true => {
-                let (tx, rx) = std::sync::mpsc::sync_channel::<&[u8]>(64);
+                // Blocks of the heights themselves are lent to the hashing thread; a reused block is copied,
+                // and fewer copies wait (2 MiB) than lent blocks (which cost nothing).
+                let depth = if direct { 64 } else { 8 };
+                let (tx, rx) = std::sync::mpsc::sync_channel::<std::borrow::Cow<'_, [u8]>>(depth);
                 let (want_md5, want_crc) = (md5_want.is_some(), crc_want.is_some());
                 let h = s.spawn(move || {
                     let mut m = want_md5.then(crate::io::md5::Md5::default);
                     let mut c = want_crc.then(crc32fast::Hasher::new);
                     for block in rx {
                         if let Some(m) = m.as_mut() {
-                            m.update(block);
+                            m.update(&block);
                         }
                         if let Some(c) = c.as_mut() {
-                            c.update(block);
+                            c.update(&block);
                         }
                     }
                     (m.map(|m| m.finish().iter().map(|b| format!("{b:02x}")).collect::<String>()), c.map(|c| c.finalize()))
@@ -230,17 +242,25 @@ fn inflate_from(
             false => (None, None),
         };
         let mut done = 0;
+        // A hasher that has gone away (it cannot, short of a panic) only loses the check.
         let mut sent = true;
-        for chunk in bytes.chunks_mut(BLOCK) {
-            entry.fill(chunk, name, done, need)?;
-            done += chunk.len();
-            let chunk: &[u8] = chunk;
-            if let Some(tx) = &tx {
-                // A hasher that has gone away (it cannot, short of a panic) only loses the check.
-                sent &= tx.send(chunk).is_ok();
-            }
-            if let Some(z) = dest.as_deref_mut() {
+        if let Some(z) = dest {
+            while done < need {
+                let chunk = &mut bytes[..BLOCK.min(need - done)];
+                entry.fill(chunk, name, done, need)?;
+                done += chunk.len();
                 decode_into(z, chunk, t, &finish);
+                if let Some(tx) = &tx {
+                    sent &= tx.send(std::borrow::Cow::Owned(chunk.to_vec())).is_ok();
+                }
+            }
+        } else {
+            for chunk in bytes.chunks_mut(BLOCK) {
+                entry.fill(chunk, name, done, need)?;
+                done += chunk.len();
+                if let Some(tx) = &tx {
+                    sent &= tx.send(std::borrow::Cow::Borrowed(chunk)).is_ok();
+                }
             }
         }
         drop(tx);
@@ -445,37 +465,18 @@ mod tests {
         // The stream's own lengths: inflate_from with a declared count that is wrong.
         let c = deflate(&raw);
         for (n, want) in [(40_001usize, "holds 320000 bytes, 320008"), (39_999, "more than the 319992 bytes")] {
-            let src = SliceInflate { d: flate2::Decompress::new(false), input: &c, pos: 0 };
+            let src = SliceInflate::new(&c);
             let e = inflate_from(src, None, "d", n, ZType::D, 1.0, 0.0, None).unwrap_err();
             assert!(e.message().contains(want), "{e}");
         }
         let cut = &c[..c.len() / 2];
-        let e = inflate_from(
-            SliceInflate { d: flate2::Decompress::new(false), input: cut, pos: 0 },
-            None,
-            "d",
-            40_000,
-            ZType::D,
-            1.0,
-            0.0,
-            None,
-        )
-        .unwrap_err();
+        let e = inflate_from(SliceInflate::new(cut), None, "d", 40_000, ZType::D, 1.0, 0.0, None).unwrap_err();
         assert_eq!(e.kind(), crate::error::ErrorKind::Corrupt, "{e}");
         // A wrong CRC-32 (the stream intact) and a damaged byte inside the stream.
-        let src = SliceInflate { d: flate2::Decompress::new(false), input: &c, pos: 0 };
+        let src = SliceInflate::new(&c);
         let e = inflate_from(src, Some(crc32fast::hash(&raw) ^ 1), "d", 40_000, ZType::D, 1.0, 0.0, None).unwrap_err();
         assert!(e.message().contains("CRC-32 mismatch"), "{e}");
-        let ok = inflate_from(
-            SliceInflate { d: flate2::Decompress::new(false), input: &c, pos: 0 },
-            Some(crc32fast::hash(&raw)),
-            "d",
-            40_000,
-            ZType::D,
-            1.0,
-            0.0,
-            None,
-        );
+        let ok = inflate_from(SliceInflate::new(&c), Some(crc32fast::hash(&raw)), "d", 40_000, ZType::D, 1.0, 0.0, None);
         assert_eq!(ok.unwrap().len(), 40_000);
         let mut bad = file.clone();
         let start = {

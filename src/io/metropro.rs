@@ -13,6 +13,7 @@
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::{check_grid, field_text, Cursor};
+use crate::io::mapped::decode_values;
 use crate::scan::{Heightfield, ScanMeta};
 
 /// The registry entry of the `metropro` format ([`crate::io::Reader`]).
@@ -93,17 +94,14 @@ pub fn read_metropro(bytes: &[u8]) -> Result<Heightfield> {
     }
     let k = if sign != 0 { -1.0 } else { 1.0 } * scale * obliquity * wavelength / r;
     let raw = d.take(cn_n_bytes, "MetroPro phase data")?;
-    let z: Vec<f64> = raw
-        .chunks_exact(4)
-        .map(|b| {
-            let v = i32::from_be_bytes([b[0], b[1], b[2], b[3]]);
-            if v >= INVALID_PHASE {
-                f64::NAN
-            } else {
-                v as f64 * k
-            }
-        })
-        .collect();
+    let z = decode_values(raw, 4, |b| {
+        let v = i32::from_be_bytes([b[0], b[1], b[2], b[3]]);
+        if v >= INVALID_PHASE {
+            f64::NAN
+        } else {
+            v as f64 * k
+        }
+    });
     let mut hf = Heightfield::new(cn_w, cn_h, lateral, lateral, z)?;
     let mut meta = ScanMeta { format: "metropro".into(), ..Default::default() };
     meta.file_xy_unit = Some("m".into());

@@ -11,6 +11,7 @@ pub mod bytes;
 pub mod gsf;
 pub mod image;
 pub(crate) mod inflate;
+pub(crate) mod mapped;
 pub mod md5;
 pub mod metropro;
 pub mod npy;
@@ -219,6 +220,11 @@ fn read_scan_inner(path: &Path, opts: &ReadOptions, stride: usize) -> Result<Hei
         return Err(Error::new(ErrorKind::InvalidInput, "is not a regular file (a pipe, socket or device); scans are read from files"));
     }
     let file = FileBytes::open(path, md.len())?;
+    // Decoders give back the file's pages behind them (`mapped`): one copy of the heights at the peak.
+    let _scope = match &file {
+        FileBytes::Mapped(map) => Some(mapped::Scope::new(map)),
+        FileBytes::Owned(_) => None,
+    };
     let bytes: &[u8] = &file;
     if bytes.is_empty() {
         return Err(Error::new(ErrorKind::BadData, "file is empty"));

@@ -11,6 +11,7 @@ use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::{check_grid, Cursor};
+use crate::io::mapped::decode_values;
 use crate::io::raw_opts::{spacing, z_scale};
 use crate::io::ReadOptions;
 use crate::scan::heights;
@@ -91,8 +92,8 @@ fn decode(bytes: &[u8], h: Header, opts: &ReadOptions) -> Result<Heightfield> {
     // scale, and mask infinities as NaN (what `Heightfield::new` would do in a second pass).
     let fin = |v: f64| if v.is_infinite() { f64::NAN } else { v };
     let (nx, ny) = (h.nx, h.ny);
-    let mut z = heights::with_capacity(n);
-    if h.fortran {
+    let z = if h.fortran {
+        let mut z = heights::with_capacity(n);
         // Column-major: element (i, j) is stored at j * ny + i; written in row-major order.
         for i in 0..ny {
             z.extend((0..nx).map(|j| {
@@ -100,12 +101,13 @@ fn decode(bytes: &[u8], h: Header, opts: &ReadOptions) -> Result<Heightfield> {
                 fin(value(&raw[k..k + size]) * zs)
             }));
         }
+        z
     } else if (endian, kind, size) == ('<', 'f', 8) {
         // The common case (numpy's default float64) without the per-element dispatch of `value`.
-        z.extend(raw.chunks_exact(8).map(|b| fin(f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * zs)));
+        decode_values(raw, 8, |b| fin(f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * zs))
     } else {
-        z.extend(raw.chunks_exact(size).map(|b| fin(value(b) * zs)));
-    }
+        decode_values(raw, size, |b| fin(value(b) * zs))
+    };
     finish(Heightfield::new_finite_or_nan(nx, ny, dx, dy, z)?, h.descr)
 }
 

@@ -12,6 +12,7 @@
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::{check_grid, field_text, Cursor};
+use crate::io::mapped::Release;
 use crate::scan::{Heightfield, ScanMeta};
 
 /// The registry entry of the `opd` format ([`crate::io::Reader`]). Two bytes, then the directory entry named "Directory".
@@ -120,12 +121,15 @@ pub fn read_opd(bytes: &[u8]) -> Result<Heightfield> {
             _ => data[k] as i8 as f64 * scale,
         }
     };
-    // Stored column by column (y fastest); row i of the grid is stored row ny-1-i.
+    // Stored column by column (y fastest); row i of the grid is stored row ny-1-i. Written in the stored
+    // order, so that the file's pages are given back behind the decoder (`mapped`).
     let mut z = vec![0.0; nx * ny];
-    for i in 0..ny {
-        for j in 0..nx {
-            z[i * nx + j] = value(j * ny + (ny - 1 - i));
+    let mut release = Release::new(data);
+    for j in 0..nx {
+        for r in 0..ny {
+            z[(ny - 1 - r) * nx + j] = value(j * ny + r);
         }
+        release.upto((j + 1) * ny * el);
     }
     let mut hf = Heightfield::new(nx, ny, pixel * 1e-3, pixel * aspect * 1e-3, z)?;
     meta.file_xy_unit = Some("mm".into());

@@ -10,6 +10,7 @@
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::{check_grid, field_text, Cursor};
+use crate::io::mapped::decode_values;
 use crate::scan::{Heightfield, ScanMeta};
 
 /// The registry entry of the `plu` format ([`crate::io::Reader`]). No signature: found by extension.
@@ -59,17 +60,14 @@ pub fn read_plu(bytes: &[u8]) -> Result<Heightfield> {
         return Err(Error::corrupt(format!("PLU layer is {nx} x {ny} but the calibration block says {cal_cols} x {cal_rows}")));
     }
     let raw = c.take(n * 4, "PLU heights")?;
-    let z: Vec<f64> = raw
-        .chunks_exact(4)
-        .map(|b| {
-            let v = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-            if v == PLU_INVALID {
-                f64::NAN
-            } else {
-                v as f64 * 1e-6
-            }
-        })
-        .collect();
+    let z = decode_values(raw, 4, |b| {
+        let v = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+        if v == PLU_INVALID {
+            f64::NAN
+        } else {
+            v as f64 * 1e-6
+        }
+    });
     if !(um_x.is_finite() && um_x > 0.0 && um_y.is_finite() && um_y > 0.0) {
         return Err(Error::corrupt(format!("PLU pixel size {um_x} x {um_y} µm is not positive")));
     }

@@ -16,6 +16,7 @@ use std::io::Read;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::bytes::{check_grid, checked_size, Cursor};
+use crate::io::mapped::decode_values;
 use crate::io::units::{latin1, metres_per};
 use crate::scan::{Heightfield, ScanMeta};
 
@@ -103,10 +104,10 @@ pub fn read_sur(bytes: &[u8]) -> Result<Heightfield> {
             v as f64 * sz + z_off
         }
     };
-    let z: Vec<f64> = if width == 2 {
-        data.chunks_exact(2).map(|b| conv(i16::from_le_bytes([b[0], b[1]]) as i32)).collect()
+    let z = if width == 2 {
+        decode_values(&data, 2, |b| conv(i16::from_le_bytes([b[0], b[1]]) as i32))
     } else {
-        data.chunks_exact(4).map(|b| conv(i32::from_le_bytes([b[0], b[1], b[2], b[3]]))).collect()
+        decode_values(&data, 4, |b| conv(i32::from_le_bytes([b[0], b[1], b[2], b[3]])))
     };
     let dx = sx as f64 * fx;
     let dy = sy as f64 * fy;

@@ -8,6 +8,7 @@
 
 use crate::error::{Error, Result};
 use crate::io::bytes::{check_grid, Cursor};
+use crate::io::mapped::decode_values;
 use crate::scan::{Heightfield, ScanMeta};
 
 /// The registry entry of the `tmd` format ([`crate::io::Reader`]).
@@ -41,7 +42,7 @@ pub fn read_tmd(bytes: &[u8]) -> Result<Heightfield> {
         return Err(Error::corrupt(format!("TMD field size {lx} x {ly} mm is not positive")));
     }
     let raw = c.take(n * 4, "TMD heights")?;
-    let z: Vec<f64> = raw.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64 * 1e-3).collect();
+    let z = decode_values(raw, 4, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64 * 1e-3);
     let mut hf = Heightfield::new(nx, ny, lx / nx as f64 * 1e-3, ly / ny as f64 * 1e-3, z)?;
     hf.x0 = ox * 1e-3;
     hf.y0 = oy * 1e-3;

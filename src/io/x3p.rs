@@ -235,8 +235,9 @@ fn read_x3p_in(bytes: &[u8], map: Option<&std::sync::Arc<memmap2::Mmap>>) -> Res
             map.is_some() && stored && ztype == ZType::D && z_inc == 1.0 && z_off == 0.0 && link.text_at(&["ValidPointsLink"]).is_none();
         if !candidate {
             budget()?;
-            // Decoded or inflated in order: every page mapped at once ([`crate::io::populate`]).
-            if let Some(map) = map {
+            // A stored entry is decoded in order: every page mapped at once ([`crate::io::populate`]). A
+            // deflated one is not: its pages fault in as the inflate reads them and are given back behind it.
+            if let Some(map) = map.filter(|_| stored) {
                 crate::io::populate(map);
             }
         }
@@ -450,8 +451,10 @@ pub fn decode(raw: &[u8], t: ZType, inc: f64, off: f64, crc: Option<u32>) -> Res
     let size = t.size();
     let mut out = heights::with_capacity(raw.len() / size);
     let mut hasher = crc.map(|_| crc32fast::Hasher::new());
-    // 64 KiB blocks: hashed and decoded while in cache.
-    for block in raw.chunks(1 << 16) {
+    let mut release = crate::io::mapped::Release::new(raw);
+    // 64 KiB blocks: hashed and decoded while in cache, the file's pages given back behind them.
+    for (k, block) in raw.chunks(1 << 16).enumerate() {
+        release.upto(k << 16);
         if let Some(h) = hasher.as_mut() {
             h.update(block);
         }

@@ -177,18 +177,21 @@ pub(crate) fn with_capacity(n: usize) -> Vec<f64> {
     v
 }
 
+/// `n` zeros (exactly one allocation), advised for huge pages when large. A large zeroed allocation
+/// comes as fresh pages of the system that become resident only as they are written.
+pub(crate) fn zeroed(n: usize) -> Vec<f64> {
+    let v = vec![0.0; n];
+    advise_huge(v.as_ptr() as usize, v.capacity() * std::mem::size_of::<f64>());
+    v
+}
+
 #[cfg(target_os = "linux")]
 fn advise_huge(start: usize, bytes: usize) {
     if bytes < HUGE_MIN_BYTES {
         return;
     }
-    // SAFETY: sysconf has no preconditions.
-    let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
     // Guard: a failed or odd page size query means no advice (the buffer works without it).
-    let Ok(page) = usize::try_from(page) else { return };
-    if page == 0 || !page.is_power_of_two() {
-        return;
-    }
+    let Some(page) = page_size() else { return };
     // madvise needs a page-aligned start; stay inside the allocation (round start up, end down).
     let lo = start.next_multiple_of(page);
     let hi = (start + bytes) / page * page;
@@ -203,23 +206,29 @@ const RELEASE_VALUES: usize = 1 << 19;
 
 /// Give the pages of `[start, start + bytes)` of a read-only file mapping back to the page cache
 /// (`MADV_DONTNEED`): the process's resident memory drops, and a later read faults the same bytes back
-/// in from the unchanged file. Called only on ranges of [`Heights`] that are mapped ([`Heights::is_mapped`]);
-/// the range is widened to whole pages (the mapping starts on a page and ends on one).
+/// in from the unchanged file. Called only on ranges of a read-only file mapping (mapped [`Heights`], a file a reader
+/// decodes); the range is widened to whole pages (the mapping starts on a page and ends on one).
 #[cfg(target_os = "linux")]
 pub(crate) fn release_pages(start: *const u8, bytes: usize) {
-    if bytes == 0 {
-        return;
-    }
-    // SAFETY: sysconf has no preconditions.
-    let Ok(page) = usize::try_from(unsafe { libc::sysconf(libc::_SC_PAGESIZE) }) else { return };
-    if page == 0 || !page.is_power_of_two() {
-        return;
-    }
+    let Some(page) = page_size().filter(|_| bytes > 0) else { return };
     let lo = (start as usize) & !(page - 1);
     let hi = (start as usize + bytes).next_multiple_of(page);
     // SAFETY: advice on whole pages of a read-only, file-backed mapping that stays mapped: the
     // contents read afterwards are the file's, unchanged (nothing writes the file or the mapping).
     let _ = unsafe { libc::madvise(lo as *mut libc::c_void, hi - lo, libc::MADV_DONTNEED) };
+}
+
+/// The page size, or `None` when the query fails or gives an odd value (then nothing is advised).
+#[cfg(target_os = "linux")]
+pub(crate) fn page_size() -> Option<usize> {
+    // SAFETY: sysconf has no preconditions.
+    let page = usize::try_from(unsafe { libc::sysconf(libc::_SC_PAGESIZE) }).ok()?;
+    (page != 0 && page.is_power_of_two()).then_some(page)
+}
+
+#[cfg(not(target_os = "linux"))]
+pub(crate) fn page_size() -> Option<usize> {
+    None
 }
 
 #[cfg(not(target_os = "linux"))]

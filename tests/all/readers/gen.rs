@@ -30,12 +30,17 @@ fn pad(s: &str, n: usize) -> Vec<u8> {
 
 /// Sensofar PLU, µm per pixel 1.5 x 2.5, heights in µm = stored / 4.
 pub fn plu() -> Vec<u8> {
+    plu_grid(NX, NY)
+}
+
+/// The same file for an `nx` x `ny` grid.
+pub fn plu_grid(nx: usize, ny: usize) -> Vec<u8> {
     let mut b = pad("Fri Mar 10 16:35:59 2023", 128);
     b.extend(1_678_462_559u32.to_le_bytes());
     b.extend(pad("(None)", 256));
-    b.extend((NY as u32).to_le_bytes());
-    b.extend((NX as u32).to_le_bytes());
-    b.extend((NX as u32).to_le_bytes());
+    b.extend((ny as u32).to_le_bytes());
+    b.extend((nx as u32).to_le_bytes());
+    b.extend((nx as u32).to_le_bytes());
     for f in [1.0f32, 1.5, 2.5, 0.0, 0.0, 1.5, 0.0] {
         b.extend(f.to_le_bytes());
     }
@@ -46,10 +51,10 @@ pub fn plu() -> Vec<u8> {
     b.extend([0u8, 1, 251, 6, 1, 0, 0, 0]);
     b.extend(1u32.to_le_bytes());
     assert_eq!(b.len(), 500);
-    b.extend((NY as u32).to_le_bytes());
-    b.extend((NX as u32).to_le_bytes());
-    for k in 0..NX * NY {
-        let v = if is_hole(k) { 1_000_001.0f32 } else { stored(k / NX, k % NX) as f32 / 4.0 };
+    b.extend((ny as u32).to_le_bytes());
+    b.extend((nx as u32).to_le_bytes());
+    for k in 0..nx * ny {
+        let v = if is_hole(k) { 1_000_001.0f32 } else { stored(k / nx, k % nx) as f32 / 4.0 };
         b.extend(v.to_le_bytes());
     }
     b.extend((-1.0f32).to_le_bytes());
@@ -60,6 +65,11 @@ pub fn plu() -> Vec<u8> {
 /// Digital Surf SUR: 32-bit points, spacing 2 µm x 3 µm (unit µm), z spacing 0.5 nm (unit nm),
 /// z offset 10 nm, non-measured flag set with value min - 2 at the holes.
 pub fn sur(compressed: bool) -> Vec<u8> {
+    sur_grid(NX, NY, compressed)
+}
+
+/// The same file for an `nx` x `ny` grid.
+pub fn sur_grid(nx: usize, ny: usize, compressed: bool) -> Vec<u8> {
     let mut h = vec![0u8; 512];
     h[..12].copy_from_slice(if compressed { b"DSCOMPRESSED" } else { b"DIGITAL SURF" });
     let put = |h: &mut Vec<u8>, off: usize, v: &[u8]| h[off..off + v.len()].copy_from_slice(v);
@@ -72,9 +82,9 @@ pub fn sur(compressed: bool) -> Vec<u8> {
     let zmin = -1000i32;
     put(&mut h, 100, &zmin.to_le_bytes());
     put(&mut h, 104, &1000i32.to_le_bytes());
-    put(&mut h, 108, &(NX as i32).to_le_bytes());
-    put(&mut h, 112, &(NY as i32).to_le_bytes());
-    put(&mut h, 116, &((NX * NY) as u32).to_le_bytes());
+    put(&mut h, 108, &(nx as i32).to_le_bytes());
+    put(&mut h, 112, &(ny as i32).to_le_bytes());
+    put(&mut h, 116, &((nx * ny) as u32).to_le_bytes());
     put(&mut h, 120, &2.0f32.to_le_bytes());
     put(&mut h, 124, &3.0f32.to_le_bytes());
     put(&mut h, 128, &0.5f32.to_le_bytes());
@@ -92,8 +102,8 @@ pub fn sur(compressed: bool) -> Vec<u8> {
     put(&mut h, 316, &2024u16.to_le_bytes());
     put(&mut h, 474, &10.0f32.to_le_bytes());
     let mut data = Vec::new();
-    for k in 0..NX * NY {
-        let v = if is_hole(k) { zmin - 2 } else { stored(k / NX, k % NX) };
+    for k in 0..nx * ny {
+        let v = if is_hole(k) { zmin - 2 } else { stored(k / nx, k % nx) };
         data.extend(v.to_le_bytes());
     }
     if compressed {
@@ -123,8 +133,13 @@ fn opd_entry(name: &str, t: i16, len: i32) -> Vec<u8> {
 /// Wyko OPD with float32 values (wavelength 600 nm, mult 2, pixel 0.002 mm, aspect 1.5).
 /// Heights (m) = stored * 600e-9 / 2; values are stored column by column from the top row.
 pub fn opd(int16: bool) -> Vec<u8> {
+    opd_grid(NX, NY, int16)
+}
+
+/// The same file for an `nx` x `ny` grid.
+pub fn opd_grid(nx: usize, ny: usize, int16: bool) -> Vec<u8> {
     let el = if int16 { 2 } else { 4 };
-    let raw_len = 6 + NX * NY * el;
+    let raw_len = 6 + nx * ny * el;
     let entries = [
         ("Directory", 1i16, 24 * 6),
         ("RAW_DATA", 3, raw_len as i32),
@@ -137,13 +152,13 @@ pub fn opd(int16: bool) -> Vec<u8> {
     for (n, t, l) in entries {
         b.extend(opd_entry(n, t, l));
     }
-    b.extend((NX as u16).to_le_bytes());
-    b.extend((NY as u16).to_le_bytes());
+    b.extend((nx as u16).to_le_bytes());
+    b.extend((ny as u16).to_le_bytes());
     b.extend((el as u16).to_le_bytes());
-    for j in 0..NX {
-        for r in 0..NY {
-            let i = NY - 1 - r;
-            let k = i * NX + j;
+    for j in 0..nx {
+        for r in 0..ny {
+            let i = ny - 1 - r;
+            let k = i * nx + j;
             if int16 {
                 let v = if is_hole(k) { i16::MAX } else { stored(i, j) as i16 };
                 b.extend(v.to_le_bytes());
@@ -163,22 +178,27 @@ pub fn opd(int16: bool) -> Vec<u8> {
 /// MetroPro DAT, header format 1: scale 0.5, wavelength 632.8 nm, obliquity 1, phase_res 1
 /// (R = 32768), lateral 1e-6 m; heights = stored * 0.5 * 632.8e-9 / 32768 (f32 constants).
 pub fn metropro() -> Vec<u8> {
+    metropro_grid(NX, NY)
+}
+
+/// The same file for an `nx` x `ny` grid.
+pub fn metropro_grid(nx: usize, ny: usize) -> Vec<u8> {
     let mut h = vec![0u8; 834];
     let put = |h: &mut Vec<u8>, off: usize, v: &[u8]| h[off..off + v.len()].copy_from_slice(v);
     put(&mut h, 0, &0x881B036Fu32.to_be_bytes());
     put(&mut h, 4, &1u16.to_be_bytes());
     put(&mut h, 6, &834u32.to_be_bytes());
-    put(&mut h, 68, &(NX as u16).to_be_bytes());
-    put(&mut h, 70, &(NY as u16).to_be_bytes());
-    put(&mut h, 72, &((NX * NY * 4) as u32).to_be_bytes());
+    put(&mut h, 68, &(nx as u16).to_be_bytes());
+    put(&mut h, 70, &(ny as u16).to_be_bytes());
+    put(&mut h, 72, &((nx * ny * 4) as u32).to_be_bytes());
     put(&mut h, 164, &0.5f32.to_be_bytes());
     put(&mut h, 168, &632.8e-9f32.to_be_bytes());
     put(&mut h, 176, &1.0f32.to_be_bytes());
     put(&mut h, 184, &1e-6f32.to_be_bytes());
     put(&mut h, 218, &1i16.to_be_bytes());
     put(&mut h, 246, b"20X Mirau");
-    for k in 0..NX * NY {
-        let v = if is_hole(k) { i32::MAX } else { stored(k / NX, k % NX) };
+    for k in 0..nx * ny {
+        let v = if is_hole(k) { i32::MAX } else { stored(k / nx, k % nx) };
         h.extend(v.to_be_bytes());
     }
     h
@@ -193,13 +213,18 @@ fn al3d_tag(k: &str, v: &str) -> Vec<u8> {
 
 /// Alicona AL3D: float32 metres = stored * 1e-6, pixel 0.5 µm x 0.75 µm, invalid 3e15.
 pub fn al3d() -> Vec<u8> {
+    al3d_grid(NX, NY)
+}
+
+/// The same file for an `nx` x `ny` grid.
+pub fn al3d_grid(nx: usize, ny: usize) -> Vec<u8> {
     let mut b = b"AliconaImaging\x00\r\n".to_vec();
     b.extend(al3d_tag("Version", "1"));
     b.extend(al3d_tag("TagCount", "6"));
     let offset = 17 + 8 * 52;
     for (k, v) in [
-        ("Cols", NX.to_string()),
-        ("Rows", NY.to_string()),
+        ("Cols", nx.to_string()),
+        ("Rows", ny.to_string()),
         ("PixelSizeXMeter", "5e-07".to_string()),
         ("PixelSizeYMeter", "7.5e-07".to_string()),
         ("DepthImageOffset", offset.to_string()),
@@ -208,10 +233,10 @@ pub fn al3d() -> Vec<u8> {
         b.extend(al3d_tag(k, &v));
     }
     assert_eq!(b.len(), offset);
-    for k in 0..NX * NY {
+    for k in 0..nx * ny {
         // The file's hole marker written digit for digit as the format's producers write it.
         #[allow(clippy::excessive_precision)]
-        let v = if is_hole(k) { 3.000000028082e15f32 } else { stored(k / NX, k % NX) as f32 * 1e-6 };
+        let v = if is_hole(k) { 3.000000028082e15f32 } else { stored(k / nx, k % nx) as f32 * 1e-6 };
         b.extend(v.to_le_bytes());
     }
     b
@@ -219,15 +244,20 @@ pub fn al3d() -> Vec<u8> {
 
 /// TrueMap TMD: field 14 mm x 10 mm, heights in mm = stored / 1000 (f32).
 pub fn tmd() -> Vec<u8> {
+    tmd_grid(NX, NY)
+}
+
+/// The same file for an `nx` x `ny` grid.
+pub fn tmd_grid(nx: usize, ny: usize) -> Vec<u8> {
     let mut b = pad("Binary TrueMap Data File v2.0\r\n", 32);
     b.extend(b"Created by TrueMap v6\r\n\0");
-    b.extend((NX as u32).to_le_bytes());
-    b.extend((NY as u32).to_le_bytes());
+    b.extend((nx as u32).to_le_bytes());
+    b.extend((ny as u32).to_le_bytes());
     for f in [14.0f32, 10.0, 0.0, 0.0] {
         b.extend(f.to_le_bytes());
     }
-    for k in 0..NX * NY {
-        let v = if is_hole(k) { f32::NAN } else { stored(k / NX, k % NX) as f32 / 1000.0 };
+    for k in 0..nx * ny {
+        let v = if is_hole(k) { f32::NAN } else { stored(k / nx, k % nx) as f32 / 1000.0 };
         b.extend(v.to_le_bytes());
     }
     b
@@ -235,14 +265,19 @@ pub fn tmd() -> Vec<u8> {
 
 /// Gwyddion Simple Field in µm laterally and nm vertically.
 pub fn gsf() -> Vec<u8> {
+    gsf_grid(NX, NY)
+}
+
+/// The same file for an `nx` x `ny` grid.
+pub fn gsf_grid(nx: usize, ny: usize) -> Vec<u8> {
     let mut b = format!(
-        "Gwyddion Simple Field 1.0\nXRes = {NX}\nYRes = {NY}\nXReal = 14\nYReal = 15\nXYUnits = um\nZUnits = nm\nTitle = generated\n"
+        "Gwyddion Simple Field 1.0\nXRes = {nx}\nYRes = {ny}\nXReal = 14\nYReal = 15\nXYUnits = um\nZUnits = nm\nTitle = generated\n"
     )
     .into_bytes();
     let padn = 4 - b.len() % 4;
     b.extend(std::iter::repeat_n(0u8, padn));
-    for k in 0..NX * NY {
-        let v = if is_hole(k) { f32::NAN } else { stored(k / NX, k % NX) as f32 };
+    for k in 0..nx * ny {
+        let v = if is_hole(k) { f32::NAN } else { stored(k / nx, k % nx) as f32 };
         b.extend(v.to_le_bytes());
     }
     b
@@ -273,12 +308,17 @@ pub fn npy() -> Vec<u8> {
 
 /// 16-bit grey PNG of stored + 1000 (holes carry alpha 0).
 pub fn png16() -> Vec<u8> {
+    png16_grid(NX, NY)
+}
+
+/// The same file for an `nx` x `ny` grid.
+pub fn png16_grid(nx: usize, ny: usize) -> Vec<u8> {
     let mut px = Vec::new();
-    for k in 0..NX * NY {
-        px.push((stored(k / NX, k % NX) + 1000) as u16);
+    for k in 0..nx * ny {
+        px.push((stored(k / nx, k % nx) + 1000) as u16);
         px.push(if is_hole(k) { 0 } else { u16::MAX });
     }
-    let img = image::ImageBuffer::<image::LumaA<u16>, Vec<u16>>::from_raw(NX as u32, NY as u32, px).expect("buffer");
+    let img = image::ImageBuffer::<image::LumaA<u16>, Vec<u16>>::from_raw(nx as u32, ny as u32, px).expect("buffer");
     let mut out = std::io::Cursor::new(Vec::new());
     img.write_to(&mut out, image::ImageFormat::Png).expect("png");
     out.into_inner()
@@ -286,8 +326,13 @@ pub fn png16() -> Vec<u8> {
 
 /// 16-bit grey TIFF of stored + 1000 (no holes: TIFF grey has no alpha here).
 pub fn tiff16() -> Vec<u8> {
-    let px: Vec<u16> = (0..NX * NY).map(|k| (stored(k / NX, k % NX) + 1000) as u16).collect();
-    let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(NX as u32, NY as u32, px).expect("buffer");
+    tiff16_grid(NX, NY)
+}
+
+/// The same file for an `nx` x `ny` grid.
+pub fn tiff16_grid(nx: usize, ny: usize) -> Vec<u8> {
+    let px: Vec<u16> = (0..nx * ny).map(|k| (stored(k / nx, k % nx) + 1000) as u16).collect();
+    let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(nx as u32, ny as u32, px).expect("buffer");
     let mut out = std::io::Cursor::new(Vec::new());
     img.write_to(&mut out, image::ImageFormat::Tiff).expect("tiff");
     out.into_inner()

@@ -6,6 +6,7 @@ pub mod gen;
 mod npy_layouts;
 mod npy_strided;
 mod npy_zero_copy;
+mod one_copy;
 mod peers;
 mod preprocess;
 mod robust;

@@ -10,7 +10,7 @@ use ndfit::io::{read_scan, ReadOptions};
 use super::x3p::main_xml;
 
 /// An X3P with `data` as `bindata/data.bin`, deflated or stored, and its point-data MD5 `md5`.
-fn x3p(ztype: &str, cz: &str, nx: usize, ny: usize, data: &[u8], md5: &str, deflated: bool) -> Vec<u8> {
+pub(super) fn x3p(ztype: &str, cz: &str, nx: usize, ny: usize, data: &[u8], md5: &str, deflated: bool) -> Vec<u8> {
     let link =
         format!("<DataLink><PointDataLink>bindata/data.bin</PointDataLink><MD5ChecksumPointData>{md5}</MD5ChecksumPointData></DataLink>");
     let main = main_xml("<ISO5436_2>", "</ISO5436_2>", ztype, cz, nx, ny, &link);
@@ -29,7 +29,7 @@ fn x3p(ztype: &str, cz: &str, nx: usize, ny: usize, data: &[u8], md5: &str, defl
 }
 
 /// Stored values of type `ztype`: a smooth sloped surface with noise-like detail and, for floats, holes.
-fn values(ztype: &str, nx: usize, ny: usize) -> Vec<u8> {
+pub(super) fn values(ztype: &str, nx: usize, ny: usize) -> Vec<u8> {
     let mut raw = Vec::new();
     for i in 0..ny {
         for j in 0..nx {
