@@ -168,6 +168,15 @@ impl Material {
         })
     }
 
+    /// Where the complex index comes from, as a file's description cites it (empty for the mirror).
+    pub fn source(self) -> &'static str {
+        match self {
+            Material::None => "",
+            Material::Au | Material::Cu => "Johnson & Christy 1972, Table I",
+            Material::Ag | Material::Al | Material::Cr => "Rakic et al. 1998 Lorentz-Drude model",
+        }
+    }
+
     /// Unpolarized Fresnel reflectance at the cosine `cos_i` between the incident direction and the facet
     /// normal, at `lambda_nm` (1 for the perfect mirror).
     pub fn fresnel(self, cos_i: f64, lambda_nm: f64) -> f64 {
