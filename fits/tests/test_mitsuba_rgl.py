@@ -240,3 +240,91 @@ def test_gaussian_scan_table_matches_beckmann(tmp_path):
     med = float(np.median(rel))
     print(f"gaussian scan table vs beckmann truth: median rel. err {med:.4f} over {len(rel)} pairs")
     assert med <= 0.05, med
+
+
+# The conductors against Mitsuba's own indices (its data/ior tables from luxpop.com, mostly Palik's handbook).
+METALS = ["Al", "Ag", "Au", "Cu", "Cr"]
+# The wavelengths (nm) ndfit evaluates its rgb channels at (export::rgl::RGB_NM) and its spectral nodes.
+RGB_NM = [612.0, 549.0, 465.0]
+SPECTRAL_NM = [380.0, 420.0, 460.0, 500.0, 540.0, 580.0, 620.0, 660.0, 700.0, 740.0, 780.0]
+# Published n + i k of one metal differ with the sample (film or bulk, surface): under 1% in reflectance
+# for the free-electron metals Al and Ag, up to 8% at the interband edge of Au and Cu (Johnson & Christy
+# against Palik) and in the blue for Cr; each tolerance covers that spread.
+INDEX_TOL = {"Al": 0.02, "Ag": 0.02, "Au": 0.09, "Cu": 0.09, "Cr": 0.09}
+# The two geometries: normal incidence, and the specular pair at 45 degrees (F at cos 45).
+PAIRS = [(np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])), (sph(math.pi / 4, 0.0), sph(math.pi / 4, math.pi))]
+
+
+def eval_spectral(bsdf, wi, wo, nm):
+    """`bsdf.eval` in a spectral variant at the wavelengths `nm` (four at a time)."""
+    out = []
+    for k in range(0, len(nm), 4):
+        chunk = list(nm[k:k + 4]) + [nm[k]] * (4 - len(nm[k:k + 4]))
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*map(float, wi))
+        si.wavelengths = mi.Spectrum(chunk)
+        v = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*map(float, wo)))
+        out += [v[j] for j in range(len(nm[k:k + 4]))]
+    return np.array(out)
+
+
+@pytest.fixture(scope="module")
+def conductor_tables(tmp_path_factory):
+    """A narrow isotropic GGX as RGB and spectral tables for the mirror and every metal."""
+    d = tmp_path_factory.mktemp("metals")
+    fit = d / "ggx.json"
+    fit.write_text(json.dumps({"model": "ggx", "params": {"alpha": 0.15}}))
+    out = {}
+    for material in ["none"] + METALS:
+        for flavour in ["rgb", "spectral"]:
+            path = d / f"{material}.{flavour}.bsdf"
+            ndfit("export", fit, "--to", "rgl", "-o", path, "--material", material, "--theta-i", "3", "--phi-i", "3",
+                  "--warp-res", "16", *(["--spectral"] if flavour == "spectral" else []))
+            out[material, flavour] = path
+    return out
+
+
+def fresnel_factors(variant, make, wi, wo, nm=None):
+    """Each metal's eval over its `material=none` twin's: the Fresnel factor alone (the table's geometry is
+    bounded by test_eval_matches_roughconductor)."""
+    mi.set_variant(variant)
+    try:
+        ev = (lambda b: eval_spectral(b, wi, wo, nm)) if nm else (lambda b: eval_bsdf(b, wi, wo))
+        mirror = ev(make("none"))
+        return {m: ev(make(m)) / mirror for m in METALS}
+    finally:
+        mi.set_variant("scalar_rgb")
+
+
+def mitsuba_conductor(material):
+    return mi.load_dict({"type": "roughconductor", "distribution": "ggx", "alpha": 0.15, "material": material})
+
+
+def test_conductors_match_mitsuba_spectral(conductor_tables):
+    """The spectral tables in scalar_spectral at ndfit's wavelength nodes against Mitsuba's roughconductor:
+    both evaluate n + i k at the wavelength itself, so only the published indices differ."""
+    for wi, wo in PAIRS:
+        ours = fresnel_factors("scalar_spectral", lambda m: load_measured(conductor_tables[m, "spectral"]), wi, wo,
+                               SPECTRAL_NM)
+        ref = fresnel_factors("scalar_spectral", mitsuba_conductor, wi, wo, SPECTRAL_NM)
+        for m in METALS:
+            rel = ours[m] / ref[m] - 1.0
+            print(f"{m} at {math.degrees(math.acos(wi[2])):.0f} deg, F / Mitsuba's - 1 at {SPECTRAL_NM[0]:.0f}.."
+                  f"{SPECTRAL_NM[-1]:.0f} nm: {' '.join(f'{r:+.3f}' for r in rel)}")
+            assert np.all(np.abs(rel) <= INDEX_TOL[m]), (m, rel)
+
+
+def test_conductors_match_mitsuba_rgb(conductor_tables):
+    """The RGB tables in scalar_rgb against Mitsuba's roughconductor, per channel. Mitsuba's RGB variants
+    turn the spectra of n and k into sRGB before the Fresnel, ndfit evaluates each channel at its dominant
+    wavelength: that gap (up to 20% in gold's blue) is measured here from Mitsuba alone, its spectral
+    variant at ndfit's wavelengths against its RGB variant, and added to the spread of the indices."""
+    for wi, wo in PAIRS:
+        ours = fresnel_factors("scalar_rgb", lambda m: load_measured(conductor_tables[m, "rgb"]), wi, wo)
+        ref = fresnel_factors("scalar_rgb", mitsuba_conductor, wi, wo)
+        ref_at_nm = fresnel_factors("scalar_spectral", mitsuba_conductor, wi, wo, RGB_NM)
+        for m in METALS:
+            rel, gap = ours[m] / ref[m] - 1.0, ref_at_nm[m] / ref[m] - 1.0
+            print(f"{m} at {math.degrees(math.acos(wi[2])):.0f} deg, RGB: F / Mitsuba's - 1 {np.round(rel, 3)}, "
+                  f"Mitsuba's own RGB gap {np.round(gap, 3)}")
+            assert np.all(np.abs(rel) <= np.abs(gap) + INDEX_TOL[m]), (m, rel, gap)

@@ -149,7 +149,7 @@ fn params_text(m: &Model) -> String {
 fn material_text(m: Material) -> String {
     match m {
         Material::None => "none (F = 1)".into(),
-        _ => format!("{} (complex index: Rakic et al. 1998 Lorentz-Drude model)", m.as_str()),
+        _ => format!("{} (complex index: {})", m.as_str(), m.source()),
     }
 }
 

@@ -1,7 +1,7 @@
 //! The tabulated BSDF (`ndfit export --to rgl`): the file read back byte by byte as pbrt-v4's `Tensor`
 //! and `MeasuredBxDFData::Create` read it, the tables against the model they tabulate (the NDF at nodes
 //! placed by hand, the projected area against Smith's closed-form Lambda), the conductors against
-//! Johnson & Christy's measured indices, and the CLI's bad input.
+//! a second set of measured indices, and the CLI's bad input.
 
 use std::f64::consts::PI;
 use std::process::Command;
@@ -158,11 +158,11 @@ fn rgl_ndf_and_sigma_against_the_model() {
     assert!(along_tab > 2.0 * across_tab && along > 0.0, "{along_tab} vs {across_tab}");
 }
 
-/// Normal-incidence reflectance of the Lorentz-Drude indices against Johnson & Christy's measured ones
-/// (Phys. Rev. B 6, 4370 (1972); for Al the table pbrt-v4 ships) at 450, 551 and 653 nm: within 0.03 for Ag
-/// and Al; Au and Cu within 0.16, the Lorentz-Drude fit's known departure at their interband edge (Cu at
-/// 551 nm: 0.78 against the measured 0.64).
-/// `(wavelength nm, n, k)`, measured.
+/// Normal-incidence reflectance of the conductors against the tabulated measured indices Mitsuba 3 ships
+/// (the luxpop.com compilation, rows at 450.85, 551.04 and 652.55 nm), a second source beside the one
+/// ndfit cites: within 0.01 for Ag and Al; Au and Cu within 0.06, the spread of published measurements at
+/// their interband edge (gold at 551 nm: Johnson & Christy 0.795 against 0.851 here; Rakic's
+/// Lorentz-Drude fit gave 0.750, and 0.784 for copper against 0.636).
 type Measured = (f64, f64, f64);
 
 #[test]
@@ -177,7 +177,7 @@ fn rgl_conductors_against_measured_indices() {
     for (mat, rows) in table {
         for (nm, n, k) in rows {
             let f = mat.fresnel(1.0, nm);
-            let tol = if matches!(mat, Material::Au | Material::Cu) { 0.16 } else { 0.03 };
+            let tol = if matches!(mat, Material::Au | Material::Cu) { 0.06 } else { 0.01 };
             assert!((f - r0(n, k)).abs() < tol, "{mat:?} at {nm} nm: {f} vs {}", r0(n, k));
         }
     }
@@ -186,7 +186,8 @@ fn rgl_conductors_against_measured_indices() {
         assert!(mat.fresnel(1.0, 612.0) > mat.fresnel(1.0, 465.0) + 0.2, "{mat:?}");
     }
     assert_eq!(Material::None.fresnel(0.3, 500.0), 1.0);
-    // Chromium: grey, between 0.5 and 0.7 over the visible (no second source at hand: a range check).
+    // Chromium: grey, between 0.5 and 0.7 over the visible (its second source is Mitsuba's, in
+    // fits/tests/test_mitsuba_rgl.py).
     for nm in [450.0, 550.0, 650.0] {
         let f = Material::Cr.fresnel(1.0, nm);
         assert!((0.5..0.7).contains(&f), "Cr at {nm}: {f}");

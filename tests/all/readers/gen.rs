@@ -411,14 +411,72 @@ pub fn binary_files() -> Vec<(&'static str, Vec<u8>)> {
     ]
 }
 
+/// Small RGL tensor files written by the library's own writer: an isotropic and a rotated anisotropic
+/// GGX in RGB, and the anisotropic one as a gold spectral table.
+pub fn rgl_files() -> Vec<(&'static str, Vec<u8>)> {
+    use ndfit::export::rgl::{tabulate, Flavour, Material, RglOptions};
+    use ndfit::models::{Model, ModelId, Ndf};
+    let small = |material, flavour| RglOptions { theta_i: 3, phi_i: 3, ndf_res: 8, warp_res: 4, material, flavour };
+    let iso = Model::from_params(ModelId::Ggx, &[0.2]).expect("ggx");
+    let aniso = Model::from_params(ModelId::GgxAniso, &[0.3, 0.1, -1.043]).expect("ggx-aniso");
+    let table = |m: &Model, opts| tabulate(&|w| m.d(w), "fuzz seed", &opts, false).expect("table").tensor.to_bytes();
+    vec![
+        ("iso.bsdf", table(&iso, small(Material::None, Flavour::Rgb))),
+        ("aniso.bsdf", table(&aniso, small(Material::Cu, Flavour::Rgb))),
+        ("spectral.bsdf", table(&aniso, small(Material::Au, Flavour::Spectral))),
+    ]
+}
+
+/// Inputs of the `x3p_write` target (byte 0: columns - 1 mod 16, bytes 1..9: the spacing as f64, then
+/// heights as f64, all little-endian): a plain grid, one with NaN, infinities and a subnormal, and one
+/// with a spacing the writer refuses.
+pub fn x3p_write_inputs() -> Vec<(&'static str, Vec<u8>)> {
+    let input = |nx: u8, dx: f64, z: &[f64]| {
+        let mut b = vec![nx - 1, 0, 0, 0, 0, 0, 0, 0, 0];
+        b[1..9].copy_from_slice(&dx.to_le_bytes());
+        z.iter().for_each(|v| b.extend(v.to_le_bytes()));
+        b
+    };
+    let grid: Vec<f64> = (0..NX * NY).map(|k| stored(k / NX, k % NX) as f64 * 1e-9).collect();
+    let mut odd = grid.clone();
+    odd[HOLES[0]] = f64::NAN;
+    odd[HOLES[1]] = f64::INFINITY;
+    odd[1] = f64::NEG_INFINITY;
+    odd[2] = 5e-324;
+    vec![
+        ("grid.bin", input(NX as u8, 1e-6, &grid)),
+        ("nonfinite.bin", input(NX as u8, 2.5e-7, &odd)),
+        ("bad_spacing.bin", input(3, -1.0, &grid[..12])),
+    ]
+}
+
+/// Batch manifests: every fixed column, option columns (a value, a bare flag, an empty cell), a comment,
+/// quoting, and an id that would escape the output folder.
+pub fn manifests() -> Vec<(&'static str, Vec<u8>)> {
+    vec![
+        ("plain.csv", b"path\na.x3p\nsub/b.sur\n".to_vec()),
+        (
+            "columns.csv",
+            b"# scans of the rough set\npath,id,model,options,dx,z_scale,quiet\na.x3p,first,ggx,--max-theta 60,1.5e-6,,true\n\"b c.plu\",second,,,,1e-3,false\n".to_vec(),
+        ),
+        ("escape.csv", b"path,id\nx.npy,../../outside\ny.npy,/abs/name\nz.npy,a/./b\n".to_vec()),
+    ]
+}
+
 /// Write the seed corpora of the cargo-fuzz targets (one directory per target) under `root`.
 pub fn write_seed_corpus(root: &std::path::Path) {
-    for (name, bytes) in binary_files() {
+    let readers = binary_files().into_iter().map(|(name, bytes)| {
         let target = match name.rsplit('.').next().expect("extension") {
             "dat" => "metropro",
             "tif" => "tiff",
             other => other,
         };
+        (target, name, bytes)
+    });
+    let others = [("rgl", rgl_files()), ("x3p_write", x3p_write_inputs()), ("manifest", manifests())]
+        .into_iter()
+        .flat_map(|(target, files)| files.into_iter().map(move |(name, bytes)| (target, name, bytes)));
+    for (target, name, bytes) in readers.chain(others) {
         let dir = root.join(target);
         std::fs::create_dir_all(&dir).expect("corpus dir");
         std::fs::write(dir.join(name), bytes).expect("seed");
