@@ -31,7 +31,7 @@ const MAX_RATIO: u64 = 1032;
 
 /// Read an OpenEXR file held in memory.
 pub fn read_exr(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
-    use exr::prelude::{read, FlatSamples, ReadChannels as _, ReadLayers as _};
+    use exr::prelude::{read, ReadChannels as _, ReadLayers as _, ReadSpecificChannel as _, Sample};
     let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
         .map_err(|e| Error::corrupt(format!("not a readable OpenEXR file ({e})")))?;
     let header = meta.headers.first().ok_or_else(|| Error::corrupt("OpenEXR file has no layer"))?;
@@ -44,43 +44,48 @@ pub fn read_exr(bytes: &[u8], opts: &ReadOptions) -> Result<Heightfield> {
     crate::budget::check_points(w as usize, h as usize, "OpenEXR header")?;
     let (dx, dy) = spacing(opts, "OpenEXR")?;
     let zs = z_scale(opts, "OpenEXR")?;
-    // A third-party decoder must not take the process down on hostile bytes: a panic inside it is
-    // reported as a corrupt file.
-    let img = std::panic::catch_unwind(|| {
+    // The channel read: `Z`, else `Y`, else `R`, else the only one.
+    let names: Vec<String> = header.channels.list.iter().map(|c| c.name.to_string()).collect();
+    let pick = ["Z", "Y", "R"]
+        .iter()
+        .find(|n| names.iter().any(|c| c == *n))
+        .map(|n| n.to_string())
+        .or(if names.len() == 1 { names.first().cloned() } else { None })
+        .ok_or_else(|| {
+            Error::new(ErrorKind::Unsupported, format!("OpenEXR channels {names:?}: none is Z, Y or R and there is more than one"))
+        })?;
+    // Each decoded block's samples go straight into the heights (zeroed pages, resident as written), and
+    // the file's pages are given back behind the reader: one copy of the heights. A third-party decoder
+    // must not take the process down on hostile bytes: a panic inside it is reported as a corrupt file.
+    let img = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         read()
             .no_deep_data()
             .largest_resolution_level()
-            .all_channels()
+            .specific_channels()
+            .required(pick.as_str())
+            .collect_pixels(
+                |size, _| (size.width(), crate::scan::heights::zeroed(size.area())),
+                move |(w, z): &mut (usize, Vec<f64>), at, (s,): (Sample,)| {
+                    let v = match s {
+                        Sample::F16(v) => v.to_f32() as f64,
+                        Sample::F32(v) => v as f64,
+                        Sample::U32(v) => v as f64,
+                    };
+                    z[at.y() * *w + at.x()] = v * zs;
+                },
+            )
             .first_valid_layer()
             .all_attributes()
-            .from_buffered(std::io::Cursor::new(bytes))
-    })
+            .from_buffered(crate::io::mapped::ReleasingCursor::new(bytes))
+    }))
     .map_err(|_| Error::corrupt("OpenEXR decoder failed on this file"))?
     .map_err(|e| Error::corrupt(format!("OpenEXR decode failed ({e})")))?;
     let layer = img.layer_data;
     let (nx, ny) = (layer.size.0, layer.size.1);
-    let list = &layer.channel_data.list;
-    let pick = ["Z", "Y", "R"]
-        .iter()
-        .find_map(|n| list.iter().find(|c| c.name.to_string() == *n))
-        .or(if list.len() == 1 { list.first() } else { None })
-        .ok_or_else(|| {
-            Error::new(
-                ErrorKind::Unsupported,
-                format!(
-                    "OpenEXR channels {:?}: none is Z, Y or R and there is more than one",
-                    list.iter().map(|c| c.name.to_string()).collect::<Vec<_>>()
-                ),
-            )
-        })?;
-    let z: Vec<f64> = match &pick.sample_data {
-        FlatSamples::F16(v) => v.iter().map(|s| s.to_f32() as f64 * zs).collect(),
-        FlatSamples::F32(v) => v.iter().map(|s| *s as f64 * zs).collect(),
-        FlatSamples::U32(v) => v.iter().map(|s| *s as f64 * zs).collect(),
-    };
+    let (_, z) = layer.channel_data.pixels;
     let mut hf = Heightfield::new(nx, ny, dx, dy, z)?;
     hf.meta = ScanMeta { format: "exr".into(), ..Default::default() };
-    hf.meta.instrument.insert("exr.channel".into(), pick.name.to_string());
+    hf.meta.instrument.insert("exr.channel".into(), pick);
     Ok(hf)
 }
 

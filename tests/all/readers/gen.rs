@@ -340,10 +340,15 @@ pub fn tiff16_grid(nx: usize, ny: usize) -> Vec<u8> {
 
 /// OpenEXR with one float channel `Z` of stored values (holes NaN).
 pub fn exr() -> Vec<u8> {
+    exr_grid(NX, NY)
+}
+
+/// The same file for an `nx` x `ny` grid.
+pub fn exr_grid(nx: usize, ny: usize) -> Vec<u8> {
     use exr::prelude::*;
-    let vals: Vec<f32> = (0..NX * NY).map(|k| if is_hole(k) { f32::NAN } else { stored(k / NX, k % NX) as f32 }).collect();
+    let vals: Vec<f32> = (0..nx * ny).map(|k| if is_hole(k) { f32::NAN } else { stored(k / nx, k % nx) as f32 }).collect();
     let ch = AnyChannel::new("Z", FlatSamples::F32(vals));
-    let layer = Layer::new((NX, NY), LayerAttributes::named("height"), Encoding::FAST_LOSSLESS, AnyChannels::sort(vec![ch].into()));
+    let layer = Layer::new((nx, ny), LayerAttributes::named("height"), Encoding::FAST_LOSSLESS, AnyChannels::sort(vec![ch].into()));
     let img = Image::from_layer(layer);
     let mut out = std::io::Cursor::new(Vec::new());
     img.write().to_buffered(&mut out).expect("exr");

@@ -1,6 +1,6 @@
 //! One copy of the heights: `ndfit ndf` and `ndfit fit` on a 4096 x 4096 scan (128 MiB of float64
 //! heights) of every binary layout that is decoded rather than read in place (other writers' X3P: stored
-//! but not 8-byte aligned, deflated, float32, int16; the float32 and integer formats; 16-bit PNG and TIFF)
+//! but not 8-byte aligned, deflated, float32, int16; the float32 and integer formats; 16-bit PNG and TIFF, EXR)
 //! peak, as each command reports its own peak, within a tenth of the heights of the same command on the
 //! same heights read in place (a native float64 NPY). A reader that holds the file's values beside the
 //! decoded heights peaks a quarter to all of the heights higher.
@@ -67,8 +67,8 @@ fn decoded_scans_hold_one_copy_of_their_heights() {
     let fit_out = dir.path().join("fit.json");
     let twin = dir.path().join("twin.npy");
     type Make = fn(usize, usize) -> Vec<u8>;
-    // (file, writer, whether `fit` is measured too); PNG and TIFF carry no unit or spacing: `--dx`, `--z-scale`.
-    let cases: [(&str, Make, bool); 13] = [
+    // (file, writer, whether `fit` is measured too); PNG, TIFF and EXR carry no unit or spacing: `--dx`, `--z-scale`.
+    let cases: [(&str, Make, bool); 14] = [
         ("unaligned.x3p", unaligned_stored_x3p, true),
         (
             "deflated.x3p",
@@ -103,12 +103,13 @@ fn decoded_scans_hold_one_copy_of_their_heights() {
         ("scan.gsf", gen::gsf_grid, false),
         ("scan.png", gen::png16_grid, false),
         ("scan.tif", gen::tiff16_grid, false),
+        ("scan.exr", gen::exr_grid, false),
     ];
     let mut failures = Vec::new();
     for (name, make, also_fit) in cases {
         let path = dir.path().join(name);
         std::fs::write(&path, make(nx, ny)).expect("write scan");
-        let image = name.ends_with(".png") || name.ends_with(".tif");
+        let image = name.ends_with(".png") || name.ends_with(".tif") || name.ends_with(".exr");
         let units: Vec<String> = if image { ["--dx", "1e-6", "--z-scale", "1e-9"].map(String::from).to_vec() } else { Vec::new() };
         let opts = ndfit::io::ReadOptions { dx: image.then_some(1e-6), z_scale: image.then_some(1e-9), ..Default::default() };
         let twin_units = in_place_twin(&path, &opts, &twin);
