@@ -8,7 +8,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::scale::analyze::{analyze, Fitter, ScaleOptions};
+use ndfit::scale::{analyze, Fitter, ScaleOptions};
 use ndfit::synth::{gaussian_surface, GaussianParams, SynthSettings};
 
 fn bench_scale(c: &mut Criterion) {

@@ -20,7 +20,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             for (k, a) in [0.1, 0.2, 0.35].into_iter().enumerate() {
                 let truth = EllipsoidParams { alpha_x: a, alpha_y: a * 0.6, theta_z: 0.3, ..Default::default() };
                 let (scan, _) = ellipsoid_surface(&SynthSettings { nx: 256, ny: 256, seed: k as u64 + 1, ..Default::default() }, &truth)?;
-                ndfit::io::x3p_write::write_x3p(&tmp.path().join(format!("scan{k}.x3p")), &scan)?;
+                ndfit::io::write_x3p(&tmp.path().join(format!("scan{k}.x3p")), &scan)?;
             }
             tmp.path().to_path_buf()
         }

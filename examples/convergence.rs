@@ -9,12 +9,12 @@
 //! `SIZES=128,256,512` sets the grid sizes. "Across" is the footprint's narrowest full width in samples
 //! (valid points along the grid row and column through the centre, the smaller).
 
-use ndfit::fit::metric::delta_to_model;
-use ndfit::fit::tail::TailRule;
+use ndfit::fit::delta_to_model;
+use ndfit::fit::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, NdfOptions, NormalScheme};
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings};
+use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
 
 #[path = "support/floor.rs"]
 mod floor;

@@ -3,11 +3,11 @@
 //!
 //!     cargo run --release --example diagnose_midpoint
 
-use ndfit::fit::metric::delta_to_model;
+use ndfit::fit::delta_to_model;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{Model, ModelId, Ndf};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings};
+use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
 
 fn settings(n: usize, seed: u64) -> SynthSettings {
     SynthSettings { nx: n, ny: n, seed, ..SynthSettings::default() }
@@ -48,6 +48,6 @@ fn main() {
         })
         .sum::<f64>()
         .sqrt();
-    let est = ndfit::fit::metric::delta(|m| ndf.d_at(*m), |m| truth.d(*m), ndf.bins.iter().map(|b| (b.m, b.proj_solid_angle)));
+    let est = ndfit::fit::delta(|m| ndf.d_at(*m), |m| truth.d(*m), ndf.bins.iter().map(|b| (b.m, b.proj_solid_angle)));
     eprintln!("midpoint rms rel err {mid:.2e}; delta(D_emp; D_true) on bins {est:?}");
 }

@@ -17,7 +17,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let truth = EllipsoidParams { alpha_x: 0.3, alpha_y: 0.15, theta_z: 0.4, ..Default::default() };
             let (scan, _) = ellipsoid_surface(&SynthSettings { nx: 512, ny: 512, ..Default::default() }, &truth)?;
             let p = dir.path().join("synthetic.x3p");
-            ndfit::io::x3p_write::write_x3p(&p, &scan)?;
+            ndfit::io::write_x3p(&p, &scan)?;
             p
         }
     };

@@ -11,13 +11,13 @@
 //!     cargo run --release --example hard_end            # 1024^2
 //!     N=2048 cargo run --release --example hard_end
 
-use ndfit::fit::metric::delta_to_model;
-use ndfit::fit::tail::TailRule;
+use ndfit::fit::delta_to_model;
+use ndfit::fit::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{Model, ModelId};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::preprocess::despike::{despike, Despike};
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
+use ndfit::preprocess::{despike, Despike};
+use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings, HARD_END_SET};
 use ndfit::Heightfield;
 
 #[path = "support/floor.rs"]
@@ -41,7 +41,7 @@ fn main() {
         let truth = truth.to_model().expect("truth");
         let ndf = empirical_ndf(&hf, &NdfOptions::default()).expect("ndf");
         let integrals = floor::fit_error(&floor::bin_integral_counts(&ndf, &truth), &truth, TailRule::Core);
-        let g = ndfit::synth::ellipsoid::EllipsoidGeometry::new(&ep, &s).expect("geometry");
+        let g = ndfit::synth::EllipsoidGeometry::new(&ep, &s).expect("geometry");
         let (lo, med, hi) = floor::phase_spread(&ndf, &g, &s, &truth);
         let d = |m: &Result<Model, String>, r: &Result<Model, String>| match (m, r) {
             (Ok(m), Ok(r)) => format!("{:.3}%", 100.0 * delta_to_model(m, r).expect("delta")),

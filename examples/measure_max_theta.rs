@@ -6,11 +6,11 @@
 //! `NDFIT_THETAS=60,70,90` sets the angles; `NDFIT_BALANCED=1` uses the `balanced` preset's binning,
 //! `NDFIT_BINNING=target,maxcells` another one.
 
-use ndfit::fit::metric::delta_to_model;
+use ndfit::fit::delta_to_model;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{Model, ModelId};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings};
+use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
 
 fn settings(n: usize, seed: u64) -> SynthSettings {
     SynthSettings { nx: n, ny: n, seed, ..SynthSettings::default() }

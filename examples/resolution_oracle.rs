@@ -4,10 +4,10 @@
 //! resolution_oracle`. Truths: ellipsoid caps (the exact gradient of Walter et al. eq. 15, 22) and
 //! random-phase sums of plane waves (a Gaussian-like random surface with a closed-form gradient).
 
-use ndfit::ndf::resolution::{confusion, Confusion};
+use ndfit::ndf::{confusion, Confusion};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::synth::ellipsoid::{EllipsoidGeometry, EllipsoidParams, HARD_END_SET};
 use ndfit::synth::{ellipsoid_surface, SynthSettings};
+use ndfit::synth::{EllipsoidGeometry, EllipsoidParams, HARD_END_SET};
 use ndfit::Heightfield;
 
 #[path = "support/waves.rs"]

@@ -6,13 +6,13 @@
 //!
 //!     cargo run --release --example sampling_oracle
 
-use ndfit::fit::metric::delta_to_model;
-use ndfit::fit::tail::TailRule;
+use ndfit::fit::delta_to_model;
+use ndfit::fit::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions};
-use ndfit::synth::ellipsoid::EllipsoidGeometry;
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
+use ndfit::synth::EllipsoidGeometry;
+use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings, HARD_END_SET};
 
 #[path = "support/floor.rs"]
 mod floor;

@@ -8,13 +8,13 @@
 //!
 //!     CASE=1 cargo run --release --example tail_anatomy
 
-use ndfit::fit::metric::delta_to_model;
-use ndfit::fit::tail::TailRule;
+use ndfit::fit::delta_to_model;
+use ndfit::fit::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{ModelId, Ndf};
 use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions};
-use ndfit::synth::ellipsoid::EllipsoidGeometry;
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
+use ndfit::synth::EllipsoidGeometry;
+use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings, HARD_END_SET};
 
 #[path = "support/floor.rs"]
 mod floor;
@@ -215,9 +215,9 @@ fn main() {
     );
     // Residuals c - E against the dense counts, in the core, by radius band and azimuth sector.
     let cos_max = 70f64.to_radians().cos();
-    let cut = ndfit::fit::tail::tail_cut(&ndf, cos_max, TailRule::Core);
+    let cut = ndfit::fit::tail_cut(&ndf, cos_max, TailRule::Core);
     let region: Vec<usize> = (0..ndf.bins.len())
-        .filter(|&i| ndfit::fit::tail::usable(&ndf.bins[i]) && ndf.bins[i].m.z >= cos_max * ndf.bins[i].m.norm() && !cut.excludes(&ndf, i))
+        .filter(|&i| ndfit::fit::usable(&ndf.bins[i]) && ndf.bins[i].m.z >= cos_max * ndf.bins[i].m.norm() && !cut.excludes(&ndf, i))
         .collect();
     let nc: f64 = region.iter().map(|&i| ndf.bins[i].count as f64).sum();
     let nd: f64 = region.iter().map(|&i| de_big.bins[i].count as f64).sum();

@@ -9,12 +9,12 @@
 //!   caps, fitted with `ellipsoid`; `gauss`: Gaussian random surfaces (anisotropic Beckmann truth),
 //!   fitted with `beckmann-aniso`.
 
-use ndfit::fit::metric::delta_to_model;
-use ndfit::fit::tail::TailRule;
+use ndfit::fit::delta_to_model;
+use ndfit::fit::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{Model, ModelId};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid::HARD_END_SET, ellipsoid_surface, SynthSettings};
+use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings, HARD_END_SET};
 use ndfit::Heightfield;
 
 fn cap(nx: usize, ny: usize, p: [f64; 5]) -> (Heightfield, Model) {
@@ -47,7 +47,7 @@ fn row(name: &str, hf: &Heightfield, truth: &Model, id: ModelId) {
     let mut line = format!("| {name} |");
     for (i, rule) in [TailRule::Rim, TailRule::Core, TailRule::Unresolved, TailRule::All].into_iter().enumerate() {
         let rep = fit_model(&ndf, id, &FitOptions { tail: rule, ..FitOptions::default() }).unwrap();
-        let t = rep.quality.tail.clone().unwrap_or_else(ndfit::fit::tail::TailCut::none);
+        let t = rep.quality.tail.clone().unwrap_or_else(ndfit::fit::TailCut::none);
         if i == 0 {
             line += &format!(" {:.2} | {} |", t.unresolved_alone_fraction, t.rule);
         }

@@ -52,6 +52,8 @@
 //!   without clap, indicatif, anyhow or plotters.
 
 #![deny(missing_docs)]
+// Every type a public item hands out can be named by its user (it is re-exported where it lives).
+#![deny(unnameable_types)]
 // `!(x > 0.0)` guards are deliberate throughout: unlike `x <= 0.0` they also catch NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 

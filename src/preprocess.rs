@@ -4,11 +4,14 @@
 //! else. Holes are never filled: invalid points stay NaN through every step, and the NDF code skips
 //! every stencil that touches one.
 
-pub mod despike;
-pub mod form;
-pub mod prepared;
+pub(crate) mod despike;
+pub(crate) mod form;
+pub(crate) mod prepared;
 
+pub use despike::despike;
 pub use despike::Despike;
+pub use form::CylinderFit;
+pub use form::{remove_cylinder, remove_polynomial};
 pub use prepared::{prepare, Prepared};
 
 use crate::error::{Error, Result};

@@ -81,7 +81,7 @@ pub fn sdq_central(z: &[f64], nx: usize, ny: usize, dx: f64, dy: f64) -> (f64, u
 
 /// [`surface_stats`] of heights read in row bands ([`BandSource`], e.g. a [`crate::preprocess::Prepared`]
 /// scan whose heights stay memory-mapped): the same numbers, bit for bit (the same sums in the same
-/// order, the plane fitted by the same [`crate::preprocess::form::fit_polynomial`]), with working memory
+/// order, the plane fitted by the same `fit_polynomial`), with working memory
 /// of a few bands, so that `ndfit info` on a tiled scan never holds the heights or their residual.
 pub fn surface_stats_of<S: BandSource<T = f64>>(src: &S) -> Result<SurfaceStats> {
     let GridShape { nx, ny, dx, dy, .. } = src.shape();

@@ -4,13 +4,13 @@
 // Each example uses a part of it.
 #![allow(dead_code)]
 
-use ndfit::fit::metric::delta_to_model;
-use ndfit::fit::tail::TailRule;
+use ndfit::fit::delta_to_model;
+use ndfit::fit::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{Model, ModelId, Ndf};
-use ndfit::ndf::grid::QuadOrder;
 use ndfit::ndf::EmpiricalNdf;
-use ndfit::synth::ellipsoid::EllipsoidGeometry;
+use ndfit::ndf::QuadOrder;
+use ndfit::synth::EllipsoidGeometry;
 use ndfit::synth::SynthSettings;
 
 /// The ellipsoid fit's NDF error against `truth` under `tail`, or NaN when the fit fails.

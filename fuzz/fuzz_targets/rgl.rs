@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use ndfit::export::rgl::tensor::TensorFile;
+use ndfit::export::rgl::TensorFile;
 use ndfit::export::rgl::{check_structure, Flavour};
 
 fuzz_target!(|data: &[u8]| {

@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use ndfit::io::{read_bytes, x3p_write::x3p_bytes, Format, ReadOptions};
+use ndfit::io::{read_bytes, x3p_bytes, Format, ReadOptions};
 use ndfit::Heightfield;
 
 fuzz_target!(|data: &[u8]| {

@@ -656,7 +656,7 @@ fn fit(
     let ndf = ndf_options(normals, ndf_cells, target_count)?;
     let max_theta = check::aperture_deg(max_theta, na, Spelling::Keyword).map_err(to_py)?;
     let extra_starts = check::extra_starts(extra_starts, Spelling::Keyword).map_err(to_py)?;
-    let tail = check::parse::<ndfit::fit::tail::TailRule>("tail", tail, Spelling::Keyword).map_err(to_py)?;
+    let tail = check::parse::<ndfit::fit::TailRule>("tail", tail, Spelling::Keyword).map_err(to_py)?;
     let tolerance = check::tolerance(tolerance, Spelling::Keyword).map_err(to_py)?;
     let fit = FitOptions {
         tail,

@@ -4,7 +4,7 @@
 //! `unzip -p SCAN bindata/data.bin > /dev/null`, a whole process like `ndfit fit`. For a batch it is the
 //! same inflate over every scan, two processes at a time, beside `ndfit batch --jobs 2` and the numpy +
 //! nlopt pool a user would otherwise write (`fits/numpy_pool.py`, which reads the X3P with zipfile +
-//! numpy). Every command is run round-robin with the others ([`super::process::interleave`]), medians
+//! numpy). Every command is run round-robin with the others (`interleave`), medians
 //! reported with the load average before and after; peak memory is each child's `ru_maxrss`.
 
 use std::path::{Path, PathBuf};

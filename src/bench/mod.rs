@@ -6,7 +6,7 @@
 //! stage ([`pipeline`]), the peak resident memory ([`mem`]: `VmHWM` reset per stage), and the accuracy
 //! against the truth ([`accuracy`]: the NDF difference metric of `data_formats/objective.md` and the
 //! parameter errors). [`analysis`] extracts the Pareto front of time against error and the cost model
-//! (log-log exponents), [`plot`] draws the front, [`presets`] holds the presets picked from it, and
+//! (log-log exponents), [`plot`] draws the front, `presets` holds the presets picked from it, and
 //! [`numpy`] runs the reference numpy + nlopt pipeline in the same run for the speed-up ratios; [`report`] renders the tables of `docs/PERFORMANCE.md` from a run.
 
 pub mod accuracy;
@@ -17,7 +17,7 @@ pub mod mem;
 pub mod numpy;
 pub mod pipeline;
 pub mod plot;
-pub mod presets;
+pub(crate) mod presets;
 pub mod process;
 pub mod report;
 pub mod scene;

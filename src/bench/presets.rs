@@ -2,7 +2,7 @@
 
 use super::knobs::{Binning, Knobs};
 use crate::fit::Solver;
-pub use crate::pipeline::preset::{Preset, PresetKnobs, FAST_STRIDE};
+pub use crate::pipeline::preset::Preset;
 
 impl Preset {
     /// The full benchmark knobs of this preset for a scan of `size` points per side.

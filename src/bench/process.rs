@@ -38,12 +38,6 @@ impl Cmd {
         Cmd { label: label.to_string(), argv: argv.into_iter().map(Into::into).collect(), stdout: None }
     }
 
-    /// The same command with its stdout written to `path`.
-    pub fn stdout_to(mut self, path: impl Into<PathBuf>) -> Cmd {
-        self.stdout = Some(path.into());
-        self
-    }
-
     fn display(&self) -> String {
         self.argv.iter().map(|a| a.to_string_lossy().into_owned()).collect::<Vec<_>>().join(" ")
     }

@@ -1,5 +1,5 @@
 //! The synthetic set: the visible half of a skewed, anisotropic ellipsoid (its NDF is exactly the
-//! ellipsoid NDF of Walter et al. eq. 1, see [`crate::synth::ellipsoid`]), written once per size as a
+//! ellipsoid NDF of Walter et al. eq. 1, see `ellipsoid`), written once per size as a
 //! float64 NPY file so that every point of the sweep times the real reader.
 
 use std::path::{Path, PathBuf};

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use ndfit::fit::metric;
+use ndfit::fit;
 use ndfit::models::{Model, ModelId, Ndf};
 use ndfit::preprocess::{FormRemoval, Preprocess};
 use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
@@ -53,7 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let ndf_ms = report.timings.ndf_ms.unwrap_or(0.0);
     let fitted = report.to_model()?;
     let nodes = ndf.bins.iter().map(|b| (b.m, b.proj_solid_angle));
-    let delta = metric::delta(|m| fitted.d(*m), |m| truth.d(*m), nodes);
+    let delta = fit::delta(|m| fitted.d(*m), |m| truth.d(*m), nodes);
 
     // Built in memory and written at the end: a closed or full standard output ends the command cleanly.
     let mut out: Vec<u8> = Vec::new();
@@ -85,7 +85,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         report.solver.evaluations
     );
     if let Some(png) = &args.plot {
-        ndfit::fit::plot::plot_fit(png, &ndf, &fitted, "ndfit demo: built-in ellipsoid scan")?;
+        ndfit::fit::plot_fit(png, &ndf, &fitted, "ndfit demo: built-in ellipsoid scan")?;
         let _ = writeln!(w, "plot: {}", png.display());
     }
     if let Some(path) = &args.output {

@@ -68,7 +68,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let max_theta = json.pointer("/quality/max_theta_deg").and_then(|v| v.as_f64()).unwrap_or(90.0);
     let name = args.fit.file_name().map_or(path.clone(), |n| n.to_string_lossy().into_owned());
     if let Model::Mixture(x) = &model {
-        let out = ndfit::export::mixture::export_mixture(x, target, max_theta).map_err(|e| anyhow!("{path}: {}", e.message()))?;
+        let out = ndfit::export::export_mixture(x, target, max_theta).map_err(|e| anyhow!("{path}: {}", e.message()))?;
         for note in [&out.core.note, &out.tail.note].into_iter().flatten() {
             eprintln!("ndfit: {path}: {note}");
         }
@@ -96,8 +96,8 @@ fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
         material,
         flavour: if args.spectral { Flavour::Spectral } else { Flavour::Rgb },
     };
-    ndfit::io::atomic::protect_input(&args.fit);
-    ndfit::io::atomic::check_output(out)?;
+    ndfit::io::protect_input(&args.fit);
+    ndfit::io::check_output(out)?;
     let name = args.fit.file_name().map_or(path.to_string(), |n| n.to_string_lossy().into_owned());
     let tail = format!(
         "Smith masking-shadowing (separable) from the tabulated NDF; conductor {}; phi = 0 and the tangent u along the scan's +x",
@@ -114,7 +114,7 @@ fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
         let outcome = ndfit::Pipeline::default().run_path(&args.fit)?;
         let fit = outcome.fit.to_model()?;
         let max_theta = outcome.fit.quality.max_theta_deg;
-        let reg = rgl::empirical::Regularized::new(&outcome.ndf, &fit, max_theta);
+        let reg = rgl::Regularized::new(&outcome.ndf, &fit, max_theta);
         let description = format!(
             "ndfit measured NDF of the scan {name}: {}; fitted {} {}; {tail}",
             reg.describe(max_theta),

@@ -42,7 +42,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let m = report.to_model()?;
         let name = scan.file_name().map_or(path.clone(), |n| n.to_string_lossy().into_owned());
         let title = format!("{name}: {} fit", report.model);
-        ndfit::fit::plot::plot_fit(png, &ndf, &m, &title)?;
+        ndfit::fit::plot_fit(png, &ndf, &m, &title)?;
     }
     let mut json = serde_json::to_string_pretty(&report).map_err(|e| anyhow!("{path}: cannot serialize the result ({e})"))?;
     json.push('\n');

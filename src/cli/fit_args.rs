@@ -64,7 +64,7 @@ impl FitArgs {
         let solver = self.solver.parse::<Solver>().map_err(|e| bad("--solver", e))?;
         let extra_starts = check::extra_starts(self.extra_starts, Spelling::Flag)?;
         let max_theta = check::aperture_deg(self.max_theta, self.na, Spelling::Flag)?;
-        let tail = self.tail.parse::<ndfit::fit::tail::TailRule>().map_err(|e| bad("--tail", e))?;
+        let tail = self.tail.parse::<ndfit::fit::TailRule>().map_err(|e| bad("--tail", e))?;
         let ndf = self.ndf.options().map_err(|e| ndfit::Error::invalid(e.to_string()))?;
         let tolerance = check::tolerance(self.tolerance, Spelling::Flag)?;
         let fit =

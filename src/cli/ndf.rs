@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
-use ndfit::ndf::{output, plot, EmpiricalNdf, NdfOptions, NormalScheme};
+use ndfit::ndf::{self, EmpiricalNdf, NdfOptions, NormalScheme};
 use ndfit::pipeline::check::{self, Spelling};
 use ndfit::scan::InputInfo;
 use ndfit::{Options, Pipeline};
@@ -70,8 +70,8 @@ fn input_json(i: &InputInfo) -> serde_json::Value {
 pub fn write_ndf(out: &Path, ndf: &EmpiricalNdf, input: serde_json::Value) -> anyhow::Result<()> {
     let ext = out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
     match ext.as_deref() {
-        Some("csv") => output::write_csv(out, ndf)?,
-        Some("json") => output::write_json(out, ndf, input)?,
+        Some("csv") => ndf::write_csv(out, ndf)?,
+        Some("json") => ndf::write_json(out, ndf, input)?,
         _ => anyhow::bail!("{}: output must end in .csv or .json", out.display()),
     }
     Ok(())
@@ -96,21 +96,21 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     // The optional outputs first: a plot that fails leaves no NDF file behind that looks like success.
     if let Some(exr) = &args.exr {
-        output::write_exr(exr, &ndf, args.exr_size)?;
+        ndf::write_exr(exr, &ndf, args.exr_size)?;
     }
     if let Some(prefix) = &args.png {
         let name = args.scan.scan.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let p = |suffix: &str| PathBuf::from(format!("{}.{suffix}.png", prefix.display()));
-        plot::plot_map(&p("map"), &ndf, &format!("empirical NDF of {name} ({} normals)", ndf.scheme.as_str()))
+        ndf::plot_map(&p("map"), &ndf, &format!("empirical NDF of {name} ({} normals)", ndf.scheme.as_str()))
             .with_context(|| format!("{}", p("map").display()))?;
-        plot::plot_slices(&p("slices"), &ndf, &format!("{name}: D through the peak"))
+        ndf::plot_slices(&p("slices"), &ndf, &format!("{name}: D through the peak"))
             .with_context(|| format!("{}", p("slices").display()))?;
     }
     match &args.output {
         Some(out) => write_ndf(out, &ndf, input_json(&input))?,
         None => {
             let mut csv = Vec::new();
-            output::write_csv_to(&mut csv, &ndf)?;
+            ndf::write_csv_to(&mut csv, &ndf)?;
             super::write_stdout(&csv)?;
         }
     }

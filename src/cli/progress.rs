@@ -13,7 +13,7 @@ pub fn install() {
     if !std::io::stderr().is_terminal() {
         return;
     }
-    ndfit::scan::bands::set_tiled_progress(|bytes| {
+    ndfit::scan::set_tiled_progress(|bytes| {
         let bar = BAR.get_or_init(|| {
             let b = indicatif::ProgressBar::new_spinner();
             if let Ok(style) =

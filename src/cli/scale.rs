@@ -6,9 +6,9 @@ use std::process::ExitCode;
 
 use anyhow::anyhow;
 use ndfit::models::ModelId;
-use ndfit::scale::analyze::{analyze, recommend, Fitter, ScaleOptions};
-use ndfit::scale::ndf_at::Blur;
-use ndfit::scale::report::{report_json, write_csv};
+use ndfit::scale::Blur;
+use ndfit::scale::{analyze, recommend, Fitter, ScaleOptions};
+use ndfit::scale::{report_json, write_csv};
 use serde_json::json;
 
 use super::scan_args::ScanArgs;
@@ -73,7 +73,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if !(1..=50).contains(&args.scene_steps) {
         anyhow::bail!("--scene-steps must be in 1..=50, got {}", args.scene_steps);
     }
-    let scene = args.scene.as_deref().map(ndfit::scale::scene::parse_scene).transpose().map_err(|e| anyhow!("--scene: {e}"))?;
+    let scene = args.scene.as_deref().map(ndfit::scale::parse_scene).transpose().map_err(|e| anyhow!("--scene: {e}"))?;
     let scene_fps = scene.map(|r| r.log_spaced(args.scene_steps)).unwrap_or_default();
     if args.footprint.is_empty() && scene_fps.is_empty() {
         anyhow::bail!("give --footprint METRES[,METRES...] or --scene");
@@ -118,7 +118,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             std::fs::create_dir_all(dir).map_err(|e| anyhow!("{}: cannot create directory ({e})", dir.display()))?;
             ndfit::io::write_bytes_atomic(&dir.join("scale.json"), text.as_bytes())?;
             ndfit::io::write_atomic(&dir.join("scale.csv"), |w| write_csv(w, &results))?;
-            ndfit::scale::plot::write_plot(&dir.join("scale.png"), &results)?;
+            ndfit::scale::write_plot(&dir.join("scale.png"), &results)?;
             eprintln!("{}", rec.explanation);
         }
     }

@@ -53,9 +53,9 @@ impl ScanArgs {
     /// Record the scan as this process's input and refuse any of `outputs` that is a directory or the
     /// scan itself, before any work (each write checks again).
     pub fn check_outputs<'a>(&self, outputs: impl IntoIterator<Item = &'a std::path::Path>) -> anyhow::Result<()> {
-        ndfit::io::atomic::protect_input(&self.scan);
+        ndfit::io::protect_input(&self.scan);
         for o in outputs {
-            ndfit::io::atomic::check_output(o)?;
+            ndfit::io::check_output(o)?;
         }
         Ok(())
     }

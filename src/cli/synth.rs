@@ -140,7 +140,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }));
     if a.repeat > 1 {
         // A periodic tile repeated: the scan is written row by row, never held whole.
-        ndfit::io::x3p_write::write_x3p_repeated(&a.output, &hf, a.repeat, a.repeat)?;
+        ndfit::io::write_x3p_repeated(&a.output, &hf, a.repeat, a.repeat)?;
     } else {
         ndfit::io::write_x3p(&a.output, &hf)?;
     }

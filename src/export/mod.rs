@@ -35,9 +35,9 @@ use crate::fit::metric::RefNodes;
 use crate::models::{LobeAxes, Model, ModelId, Ndf};
 use crate::ndf::SlopeFrame;
 
-pub mod mixture;
+pub(crate) mod mixture;
 pub mod rgl;
-pub mod snippet;
+pub(crate) mod snippet;
 
 /// Largest `alpha_x / alpha_y` of Blender's Principled BSDF: `1 / aspect^2` at `anisotropic = 1`.
 pub const BLENDER_MAX_ANISOTROPY: f64 = 10.0;
@@ -93,6 +93,8 @@ impl std::str::FromStr for Target {
 }
 
 pub use crate::models::Distribution;
+pub use mixture::export_mixture;
+pub use mixture::MixtureExport;
 
 /// An axis-aligned lobe in a renderer's shading frame: `alpha_u` along the tangent `u`, which points at
 /// azimuth `tangent_angle` (radians, counter-clockwise from the scan's `+x`), `alpha_v` along `n x u`.

@@ -62,6 +62,7 @@ impl LnD {
 
     /// `ln D(m)` and its gradient with respect to the internal parameters, written into `grad`
     /// (length = the model's parameter count).
+    #[cfg(test)]
     #[inline]
     pub fn value_grad(&self, m: &Vector3<f64>, grad: &mut [f64]) -> f64 {
         self.grad(m, grad);
@@ -212,15 +213,7 @@ impl LobeLnD {
         }
     }
 
-    /// `ln D(m)` and its gradient with respect to the internal parameters, written into `grad`
-    /// (length = the model's parameter count).
-    #[inline]
-    pub fn value_grad(&self, m: &Vector3<f64>, grad: &mut [f64]) -> f64 {
-        self.grad(m, grad);
-        self.value(m)
-    }
-
-    /// The gradient of `ln D(m)` alone (as [`LnD::value_grad`], without the logarithm of the value:
+    /// The gradient of `ln D(m)` alone (as `value_grad`, without the logarithm of the value:
     /// the Jacobian reuses the residual pass's `ln D`).
     #[inline]
     pub fn grad(&self, m: &Vector3<f64>, grad: &mut [f64]) {

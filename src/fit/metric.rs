@@ -125,11 +125,13 @@ impl RefNodes {
     }
 
     /// Sum of the projected solid angles (pi for a grid covering the hemisphere).
+    #[cfg(test)]
     pub fn total(&self) -> f64 {
         self.nodes.iter().map(|n| n.1).sum()
     }
 
     /// `delta(D_model; D_truth)` on these nodes.
+    #[cfg(feature = "cli")]
     pub fn delta_model(&self, model: &Model, truth: &Model) -> Option<f64> {
         delta(|m| model.d(*m), |m| truth.d(*m), self.nodes.iter().copied())
     }

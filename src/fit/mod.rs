@@ -1,45 +1,59 @@
 //! Fitting analytic NDFs to an empirical NDF with Levenberg-Marquardt.
 //!
-//! - [`params`]: the unbounded parameterization (`alpha = ALPHA_MIN + exp(u)`, free angles) and why;
-//! - [`lnd`]: `ln D` of every model (Walter et al. eq. 1-3, Heitz eq. 82) with its analytic gradient;
-//! - [`objective`]: the residuals of `data_formats/objective.md` (Poisson deviance, or count-weighted
+//! - `params`: the unbounded parameterization (`alpha = ALPHA_MIN + exp(u)`, free angles) and why;
+//! - `lnd`: `ln D` of every model (Walter et al. eq. 1-3, Heitz eq. 82) with its analytic gradient;
+//! - `objective`: the residuals of `data_formats/objective.md` (Poisson deviance, or count-weighted
 //!   log D);
-//! - [`problem`], [`solve`]: the LM problem and the solvers (LM, argmin's Nelder-Mead and L-BFGS);
-//! - [`start`]: closed-form starting points from the slope distribution;
+//! - `problem`, `solve`: the LM problem and the solvers (LM, argmin's Nelder-Mead and L-BFGS);
+//! - `start`: closed-form starting points from the slope distribution;
 //! - canonical form: [`crate::models::Model::canonical`] (the models module's convention);
 //! - [`covariance`]: standard errors and correlations from `(J^T J)^+` scaled by the residual variance;
-//! - [`report`]: the `ndfit.fit/1` JSON; [`metric`]: the NDF difference metric;
-//! - [`synthetic`]: binned NDFs with known truth (test and benchmark fixtures); [`plot`]: data vs fit.
+//! - `report`: the `ndfit.fit/1` JSON; `metric`: the NDF difference metric;
+//! - `synthetic`: binned NDFs with known truth (test and benchmark fixtures); `plot`: data vs fit.
 //!
 //! Entry points: [`fit_model`] for one model, [`fit_auto`] for model selection.
 
-pub mod covariance;
-pub mod lnd;
+pub(crate) mod covariance;
+pub(crate) mod lnd;
 pub(crate) mod lnd_mixture;
-pub mod metric;
-pub mod mixture;
-pub mod objective;
-pub mod options;
-pub mod params;
+pub(crate) mod metric;
+pub(crate) mod mixture;
+pub(crate) mod objective;
+pub(crate) mod options;
+pub(crate) mod params;
 #[cfg(feature = "plot")]
-pub mod plot;
-pub mod problem;
+pub(crate) mod plot;
+pub(crate) mod problem;
 pub(crate) mod qbic;
-pub mod report;
-pub mod solve;
-pub mod start;
-pub mod synthetic;
-pub mod tail;
-pub mod verdict;
+pub(crate) mod report;
+pub(crate) mod solve;
+pub(crate) mod start;
+pub(crate) mod synthetic;
+pub(crate) mod tail;
+pub(crate) mod verdict;
+
+#[cfg(test)]
+mod tests;
 
 use std::collections::BTreeMap;
 use std::time::Instant;
 
 use nalgebra::DMatrix;
 
+pub use covariance::{covariance, Covariance};
+pub use metric::{delta, delta_to_model};
+pub use objective::Bin;
+pub use objective::Rounding;
+pub use objective::DEFAULT_MAX_THETA_DEG;
 pub use objective::{FitData, Objective};
+pub use options::MAX_EXTRA_STARTS;
+#[cfg(feature = "plot")]
+pub use plot::plot_fit;
 pub use report::{Candidate, FitReport, Quality, Selection, SolverInfo, Timings};
 pub use solve::{Solver, Tolerances};
+pub use synthetic::{binned_ndf, expected, Grid};
+pub use tail::{tail_cut, usable, TailCut, TailRule, MIN_ALONE_SHARE};
+pub use verdict::{data_dispersion, judge, Evidence, Verdict, DEFAULT_TOLERANCE};
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::models::table::Form;
@@ -69,7 +83,7 @@ pub struct FitOptions {
     /// Largest polar angle (radians) of the bins the objective uses; the model is normalized over them
     /// (objective.md). Default [`objective::DEFAULT_MAX_THETA_DEG`].
     pub max_theta: f64,
-    /// The tail rule ([`tail`], objective.md): by default the whitened core of a lone lobe whose rim the
+    /// The tail rule (`tail`, objective.md): by default the whitened core of a lone lobe whose rim the
     /// sampling leaves unresolved, else only the unresolved bins ([`tail::TailRule::Rim`]).
     pub tail: tail::TailRule,
     /// The NDF error beyond counting noise a renderer cannot show ([`verdict::DEFAULT_TOLERANCE`]): the
@@ -529,9 +543,9 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 /// Choose the model a scene requires: the ladder of the models the table puts in `auto`, climbed one
 /// step at a time (a rung, its depth in the table's parent tree, and within it a parameter count) while no
 /// model fitted so far is within the tolerance on the NDF error beyond counting noise
-/// ([`FitOptions::tolerance`], [`verdict::excess_delta`]); the models of a step are fitted side by side.
+/// ([`FitOptions::tolerance`], `verdict::excess_delta`); the models of a step are fitted side by side.
 ///
-/// The choice is the rule `scale` uses ([`verdict::select`]), at the scan's own footprint: the candidates
+/// The choice is the rule `scale` uses (`verdict::select`), at the scan's own footprint: the candidates
 /// ordered simplest first (rung, then parameters, then error), the first whose error exceeds the smallest
 /// by no more than the tolerance (in quadrature): the first within the tolerance, or when every model is
 /// visibly off, the simplest a renderer cannot tell from the closest. The likelihood is a guard, not the

@@ -95,11 +95,11 @@ pub struct FitData {
     pub max_theta: f64,
     /// The objective.
     pub objective: Objective,
-    /// Whether Levenberg-Marquardt sees compressed residuals ([`super::problem::Problem`]): set for a
-    /// region of at least [`super::problem::COMPRESS_MIN_BINS`] fine bins and inherited by its merged
+    /// Whether Levenberg-Marquardt sees compressed residuals (`Problem`): set for a
+    /// region of at least `COMPRESS_MIN_BINS` fine bins and inherited by its merged
     /// bins ([`FitData::coarsened`]), so one fit's passes all solve the same way.
     pub lm_compressed: bool,
-    /// The tail bins left out of the region ([`super::tail`]; nothing cut for [`FitData::new`]).
+    /// The tail bins left out of the region (`tail`; nothing cut for [`FitData::new`]).
     pub tail: super::tail::TailCut,
     /// The rounding of a quantized scan's heights, which every bin's model carries (`None` when the
     /// heights are not on a material lattice: then `D` is evaluated at `m_k` alone).
@@ -130,7 +130,7 @@ pub struct Rounding {
 
 impl Rounding {
     /// The rule of the lattice `quantum` of `scheme` for `bins`; `None` for a lattice finer than
-    /// [`MODELLED_STEP`] or coarser than [`MAX_RESOLVED_STEP`], and for a kernel that is zero or not a
+    /// `MODELLED_STEP` or coarser than `MAX_RESOLVED_STEP`, and for a kernel that is zero or not a
     /// finite positive definite matrix.
     pub fn new(quantum: &HeightQuantum, scheme: NormalScheme, bins: &[Bin]) -> Option<Rounding> {
         // Guard: a lattice too fine to matter is not modelled (its cost is nine lobe evaluations per bin),
@@ -219,7 +219,7 @@ impl FitData {
         FitData::with_tail(ndf, objective, max_theta, super::tail::TailRule::All)
     }
 
-    /// [`FitData::new`] with the tail cut of `rule` ([`super::tail`]): the bins it leaves out also leave
+    /// [`FitData::new`] with the tail cut of `rule` (`tail`): the bins it leaves out also leave
     /// the region.
     pub fn with_tail(ndf: &EmpiricalNdf, objective: Objective, max_theta: f64, rule: super::tail::TailRule) -> Result<FitData> {
         if !(max_theta > 0.0) {

@@ -301,7 +301,8 @@ impl<'a> Problem<'a> {
         Problem { data, id, x: DVector::from_column_slice(x0), ws: RefCell::new(Workspace::default()), compressed }
     }
 
-    /// The same problem with compression (`compress`) forced on or off (tests and measurements).
+    /// The same problem with compression (`compress`) forced on or off (tests).
+    #[cfg(test)]
     pub fn with_compression(mut self, on: bool) -> Problem<'a> {
         self.compressed = on;
         self

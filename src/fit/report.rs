@@ -45,10 +45,10 @@ pub struct Quality {
     #[serde(default)]
     pub dispersion: Option<f64>,
     /// `delta_data` with the counting noise taken out (`sqrt(delta_data^2 - dispersion K / N)`): the
-    /// model's own NDF error against the data ([`super::verdict::excess_delta`]).
+    /// model's own NDF error against the data (`excess_delta`).
     #[serde(default)]
     pub delta_excess: Option<f64>,
-    /// `ok`, `misfit` or `unresolved` ([`super::verdict`]).
+    /// `ok`, `misfit` or `unresolved` (`verdict`).
     #[serde(default)]
     pub verdict: super::verdict::Verdict,
     /// Why the verdict is not `ok` (one line each); for `ok`, a difference the counts show that is within
@@ -177,7 +177,7 @@ pub struct Selection {
 /// A fit result (`ndfit.fit/1`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FitReport {
-    /// Always [`SCHEMA`].
+    /// Always `SCHEMA`.
     pub schema: String,
     /// The model id (for `auto`, the model chosen).
     pub model: ModelId,
@@ -187,7 +187,7 @@ pub struct FitReport {
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub matrix_a: Option<[[f64; 3]; 3]>,
     /// The anisotropic models' axes in the scan frame (the `alpha_x` direction lies at azimuth `-theta_z`,
-    /// along `(cos theta_z, -sin theta_z)`); see [`crate::models::axes`].
+    /// along `(cos theta_z, -sin theta_z)`); see `axes`.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub axes: Option<crate::models::LobeAxes>,
     /// The input scan (set by the caller that read it).

@@ -64,13 +64,13 @@ impl std::str::FromStr for TailRule {
 /// What the tail cut left out of the region (the fit JSON's `quality.tail`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TailCut {
-    /// The cut applied: `core` (the whitened core, [`CORE_RADIUS`]), `unresolved` (bins where over half
+    /// The cut applied: `core` (the whitened core, `CORE_RADIUS`), `unresolved` (bins where over half
     /// of the normals are unresolved), `none`, `none (rough at the sampling step)` or `none (tail
-    /// resolved)` (under [`MIN_TAIL_SHARE`] of the normals in unresolved bins). The default `rim` rule
+    /// resolved)` (under `MIN_TAIL_SHARE` of the normals in unresolved bins). The default `rim` rule
     /// reports the cut it chose, `core` or `unresolved` ([`TailCut::unresolved_alone_fraction`]).
     pub rule: String,
     /// The relative slope error above which a normal counts as unresolved
-    /// ([`crate::ndf::resolution::RESOLUTION_TOLERANCE`]).
+    /// (`RESOLUTION_TOLERANCE`).
     pub tolerance: f64,
     /// Share of all the NDF's normals that are unresolved (the cut applies up to [`MAX_UNRESOLVED_SHARE`]).
     pub unresolved_fraction: f64,

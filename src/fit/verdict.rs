@@ -14,7 +14,7 @@ pub enum Verdict {
     /// the NDF.
     #[default]
     Ok,
-    /// The deviance per dof exceeds the data's own dispersion by more than [`MISFIT_RATIO`] and the NDF
+    /// The deviance per dof exceeds the data's own dispersion by more than `MISFIT_RATIO` and the NDF
     /// error beyond noise exceeds the tolerance, or the solver did not converge.
     Misfit,
     /// The scan cannot resolve the NDF (quantized heights, too few samples, a lobe inside one bin,
@@ -142,7 +142,7 @@ pub struct Evidence {
     pub reduced_chi2: Option<f64>,
     /// The data's dispersion ([`data_dispersion`]).
     pub dispersion: Option<f64>,
-    /// The NDF error beyond counting noise ([`excess_delta`]).
+    /// The NDF error beyond counting noise (`excess_delta`).
     pub delta_excess: Option<f64>,
     /// Over half of the normals in one bin.
     pub specular: bool,

@@ -131,6 +131,7 @@ where
 /// [`write_atomic`] without the `fsync` before the rename: the file is still complete or absent under
 /// its name for every process and after any crash or kill of this one, but only durable against power
 /// loss once the caller has run [`sync_tree`] over its folder (what `ndfit batch` does once per run).
+#[cfg(feature = "cli")]
 pub fn write_atomic_unsynced<F>(path: &Path, fill: F) -> Result<()>
 where
     F: FnOnce(&mut dyn Write) -> Result<()>,
@@ -187,6 +188,7 @@ where
 /// Make everything written under `dir` durable: on Linux one `syncfs(2)` of the file system holding it
 /// (files, their data and the renames, in one journal commit); elsewhere an `fsync` of every file and
 /// folder under it.
+#[cfg(feature = "cli")]
 pub fn sync_tree(dir: &Path) -> Result<()> {
     #[cfg(target_os = "linux")]
     {
@@ -200,6 +202,7 @@ pub fn sync_tree(dir: &Path) -> Result<()> {
     sync_each(dir)
 }
 
+#[cfg(feature = "cli")]
 fn sync_each(dir: &Path) -> Result<()> {
     for e in std::fs::read_dir(dir).map_err(|e| Error::io(e).with_path(dir))? {
         let p = e.map_err(|e| Error::io(e).with_path(dir))?.path();

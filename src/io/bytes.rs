@@ -99,10 +99,6 @@ impl<'a> Cursor<'a> {
     pub fn i32_be(&mut self, what: &str) -> Result<i32> {
         Ok(i32::from_be_bytes(self.array(what)?))
     }
-    /// Little-endian u64.
-    pub fn u64_le(&mut self, what: &str) -> Result<u64> {
-        Ok(u64::from_le_bytes(self.array(what)?))
-    }
     /// Little-endian f32.
     pub fn f32_le(&mut self, what: &str) -> Result<f32> {
         Ok(f32::from_le_bytes(self.array(what)?))
@@ -110,10 +106,6 @@ impl<'a> Cursor<'a> {
     /// Big-endian f32.
     pub fn f32_be(&mut self, what: &str) -> Result<f32> {
         Ok(f32::from_be_bytes(self.array(what)?))
-    }
-    /// Little-endian f64.
-    pub fn f64_le(&mut self, what: &str) -> Result<f64> {
-        Ok(f64::from_le_bytes(self.array(what)?))
     }
 }
 

@@ -5,34 +5,37 @@
 //! the bytes actually present before allocating. Layouts, units and invalid markers of each format are
 //! described in `data_formats/formats.md`.
 
-pub mod al3d;
-pub mod atomic;
-pub mod bytes;
-pub mod gsf;
-pub mod image;
+pub(crate) mod al3d;
+pub(crate) mod atomic;
+pub(crate) mod bytes;
+pub(crate) mod gsf;
+pub(crate) mod image;
 pub(crate) mod inflate;
 pub(crate) mod mapped;
-pub mod md5;
-pub mod metropro;
-pub mod npy;
-pub mod opd;
-pub mod plu;
-pub mod raw_opts;
-pub mod sur;
-pub mod text;
-pub mod tmd;
-pub mod units;
-pub mod x3p;
-pub mod x3p_write;
-pub mod xml;
+pub(crate) mod md5;
+pub(crate) mod metropro;
+pub(crate) mod npy;
+pub(crate) mod opd;
+pub(crate) mod plu;
+pub(crate) mod raw_opts;
+pub(crate) mod sur;
+pub(crate) mod text;
+pub(crate) mod tmd;
+pub(crate) mod units;
+pub(crate) mod x3p;
+pub(crate) mod x3p_write;
+pub(crate) mod xml;
 
 use std::path::Path;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::scan::Heightfield;
 
+pub use atomic::{check_output, protect_input};
 pub use atomic::{write_atomic, write_bytes_atomic};
+pub use x3p::MAX_POINT_MD5;
 pub use x3p_write::write_x3p;
+pub use x3p_write::{write_x3p_repeated, x3p_bytes};
 
 /// Options for formats that do not carry everything themselves (CONTRACT.md: `--dx`, `--dy`, `--z-scale`).
 #[derive(Debug, Clone, Default, PartialEq)]

@@ -16,13 +16,12 @@ const MAX_ELEMENTS: usize = 50_000_000;
 /// the slack of its parent's growing child list): the element count is also bounded by the memory budget.
 const ELEMENT_BYTES: u64 = 256;
 
-/// One XML element: local name, attributes, concatenated text and children.
+/// One XML element: local name, concatenated text and children (no reader needs attributes; they are
+/// checked for well-formedness and dropped).
 #[derive(Debug, Clone, Default)]
 pub struct Element {
     /// Local name (no namespace prefix).
     pub name: String,
-    /// Attributes as (local name, unescaped value).
-    pub attrs: Vec<(String, String)>,
     /// Text directly inside this element (not its children's), trimmed.
     pub text: String,
     /// Child elements in document order.
@@ -126,15 +125,10 @@ pub fn parse(text: &str) -> Result<Element> {
 
 fn element_from(s: &quick_xml::events::BytesStart<'_>) -> Result<Element> {
     let name = s.local_name().as_ref().to_string();
-    let mut attrs = Vec::new();
     for a in s.attributes() {
-        let a = a.map_err(|e| Error::corrupt(format!("XML attribute error in <{name}>: {e}")))?;
-        let key = a.key.local_name().as_ref().to_string();
-        let raw = a.value.to_string();
-        let val = quick_xml::escape::unescape(&raw).map(|c| c.into_owned()).unwrap_or(raw);
-        attrs.push((key, val));
+        a.map_err(|e| Error::corrupt(format!("XML attribute error in <{name}>: {e}")))?;
     }
-    Ok(Element { name, attrs, text: String::new(), children: Vec::new() })
+    Ok(Element { name, text: String::new(), children: Vec::new() })
 }
 
 fn attach(stack: &mut [Element], root: &mut Option<Element>, e: Element) -> Result<()> {

@@ -91,7 +91,7 @@ impl LobeAxes {
 
 impl Model {
     /// The axes of the anisotropic models as parameterized (call on [`Model::canonical`] for the canonical
-    /// labeling), read from the first lobe's geometry ([`super::table`]; a mixture's frame is its first
+    /// labeling), read from the first lobe's geometry (`table`; a mixture's frame is its first
     /// lobe's, shared by both lobes of `ggx2` and `beckmann2`); `None` when that lobe is isotropic.
     pub fn axes(&self) -> Option<LobeAxes> {
         let spec = self.id().spec();

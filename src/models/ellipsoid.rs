@@ -50,7 +50,7 @@ impl Ellipsoid {
     }
 
     /// An ellipsoid from any invertible A (eq. 1 depends on A only through `A^T A` up to scale). The result
-    /// is the canonical equivalent (see [`canonical::decompose`]) with exactly the same D: [`Ellipsoid::a`]
+    /// is the canonical equivalent (see `canonical::decompose`) with exactly the same D: [`Ellipsoid::a`]
     /// then returns `S R` of the canonical parameters, not the matrix given, and the alphas are not floored
     /// at [`super::ALPHA_MIN`] (they lie within `[1e-12, 1e12]`). A matrix whose smallest singular value is
     /// below `1e-12` times its largest (numerically singular), or that is not finite, is refused.
@@ -68,7 +68,7 @@ impl Ellipsoid {
         self.params
     }
 
-    /// The same distribution with the canonical parameters (see [`canonical::decompose`]): the ellipsoid axis
+    /// The same distribution with the canonical parameters (see `canonical::decompose`): the ellipsoid axis
     /// nearest `n` is the third axis, `alpha_x >= alpha_y`, `theta_z` in `(-pi/2, pi/2]`, `theta_z = 0` when
     /// the alphas tie. Idempotent.
     /// The canonical alphas keep D exactly: they are ratios of singular values and are not floored (an

@@ -12,10 +12,10 @@
 //! Every model is a small `Copy` value type whose methods read like the formulas. All directions are unit
 //! vectors in the scan frame of CONTRACT.md (macro normal `n = +z`).
 //!
-//! Files, one job each: [`ellipsoid`] (D, G1, projected areas, pdf), [`sampling`] (Walter sec. 4.1),
-//! [`canonical`] (one labeling per distribution), [`ggx`] and [`beckmann`] (Heitz's slope-space forms and
-//! Smith Lambda), `roughness_matrix` (Tokuyoshi's 2x2 form), [`fresnel`], [`brdf`] (Walter eq. 4 with
-//! separable or height-correlated G2), [`sel`] (Tokuyoshi-Harada lobe), [`spec`] (JSON <-> [`Model`]).
+//! Files, one job each: `ellipsoid` (D, G1, projected areas, pdf), `sampling` (Walter sec. 4.1),
+//! `canonical` (one labeling per distribution), `ggx` and `beckmann` (Heitz's slope-space forms and
+//! Smith Lambda), `roughness_matrix` (Tokuyoshi's 2x2 form), `fresnel`, `brdf` (Walter eq. 4 with
+//! separable or height-correlated G2), `sel` (Tokuyoshi-Harada lobe), `spec` (JSON <-> [`Model`]).
 //!
 //! Conventions shared by every model: `D = 0` below the horizon; `G1` in `[0, 1]`; `Lambda >= 0`, saturated at
 //! `f64::MAX` exactly on the horizon (its true value is `+inf`), so no public function returns NaN or an
@@ -24,32 +24,36 @@
 // The `!(x > 0.0)` guards are deliberate: they also catch NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-pub mod axes;
-pub mod beckmann;
-pub mod brdf;
-pub mod canonical;
-pub mod ellipsoid;
-pub mod fresnel;
-pub mod ggx;
-pub mod mixture;
-pub mod roughness;
+pub(crate) mod axes;
+pub(crate) mod beckmann;
+pub(crate) mod brdf;
+pub(crate) mod canonical;
+pub(crate) mod ellipsoid;
+pub(crate) mod fresnel;
+pub(crate) mod ggx;
+pub(crate) mod mixture;
+pub(crate) mod roughness;
 pub(crate) mod roughness_matrix;
-pub mod sampling;
-pub mod sel;
-pub mod spec;
-pub mod student;
-pub mod table;
+pub(crate) mod sampling;
+pub(crate) mod sel;
+pub(crate) mod spec;
+pub(crate) mod student;
+pub(crate) mod table;
 
 pub use axes::LobeAxes;
 pub use beckmann::Beckmann;
 pub use brdf::{MaskingShadowing, MicrofacetBrdf};
+pub use ellipsoid::rotation_xyz;
 pub use ellipsoid::Ellipsoid;
+pub use fresnel::checked_eta;
 pub use fresnel::fresnel_conductor;
 pub use ggx::Ggx;
 pub use mixture::{Lobe, Mixture, MixtureKind};
 pub use roughness_matrix::{disk_to_slope_jacobian, GgxMatrix};
+pub use sampling::{concentric_disk, frisvad_basis};
 pub use sel::SquaredEllipsoidalLobe;
 pub use student::Student;
+pub use table::{Form, Kernel, LobeSpec, Parts};
 pub use table::{ModelId, ModelSpec, Role};
 
 use nalgebra::{Matrix3, Vector3};
@@ -327,7 +331,7 @@ impl Model {
         }
     }
 
-    /// The same distribution in canonical parameters (see [`canonical`]): `ggx` unchanged; `ggx-aniso` and
+    /// The same distribution in canonical parameters (see `canonical`): `ggx` unchanged; `ggx-aniso` and
     /// `beckmann-aniso` with `alpha_x >= alpha_y` and `theta_z` in `(-pi/2, pi/2]` (`theta_z = 0` when the
     /// alphas tie); the ellipsoid by [`Ellipsoid::canonical`]. The id is kept.
     pub fn canonical(&self) -> Model {

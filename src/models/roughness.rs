@@ -5,7 +5,6 @@
 use nalgebra::{Matrix2, Matrix3, Vector2};
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::models::ellipsoid::rotation_xyz;
 use crate::models::table::{Form, Parts};
 use crate::models::{canonical, GgxMatrix, Model, ModelId, Role, ALPHA_MIN};
 
@@ -108,6 +107,7 @@ pub fn skew_offset(f: &SlopeForm) -> f64 {
 #[serde(rename_all = "snake_case")]
 pub enum IsoRule {
     /// `alpha^2 + tr(Sigma)`: keeps the slope second moment, what a fit to the filtered NDF finds.
+    #[cfg(test)]
     MomentMatched,
     /// `alpha^2 + 2 lambda_max(Sigma)`: Tokuyoshi eq. 10 without the `delta_max` clamp (over-filters).
     Eq10,
@@ -119,6 +119,7 @@ pub enum IsoRule {
 pub fn filter_isotropic(alpha: f64, sigma: &Matrix2<f64>, rule: IsoRule) -> f64 {
     let tr = sigma.trace();
     let add = match rule {
+        #[cfg(test)]
         IsoRule::MomentMatched => tr,
         IsoRule::Eq10 => 2.0 * GgxMatrix::eigen(&(0.5 * (sigma + sigma.transpose()))).0,
         IsoRule::Eq13 => 2.0 * tr,
@@ -128,6 +129,7 @@ pub fn filter_isotropic(alpha: f64, sigma: &Matrix2<f64>, rule: IsoRule) -> f64 
 
 /// A model filtered by a kernel of slope covariance `sigma`: roughness matrix `A2 + 2 Sigma` (Tokuyoshi
 /// eq. 3), `mu` unchanged; isotropic models by [`IsoRule::MomentMatched`]. The result has the same id.
+#[cfg(test)]
 pub fn filter_model(model: &Model, sigma: &Matrix2<f64>) -> Result<Model> {
     check_finite2(sigma)?;
     let sigma = psd_part(0.5 * (sigma + sigma.transpose()));
@@ -213,6 +215,7 @@ fn check_finite2(a: &Matrix2<f64>) -> Result<()> {
 
 /// Slope-space density of a slope form as non-axis-aligned GGX (Tokuyoshi eq. 17 in slope space,
 /// translated by `mu`): `1 / (pi sqrt(det A2) (1 + d^T A2^-1 d)^2)`, `d = s - mu`.
+#[cfg(test)]
 pub fn ggx_p22(f: &SlopeForm, s: Vector2<f64>) -> f64 {
     let det = f.a2.determinant();
     let inv = f.a2.try_inverse().unwrap_or_else(Matrix2::zeros);
@@ -222,16 +225,12 @@ pub fn ggx_p22(f: &SlopeForm, s: Vector2<f64>) -> f64 {
 }
 
 /// Slope-space density of a slope form as a Beckmann (Gaussian) lobe: `exp(-d^T A2^-1 d) / (pi sqrt(det A2))`.
+#[cfg(test)]
 pub fn beckmann_p22(f: &SlopeForm, s: Vector2<f64>) -> f64 {
     let det = f.a2.determinant();
     let inv = f.a2.try_inverse().unwrap_or_else(Matrix2::zeros);
     let d = s - f.mu;
     (-(d.transpose() * inv * d)[(0, 0)]).exp() / (std::f64::consts::PI * det.sqrt())
-}
-
-/// `R = Rx Ry Rz` re-exported for tests of the canonical form.
-pub fn rotation(theta_x: f64, theta_y: f64, theta_z: f64) -> Matrix3<f64> {
-    rotation_xyz(theta_x, theta_y, theta_z)
 }
 
 #[cfg(test)]

@@ -90,6 +90,11 @@ pub(crate) fn checked_gamma(name: &str, g: f64) -> Result<f64> {
 }
 
 impl Student {
+    /// `GAMMA_MIN`: the exclusive lower bound of `gamma` (Smith's `Lambda` needs a finite mean slope).
+    pub const GAMMA_MIN: f64 = GAMMA_MIN;
+    /// `GAMMA_MAX`: the largest `gamma` accepted, beyond which the lobe is Beckmann for any data.
+    pub const GAMMA_MAX: f64 = GAMMA_MAX;
+
     /// An STD lobe; alphas below [`super::ALPHA_MIN`] are raised to it, alphas above [`super::ALPHA_MAX`],
     /// `gamma` outside `(GAMMA_MIN, GAMMA_MAX]` and non-finite values are refused.
     pub fn new(alpha_x: f64, alpha_y: f64, theta_z: f64, gamma: f64) -> Result<Self> {
@@ -102,7 +107,7 @@ impl Student {
     }
 
     /// The same distribution in canonical parameters: `alpha_x >= alpha_y`, `theta_z` in `(-pi/2, pi/2]`
-    /// ([`canonical::canonical_aniso`]); `gamma` unchanged.
+    /// (`canonical::canonical_aniso`); `gamma` unchanged.
     pub fn canonical(&self) -> Student {
         let (ax, ay, tz) = canonical::canonical_aniso(self.alpha_x, self.alpha_y, self.theta_z);
         Student { alpha_x: ax, alpha_y: ay, theta_z: tz, ..*self }

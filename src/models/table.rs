@@ -49,7 +49,7 @@ pub enum Kernel {
     Ggx,
     /// Beckmann (Heitz eq. 82).
     Beckmann,
-    /// The Student-t slopes of Ribardiere et al. ([`super::student`]): a free tail, GGX at `gamma = 2`.
+    /// The Student-t slopes of Ribardiere et al. (`student`): a free tail, GGX at `gamma = 2`.
     Student,
 }
 
@@ -157,7 +157,7 @@ impl ModelSpec {
         self.roles.iter().enumerate().filter(move |(_, (_, l))| l & (1 << lobe) != 0).map(|(i, _)| i)
     }
 
-    /// The geometry of lobe `lobe` in parameter vector `p` (module docs of [`Parts`]).
+    /// The geometry of lobe `lobe` in parameter vector `p` (module docs of `Parts`).
     pub fn parts(&self, p: &[f64], lobe: usize) -> Parts {
         let get = |r| self.slot(r, lobe).map(|i| p[i]);
         let alpha_x = get(Role::AlphaX).or(get(Role::Alpha)).unwrap_or(f64::NAN);
@@ -228,7 +228,7 @@ model_table! {
         names: &["alpha"], roles: &[(Alpha, L1)], lobes: &[LobeSpec { kernel: Beckmann, form: Iso }],
         matrix_a: false, parent: None, in_auto: true,
     },
-    /// Isotropic Student-t slopes ([`super::student`]): `alpha`, `gamma`.
+    /// Isotropic Student-t slopes (`student`): `alpha`, `gamma`.
     Student => ModelSpec {
         name: "student", aliases: &["std"], about: "isotropic Student-t slopes (STD), a free tail: GGX at gamma = 2, Beckmann as gamma grows",
         names: &["alpha", "gamma"], roles: &[(Alpha, L1), (Gamma, L1)], lobes: &[LobeSpec { kernel: Student, form: Iso }],
@@ -261,7 +261,7 @@ model_table! {
         lobes: &[LobeSpec { kernel: Ggx, form: Full }],
         matrix_a: true, parent: Some(ModelId::GgxAniso), in_auto: true,
     },
-    /// Two GTR2aniso lobes sharing `theta_z` ([`super::mixture`]): `alpha_x1`, `alpha_y1`, `alpha_x2`,
+    /// Two GTR2aniso lobes sharing `theta_z` (`mixture`): `alpha_x1`, `alpha_y1`, `alpha_x2`,
     /// `alpha_y2`, `theta_z`, `weight`.
     Ggx2 => ModelSpec {
         name: "ggx2", aliases: &[], about: "two GGX lobes sharing one tangent frame",
@@ -278,7 +278,7 @@ model_table! {
         lobes: &[LobeSpec { kernel: Beckmann, form: Aniso }, LobeSpec { kernel: Beckmann, form: Aniso }],
         matrix_a: false, parent: Some(ModelId::BeckmannAniso), in_auto: true,
     },
-    /// An ellipsoid core and an isotropic GGX tail ([`super::mixture`]): `alpha_x1`, `alpha_y1`, `theta_x`,
+    /// An ellipsoid core and an isotropic GGX tail (`mixture`): `alpha_x1`, `alpha_y1`, `theta_x`,
     /// `theta_y`, `theta_z`, `alpha2`, `weight`.
     EllipsoidGgx => ModelSpec {
         name: "ellipsoid+ggx", aliases: &[], about: "an ellipsoid core and an isotropic GGX tail",

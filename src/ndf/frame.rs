@@ -56,7 +56,7 @@ pub struct SlopeFrame {
 
 impl SlopeFrame {
     /// A frame from a centre and a covariance; the covariance's eigenvalues are floored by
-    /// [`SLOPE_SCALE_FLOOR`] and [`MAX_ANISOTROPY`].
+    /// `SLOPE_SCALE_FLOOR` and `MAX_ANISOTROPY`.
     pub fn new(center: [f64; 2], cov: [[f64; 2]; 2]) -> Self {
         let (a, b, c) = (cov[0][0], 0.5 * (cov[0][1] + cov[1][0]), cov[1][1]);
         // Eigen-decomposition of the symmetric 2x2 matrix in closed form.
@@ -94,7 +94,7 @@ impl SlopeFrame {
     /// columns of `Sigma^(1/2)`, at the angles `g_x`, `g_y`. With `theta_z = 0` (or any round lobe) they
     /// are the grid's axes, the case of the moire; with a strong anisotropy both lie near the principal
     /// axis `-theta_z`, so no constant turn suits every `theta_z`. `t` puts the images' mean direction
-    /// modulo 45 degrees (the circular mean of `8 g`, divided by 8) at [`LATTICE_IMAGE_ANGLE`].
+    /// modulo 45 degrees (the circular mean of `8 g`, divided by 8) at `LATTICE_IMAGE_ANGLE`.
     pub fn grid_turn(root: [[f64; 2]; 2]) -> f64 {
         let (gx, gy) = (root[1][0].atan2(root[0][0]), root[1][1].atan2(root[0][1]));
         let (sy, sx) = ((8.0 * gx).sin() + (8.0 * gy).sin(), (8.0 * gx).cos() + (8.0 * gy).cos());

@@ -5,7 +5,7 @@
 //! 1. slopes `s = grad h` by central differences or the exact Gauss map of the triangulated surface
 //!    ([`NormalScheme`]); every sample has the same projected area on a regular grid;
 //! 2. a robust centre and covariance of the slopes from a subsample of [`FRAME_SUBSAMPLE`] normals
-//!    ([`SlopeFrame::robust`]); heights on a coarse lattice are detected here ([`quantum`]) and cap the
+//!    ([`SlopeFrame::robust`]); heights on a coarse lattice are detected here (`quantum`) and cap the
 //!    automatic grid;
 //! 3. each slope is whitened, turned into the stretched normal `m'` and mapped with the Lambert
 //!    azimuthal equal-area map onto the disk `|p| <= sqrt 2` ([`SlopeFrame::to_lambert`]), which covers
@@ -18,32 +18,38 @@
 //!    `sum_k D_k W_k = 1` (Heitz eq. 9).
 //!
 //! The heights are read as f64 ([`empirical_ndf`]) or from f32 storage ([`empirical_ndf_f32`],
-//! [`precision`]) by the same kernel, generic over [`HeightRows`].
+//! `precision`) by the same kernel, generic over `HeightRows`.
 //!
 //! The bin's central direction `m_k` is the image of the `W`-weighted centroid of the cell, which makes
 //! the midpoint rule `E_k = N D(m_k) W_k` of `data_formats/objective.md` exact for any `D` that is linear
 //! over the cell in Lambert coordinates (second-order error).
 
 mod cells;
-pub mod frame;
-pub mod grid;
+pub(crate) mod frame;
+pub(crate) mod grid;
 mod histogram;
-pub mod lattice;
-pub mod normals;
-pub mod output;
+pub(crate) mod lattice;
+pub(crate) mod normals;
+pub(crate) mod output;
 #[cfg(feature = "plot")]
-pub mod plot;
-pub mod precision;
-pub mod quantum;
-pub mod resolution;
+pub(crate) mod plot;
+pub(crate) mod precision;
+pub(crate) mod quantum;
+pub(crate) mod resolution;
 
 pub use frame::SlopeFrame;
+pub use grid::MAX_CELLS_ACROSS;
 pub use grid::{BinGrid, QuadOrder, RimShape};
 use nalgebra::Vector3;
 pub use normals::NormalScheme;
+pub use output::{write_csv, write_csv_to, write_exr, write_json, CSV_HEADER};
+#[cfg(feature = "plot")]
+pub use plot::{plot_map, plot_slices, zoom_half};
 pub use precision::{F32Storage, HeightsF32, Precision};
+pub use quantum::rounding_kernel;
 pub use quantum::{HeightQuantum, SlopeLattice};
 use rayon::prelude::*;
+pub use resolution::{assess, confusion, Confusion, MAX_UNRESOLVED_SHARE};
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::scan::bands::{self, BandSource, HeightRows};
@@ -95,15 +101,15 @@ pub struct EmpiricalNdf {
     pub slope_cov: [[f64; 2]; 2],
     /// Projected area of one sample in m^2 (`dx dy`, or `dx dy / 2` for triangles).
     pub sample_area: f64,
-    /// Heights found on a coarse lattice (see [`quantum`]), and the grid cap it imposed.
+    /// Heights found on a coarse lattice (see `quantum`), and the grid cap it imposed.
     pub quantization: Option<HeightQuantum>,
     /// Set when the heights were read from f32 storage ([`empirical_ndf_f32`]): what it cost.
     pub f32_storage: Option<F32Storage>,
     /// Per bin, the part of `count` from the odd row blocks of the dispersion split
     /// ([`DISPERSION_BLOCKS`]); empty when the NDF was not counted from a scan. The fit compares the two
-    /// halves to estimate the overdispersion the data show ([`crate::fit::verdict`]).
+    /// halves to estimate the overdispersion the data show (`verdict`).
     pub counts_odd: Vec<u64>,
-    /// Per bin, how many of its normals the sampling does not resolve ([`resolution`]); empty when not
+    /// Per bin, how many of its normals the sampling does not resolve (`resolution`); empty when not
     /// assessed (triangle normals, NDFs not counted from a scan) or when over
     /// [`resolution::MAX_UNRESOLVED_SHARE`] of all normals are unresolved.
     pub unresolved: Vec<u64>,
@@ -187,7 +193,7 @@ impl NdfOptions {
 }
 /// Compute the empirical NDF of `hf` (see the module documentation for the method).
 ///
-/// Heights on a coarse lattice (see [`quantum`]) cap the automatic grid (`cells_across: None`) so that
+/// Heights on a coarse lattice (see `quantum`) cap the automatic grid (`cells_across: None`) so that
 /// bins are no finer than the slope lattice; an explicit `cells_across` finer than the cap is kept with
 /// a warning in [`EmpiricalNdf::warnings`].
 ///
@@ -207,7 +213,7 @@ pub fn empirical_ndf_of<S: BandSource<T = f64>>(src: &S, opts: &NdfOptions, inva
 /// result carries [`EmpiricalNdf::f32_storage`] (offset, rounding bound).
 ///
 /// Errors: as [`empirical_ndf`], and [`ErrorKind::BadData`] when the f32 rounding of the heights bounds
-/// a slope error above [`precision::MAX_ROUNDING_FRACTION`] of the smallest robust slope scale (use f64).
+/// a slope error above `precision::MAX_ROUNDING_FRACTION` of the smallest robust slope scale (use f64).
 pub fn empirical_ndf_f32(h: &HeightsF32, opts: &NdfOptions) -> Result<EmpiricalNdf> {
     let mut ndf = ndf_of(h, opts, || h.invalid)?;
     let bound = h.slope_rounding_bound(opts.scheme);

@@ -106,7 +106,7 @@ pub fn to_json(ndf: &EmpiricalNdf, input: serde_json::Value) -> serde_json::Valu
     })
 }
 
-/// Write [`to_json`] to `path`.
+/// Write `to_json` to `path`.
 pub fn write_json(path: &Path, ndf: &EmpiricalNdf, input: serde_json::Value) -> Result<()> {
     let v = to_json(ndf, input);
     write_atomic(path, |w| serde_json::to_writer(w, &v).map_err(|e| Error::new(ErrorKind::Io, e.to_string())))
@@ -130,7 +130,7 @@ pub fn raster(ndf: &EmpiricalNdf, res: usize, center: [f64; 2], half: f64) -> Ve
     out
 }
 
-/// Write an OpenEXR image (one float channel `D`, `res x res`) of [`raster`] over the whole hemisphere.
+/// Write an OpenEXR image (one float channel `D`, `res x res`) of `raster` over the whole hemisphere.
 pub fn write_exr(path: &Path, ndf: &EmpiricalNdf, res: usize) -> Result<()> {
     use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec, WritableImage};
     if res == 0 || res > 8192 {

@@ -91,7 +91,7 @@ pub struct HeightQuantum {
 
 impl HeightQuantum {
     /// Whether the lattice is fine enough against the slope scale to resolve the NDF
-    /// ([`MAX_RESOLVED_STEP`]).
+    /// (`MAX_RESOLVED_STEP`).
     pub fn resolves_ndf(&self) -> bool {
         self.whitened_step[0].max(self.whitened_step[1]) <= MAX_RESOLVED_STEP
     }
@@ -111,18 +111,6 @@ impl HeightQuantum {
     }
 }
 
-/// Find the height quantum of a scan: `q` is the smallest nonzero adjacent height difference (ignoring
-/// differences below 1e-6 of the 90th percentile, which are rounding specks) when at least 99% of the
-/// examined differences are integer multiples of it and they show more than one step: the 90th
-/// percentile of the nonzero ones spans at least two steps, or two multiples (zero included) each hold
-/// at least 1% of them (the coarsest lattices, whose differences are mostly 0 and one step).
-/// `None` when the heights are not on a lattice, when
-/// too few differences are nonzero to tell (fewer than 100), or when the lattice is immaterial
-/// ([`MATERIAL_STEP`]).
-pub fn detect<S: BandSource>(hf: &S, scheme: NormalScheme, frame: &SlopeFrame) -> Option<HeightQuantum> {
-    assess(lattice(hf)?, &hf.outline(), scheme, frame)
-}
-
 /// A height step `q` and the fraction of the examined differences on its lattice.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Lattice {
@@ -137,7 +125,7 @@ impl Lattice {
     }
 }
 
-/// The height quantum of the raw heights, if they are on a lattice (the data half of [`detect`]).
+/// The height quantum of the raw heights, if they are on a lattice (as [`lattice`]).
 pub fn height_quantum<S: BandSource>(hf: &S) -> Option<f64> {
     lattice(hf).map(|l| l.q)
 }
@@ -163,7 +151,16 @@ pub(crate) fn phase(sample: &[[f64; 2]], step: [f64; 2]) -> ([f64; 2], [f64; 2])
     (offset, rigidity)
 }
 
-/// The data half of [`detect`] (no frame needed, so it can run beside the frame's estimation).
+/// Find the height quantum of a scan: `q` is the smallest nonzero adjacent height difference (ignoring
+/// differences below 1e-6 of the 90th percentile, which are rounding specks) when at least 99% of the
+/// examined differences are integer multiples of it and they show more than one step: the 90th
+/// percentile of the nonzero ones spans at least two steps, or two multiples (zero included) each hold
+/// at least 1% of them (the coarsest lattices, whose differences are mostly 0 and one step).
+/// `None` when the heights are not on a lattice, when
+/// too few differences are nonzero to tell (fewer than 100), or when the lattice is immaterial
+/// ([`MATERIAL_STEP`], judged by [`assess`], the frame half of the rule).
+///
+/// This is the data half (no frame needed, so it can run beside the frame's estimation).
 pub(crate) fn lattice<S: BandSource>(src: &S) -> Option<Lattice> {
     let shape = src.shape();
     let (nx, ny) = (shape.nx, shape.ny);
@@ -220,7 +217,7 @@ fn two_levels(d: &[f64], q: f64) -> bool {
     counts.values().filter(|&&c| c as f64 >= least).count() >= 2
 }
 
-/// The frame half of [`detect`]: whether the lattice is material in the frame's whitened slopes, and
+/// The frame half of the rule of [`lattice`]: whether the lattice is material in the frame's whitened slopes, and
 /// the cap it puts on the grid.
 pub(crate) fn assess<H: HeightRows>(lat: Lattice, hf: &H, scheme: NormalScheme, frame: &SlopeFrame) -> Option<HeightQuantum> {
     let Lattice { q, on } = lat;

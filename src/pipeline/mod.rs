@@ -8,7 +8,7 @@
 //! ```
 
 pub mod check;
-pub mod preset;
+pub(crate) mod preset;
 
 use std::path::Path;
 use std::time::Instant;
@@ -20,7 +20,9 @@ use crate::models::ModelChoice;
 use crate::ndf::{EmpiricalNdf, NdfOptions};
 use crate::preprocess::{Prepared, Preprocess};
 use crate::scan::{Heightfield, InputInfo, Scan};
+pub use check::Spelling;
 pub use preset::Preset;
+pub use preset::PresetKnobs;
 
 /// Everything the pipeline needs besides the scan. `Default` is what `ndfit fit` does without flags:
 /// the mean plane removed, the automatic NDF grid, `auto` model choice, Poisson objective with LM.

@@ -80,7 +80,7 @@ impl Preset {
     }
 
     /// The NDF options of this preset for a scan with about `samples` valid normals (the bin count is
-    /// the automatic one for [`PresetKnobs::target_count`], capped at [`PresetKnobs::max_cells`]).
+    /// the automatic one for `PresetKnobs::target_count`, capped at `PresetKnobs::max_cells`).
     pub fn ndf_options(self, samples: u64) -> NdfOptions {
         let k = self.knobs();
         let auto = NdfOptions { scheme: k.scheme, cells_across: None, target_count: k.target_count, frame: None, resolution: None };

@@ -52,7 +52,7 @@ const MAX_TERMS: usize = 10;
 ///
 /// Three passes over the heights, each split over the rayon threads by blocks of `ROWS_PER_TASK`
 /// rows: the count and mean of the valid heights, the normal equations (fixed-size, upper triangle),
-/// and the residuals ([`fit_polynomial`], then [`FormModel::residual`]).
+/// and the residuals (`fit_polynomial`, then `FormModel::residual`).
 pub fn remove_polynomial(hf: &Scan, order: usize) -> Result<Vec<f64>> {
     Ok(fit_polynomial(hf, order)?.residual(hf))
 }

@@ -24,8 +24,9 @@ use crate::scan::{InputInfo, Scan, ScanMeta};
 use super::form::FormModel;
 use super::{despike, FormRemoval, Preprocess};
 
-/// A preprocessed scan: the heights as read, the form to subtract and the points to mask (see the
-/// [module documentation](self)).
+/// A preprocessed scan: the heights as read, the form to subtract and the points to mask, kept apart
+/// and handed out in row bands ([`BandSource`]) so that no second copy of the heights is made. Every
+/// pass sees the residual heights the whole-grid form removal would make, bit for bit.
 #[derive(Debug, Clone)]
 pub struct Prepared<'a> {
     /// The heights after crop and subsampling, before form removal (a mapped file stays mapped).

@@ -657,8 +657,3 @@ fn one_lobe_suffices(results: &[FootprintResult], chosen: Option<ModelId>, toler
         )
     })
 }
-
-/// `2 Sigma` as `(alpha_x, alpha_y, theta_z)` for reporting; None when it is singular.
-pub fn roughness_params(sigma: &Matrix2<f64>) -> Option<(f64, f64, f64)> {
-    aniso_params(&(2.0 * sigma)).ok()
-}

@@ -107,7 +107,7 @@ pub fn filter_channels(nx: usize, ny: usize, fields: &[Vec<f64>], sigma_x: f64, 
     Ok(result)
 }
 
-/// Filter one field (see [`filter_channels`]).
+/// Filter one field (see `filter_channels`).
 pub fn filter_field(nx: usize, ny: usize, field: &[f64], sigma_x: f64, sigma_y: f64) -> Result<Vec<f64>> {
     let mut r = filter_channels(nx, ny, &[field.to_vec()], sigma_x, sigma_y)?;
     Ok(r.pop().expect("one channel in, one channel out"))

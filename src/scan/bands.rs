@@ -79,7 +79,7 @@ pub fn band_rows(nx: usize, bytes: usize) -> usize {
 /// Rows per band set for this process (0: from [`BAND_BYTES`]).
 static BAND_ROWS: AtomicUsize = AtomicUsize::new(0);
 
-/// Set the rows per band for this process (`None`: from [`BAND_BYTES`]); tests use a row or two to
+/// Set the rows per band for this process (`None`: from `BAND_BYTES`); tests use a row or two to
 /// put band edges everywhere. Only speed and memory change with it, never a result.
 pub fn set_band_rows(rows: Option<usize>) {
     BAND_ROWS.store(rows.map_or(0, |r| r.max(1)), Ordering::Relaxed);
@@ -141,7 +141,7 @@ pub struct GridShape {
     pub quantum: Option<f64>,
 }
 
-/// Rows `lo..hi` of a grid (see the [module documentation](self)).
+/// Rows `lo..hi` of a grid, handed out by a [`BandSource`]: row `i` of the band is row `i` of the whole grid.
 pub struct Band<'b, T> {
     z: &'b [T],
     lo: usize,
@@ -206,7 +206,9 @@ impl<T: Copy + Into<f64> + Sync> HeightRows for Band<'_, T> {
     }
 }
 
-/// Heights handed out in row bands (see the [module documentation](self)).
+/// Heights handed out in row bands: rows `lo..hi` with global row indices, so the stencil kernels run on a
+/// band unchanged; a scan in memory hands out views of its rows, a lazily preprocessed one computes each
+/// band's residual rows into a small buffer. Passes over bands need a few bands of memory per thread.
 pub trait BandSource: Sync {
     /// The stored float type.
     type T: Copy + Into<f64> + Sync + Send + 'static;
@@ -226,7 +228,7 @@ pub trait BandSource: Sync {
     fn band_rows(&self) -> usize {
         band_rows(self.shape().nx, std::mem::size_of::<Self::T>())
     }
-    /// The grid's shape as a [`HeightRows`] that holds no row (for the shape-only helpers of
+    /// The grid's shape as a `HeightRows` that holds no row (for the shape-only helpers of
     /// [`crate::ndf::NormalScheme`]).
     fn outline(&self) -> Band<'static, Self::T> {
         Band::new(&[], 0, self.shape())
@@ -234,7 +236,7 @@ pub trait BandSource: Sync {
 }
 
 impl Scan<'_> {
-    /// Whether passes read this scan as a tiled scan (mapped, above [`release_threshold`]): each band's
+    /// Whether passes read this scan as a tiled scan (mapped, above `release_threshold`): each band's
     /// pages are released after use, so nothing may read its rows outside a band.
     pub fn is_tiled(&self) -> bool {
         self.z.is_mapped() && (self.z.len() as u64).saturating_mul(8) > release_threshold()

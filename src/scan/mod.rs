@@ -4,13 +4,15 @@
 //! `z = h[i][j]`, all in metres; row index grows with y, column index with x; the macro normal is `+z`.
 //! Invalid points are stored as NaN and are never read as heights.
 
-pub mod bands;
-pub mod heights;
+pub(crate) mod bands;
+pub(crate) mod heights;
 mod input;
 
 use std::collections::BTreeMap;
 
 use crate::error::{Error, Result};
+pub use bands::{set_band_rows, set_release_threshold, set_tiled_progress, BandSource};
+pub use bands::{Band, GridShape, HeightRows, RawMasked};
 pub use heights::Heights;
 pub use input::InputInfo;
 

@@ -10,13 +10,14 @@
 //! and returns the heightfield with its [`Truth`], which serializes as `SCAN.truth.json`
 //! (`schema: "ndfit.synth/1"`, contract `model`, `params`, `matrix_a`).
 
-pub mod ellipsoid;
-pub mod fft;
-pub mod gaussian;
-pub mod planes;
+pub(crate) mod ellipsoid;
+pub(crate) mod fft;
+pub(crate) mod gaussian;
+pub(crate) mod planes;
 mod truth;
 
 pub use ellipsoid::{ellipsoid_surface, EllipsoidParams};
+pub use ellipsoid::{EllipsoidGeometry, HARD_END_SET};
 pub use gaussian::{gaussian_surface, GaussianParams};
 pub use planes::{tilted_planes, PlaneFacet};
 pub use truth::{FacetTruth, Truth};

@@ -77,3 +77,9 @@ pub fn reference_total(ndf: &ndfit::ndf::EmpiricalNdf, k: usize) -> f64 {
     }
     total
 }
+
+/// Lower-case hex MD5 of `data` (RustCrypto's `md-5`, not ndfit's own wrapper): the checksums test X3P files carry.
+pub fn md5_hex(data: &[u8]) -> String {
+    use md5::Digest;
+    md5::Md5::digest(data).iter().map(|b| format!("{b:02x}")).collect()
+}

@@ -346,7 +346,7 @@ fn ellipsoid_axes_follow_d() {
             assert!((q - want).abs() < 1e-6 * want, "{p:?} phi {phi}: {q} vs {want}");
         }
         // alpha_x is the axis nearer the first row of R, as documented.
-        let r = ndfit::models::ellipsoid::rotation_xyz(fit.params()[2], fit.params()[3], fit.params()[4]);
+        let r = ndfit::models::rotation_xyz(fit.params()[2], fit.params()[3], fit.params()[4]);
         let r1 = Vector3::new(r[(0, 0)], r[(0, 1)], 0.0).normalize();
         assert!(ex.dot(&r1).abs() > ey.dot(&r1).abs() && ex.dot(&r1) > 0.0);
     }
@@ -416,10 +416,10 @@ fn cli_export() {
 /// half-width is 1.2 sin of that (to the bin size), far inside the disk.
 #[test]
 fn zoom_window_holds_the_data() {
-    use ndfit::fit::synthetic::{binned_ndf, Grid};
+    use ndfit::fit::{binned_ndf, Grid};
     let truth = model(ModelId::Beckmann, &[0.05]);
     let ndf = binned_ndf(&truth, &Grid::for_model(&truth, 63), 2e5, 3);
-    let half = ndfit::ndf::plot::zoom_half(&ndf, Vector3::z());
+    let half = ndfit::ndf::zoom_half(&ndf, Vector3::z());
     let t = 0.05 * 100f64.ln().sqrt();
     let want = 1.2 * t / (1.0 + t * t).sqrt();
     assert!((half - want).abs() < 0.1 * want, "{half} vs {want}");

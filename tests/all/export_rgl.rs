@@ -7,8 +7,8 @@ use std::f64::consts::PI;
 use std::process::Command;
 
 use nalgebra::Vector3;
-use ndfit::export::rgl::tensor::{Dtype, TensorFile};
 use ndfit::export::rgl::{check_structure, tabulate, Flavour, Material, RglOptions};
+use ndfit::export::rgl::{Dtype, TensorFile};
 use ndfit::models::{Model, ModelId, Ndf};
 
 use crate::common::ndfit_bin;

@@ -1,14 +1,14 @@
 //! The resolution test run inside the histogram's pass against its two-pass form
-//! ([`ndfit::ndf::resolution::assess`], which reads the scan twice more): the same share and the same
+//! ([`ndfit::ndf::assess`], which reads the scan twice more): the same share and the same
 //! per-bin counts of unresolved normals, bit for bit, on odd grid sizes, with holes and masked spikes,
 //! with bands of 1 and 3 rows and the default, through a lazily formed scan ([`prepare`]) and through
 //! f32 storage; on both sides of [`MAX_UNRESOLVED_SHARE`] (per-bin counts kept or dropped).
 
-use ndfit::ndf::resolution::{assess, MAX_UNRESOLVED_SHARE};
+use ndfit::ndf::{assess, MAX_UNRESOLVED_SHARE};
 use ndfit::ndf::{empirical_ndf, empirical_ndf_f32, EmpiricalNdf, HeightsF32, NdfOptions};
 use ndfit::pipeline::ndf_prepared;
 use ndfit::preprocess::{prepare, Preprocess};
-use ndfit::scan::bands::set_band_rows;
+use ndfit::scan::set_band_rows;
 use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
 use ndfit::Heightfield;
 
@@ -45,7 +45,7 @@ fn bumps(nx: usize, ny: usize, noise: f64) -> Heightfield {
 }
 
 /// The two-pass assessment of `src` for the bins of `ndf` (its fields reset first).
-fn reference<S: ndfit::scan::bands::BandSource>(src: &S, ndf: &EmpiricalNdf) -> EmpiricalNdf {
+fn reference<S: ndfit::scan::BandSource>(src: &S, ndf: &EmpiricalNdf) -> EmpiricalNdf {
     let mut r = ndf.clone();
     r.unresolved = vec![u64::MAX; 3];
     r.unresolved_share = None;

@@ -4,7 +4,7 @@
 //! modulo 45 from the bin grid's axes, whatever the lobe's `theta_z`.
 
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, SynthSettings};
+use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
 
 /// Circular mean modulo 45 degrees (of `8 g`) of the whitened lattice steps' angles near the lobe's centre
 /// (whitened slope radius below 1), over steps along x and along y, in degrees in (-22.5, 22.5].

@@ -443,12 +443,12 @@ fn an_x3p_whose_main_xml_does_not_match_its_md5_is_refused() {
     let main = main_xml(4, 4, "D", "<DataLink><PointDataLink>bindata/data.bin</PointDataLink></DataLink>");
     let data: Vec<u8> = (0..16).flat_map(|k| (k as f64 * 1e-7).to_le_bytes()).collect();
     // The checksum file of a different main.xml (one byte more).
-    let sum = format!("{} *main.xml\n", ndfit::io::md5::md5_hex(format!("{main} ").as_bytes()));
+    let sum = format!("{} *main.xml\n", crate::common::md5_hex(format!("{main} ").as_bytes()));
     x3p(&d.path().join("m.x3p"), &main, &[("bindata/data.bin", &data, 1), ("md5checksum.hex", sum.as_bytes(), 1)]);
     let out = run(d.path(), &["info", "m.x3p"]);
     assert_refused(&out, &["m.x3p", "md5checksum.hex", "main.xml"]);
     // With the right sum it reads.
-    let sum = format!("{} *main.xml\n", ndfit::io::md5::md5_hex(main.as_bytes()));
+    let sum = format!("{} *main.xml\n", crate::common::md5_hex(main.as_bytes()));
     x3p(&d.path().join("m.x3p"), &main, &[("bindata/data.bin", &data, 1), ("md5checksum.hex", sum.as_bytes(), 1)]);
     let out = run(d.path(), &["info", "m.x3p"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -508,15 +508,15 @@ fn plots_of_degenerate_ndfs_draw_or_fail_cleanly() {
     let mut bad = Vec::new();
     for (name, ndf) in degenerate_ndfs() {
         let outs: Vec<(String, ndfit::Result<()>)> = vec![
-            ("map".into(), ndfit::ndf::plot::plot_map(&d.path().join("map.png"), &ndf, name)),
-            ("slices".into(), ndfit::ndf::plot::plot_slices(&d.path().join("slices.png"), &ndf, name)),
+            ("map".into(), ndfit::ndf::plot_map(&d.path().join("map.png"), &ndf, name)),
+            ("slices".into(), ndfit::ndf::plot_slices(&d.path().join("slices.png"), &ndf, name)),
         ]
         .into_iter()
         .chain(
             models
                 .iter()
                 .enumerate()
-                .map(|(k, m)| (format!("fit{k}"), ndfit::fit::plot::plot_fit(&d.path().join(format!("fit{k}.png")), &ndf, m, name))),
+                .map(|(k, m)| (format!("fit{k}"), ndfit::fit::plot_fit(&d.path().join(format!("fit{k}.png")), &ndf, m, name))),
         )
         .collect();
         for (what, r) in outs {

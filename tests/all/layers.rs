@@ -251,3 +251,67 @@ fn the_layer_check_reads_paths_as_the_compiler_does() {
     assert_eq!(names.get("ModelChoice").map(String::as_str), Some("models"));
     assert_eq!(names.len(), 4);
 }
+
+/// The public namespaces below the crate root, from the first column of the table under
+/// `## The public API` (`export::rgl`, `batch::runner`, ...).
+fn public_namespaces(doc: &str) -> Vec<String> {
+    let section = doc.split("\n## The public API").nth(1).expect("docs/ARCHITECTURE.md has a `## The public API` section");
+    let section = section.split("\n## ").next().unwrap_or(section);
+    let mut names = Vec::new();
+    for row in section.lines().filter(|l| l.starts_with("| `")) {
+        let first = row.split('|').nth(1).unwrap_or("");
+        names.extend(first.split(',').map(|n| n.trim().trim_matches('`').to_string()).filter(|n| n.contains("::")));
+    }
+    names
+}
+
+/// The module path of a file under `src/` (`src/export/rgl/mod.rs` gives `export::rgl`, `src/fit/tail.rs`
+/// gives `fit::tail`, `src/lib.rs` the empty root).
+fn module_path(src: &Path, path: &Path) -> String {
+    let rel = path.strip_prefix(src).expect("under src").with_extension("");
+    let mut parts: Vec<String> = rel.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect();
+    if parts.last().is_some_and(|l| l == "mod" || l == "lib") {
+        parts.pop();
+    }
+    parts.join("::")
+}
+
+/// The boundary: below the crate root only the namespaces of ARCHITECTURE.md's table are `pub mod`;
+/// every other file is a private module whose public items reach users through its module's re-exports.
+#[test]
+fn only_the_listed_namespaces_are_public() {
+    let root = repo();
+    let doc = std::fs::read_to_string(root.join("docs/ARCHITECTURE.md")).expect("docs/ARCHITECTURE.md");
+    let allowed = public_namespaces(&doc);
+    assert!(allowed.len() >= 10, "the public API table of docs/ARCHITECTURE.md was not read: {allowed:?}");
+    let src = root.join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    files.sort();
+    let (mut public, mut wrong) = (Vec::new(), Vec::new());
+    for path in &files {
+        let parent = module_path(&src, path);
+        if parent.is_empty() || parent == "main" || parent.starts_with("cli") {
+            continue; // the crate root's modules are the layers; the binary's modules are not the library's API
+        }
+        let code = code_only(&std::fs::read_to_string(path).expect("source file"));
+        for (k, line) in code.lines().enumerate() {
+            let Some(name) = line.trim().strip_prefix("pub mod ") else { continue };
+            let name = name.trim_end_matches(|c: char| c == ';' || c == '{' || c.is_whitespace());
+            let full = format!("{parent}::{name}");
+            if allowed.contains(&full) {
+                public.push(full);
+            } else {
+                wrong.push(format!(
+                    "{}:{}: `pub mod {name}` ({full}) is not a public namespace of docs/ARCHITECTURE.md",
+                    path.display(),
+                    k + 1
+                ));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+    for a in &allowed {
+        assert!(public.contains(a), "docs/ARCHITECTURE.md lists `{a}` as a public namespace, but it is not a `pub mod`");
+    }
+}

@@ -5,7 +5,7 @@
 use nalgebra::Vector3;
 use ndfit::models::Ndf;
 use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions, NormalScheme, QuadOrder};
-use ndfit::synth::ellipsoid::EllipsoidGeometry;
+use ndfit::synth::EllipsoidGeometry;
 use ndfit::synth::{ellipsoid_surface, gaussian_surface, tilted_planes, EllipsoidParams, GaussianParams, PlaneFacet, SynthSettings};
 use ndfit::{ErrorKind, Heightfield};
 

@@ -5,11 +5,11 @@
 //! cell edge; moments within 1e-9 relative. On odd grids with holes and masked spikes, with bands of 1
 //! and 3 rows and the default. And the CSV: every number parses back to the same bits.
 
-use ndfit::ndf::output::write_csv_to;
+use ndfit::ndf::write_csv_to;
 use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions, NormalScheme};
 use ndfit::pipeline::ndf_prepared;
 use ndfit::preprocess::{prepare, Preprocess};
-use ndfit::scan::bands::{set_band_rows, BandSource};
+use ndfit::scan::{set_band_rows, BandSource};
 use ndfit::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
 use ndfit::Heightfield;
 
@@ -137,7 +137,7 @@ fn ndf_csv_numbers_round_trip() {
     write_csv_to(&mut out, &ndf).expect("csv");
     let text = String::from_utf8(out).expect("utf-8");
     let mut lines = text.lines();
-    assert_eq!(lines.next(), Some(ndfit::ndf::output::CSV_HEADER));
+    assert_eq!(lines.next(), Some(ndfit::ndf::CSV_HEADER));
     let mut exponents = 0;
     let mut n = 0;
     for (k, line) in lines.enumerate() {

@@ -6,10 +6,10 @@
 use std::process::Command;
 
 use nalgebra::Vector3;
-use ndfit::fit::verdict::{data_dispersion, judge, Evidence, Verdict};
+use ndfit::fit::{data_dispersion, judge, Evidence, Verdict};
 use ndfit::fit::{fit_model, FitOptions, FitReport};
 use ndfit::models::{ModelId, Ndf};
-use ndfit::ndf::quantum::rounding_kernel;
+use ndfit::ndf::rounding_kernel;
 use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfBin, NdfOptions, NormalScheme};
 use ndfit::preprocess::{apply, Preprocess};
 use ndfit::synth::{gaussian_surface, GaussianParams, SynthSettings};
@@ -64,7 +64,7 @@ fn slope_spread(ndf: &EmpiricalNdf) -> f64 {
 /// `delta(D_a; D_b)` over the bins of `ndf` (objective.md's metric).
 fn ndf_delta(a: &FitReport, b: &FitReport, ndf: &EmpiricalNdf) -> f64 {
     let (ma, mb) = (a.to_model().unwrap(), b.to_model().unwrap());
-    ndfit::fit::metric::delta(|m| ma.d(*m), |m| mb.d(*m), ndf.bins.iter().map(|k| (k.m, k.proj_solid_angle))).unwrap()
+    ndfit::fit::delta(|m| ma.d(*m), |m| mb.d(*m), ndf.bins.iter().map(|k| (k.m, k.proj_solid_angle))).unwrap()
 }
 
 #[test]
@@ -159,7 +159,7 @@ fn clean_scans_at_every_lattice_size() {
             let r = rep.rounding.as_ref().unwrap_or_else(|| panic!("lattice {f}: the fit reports no rounding"));
             assert_eq!(r.kernel, rounding_kernel(NormalScheme::Central, found.slope_step));
             // Read back from the report, the rounding smooths the lobe as the fit did.
-            let back: ndfit::fit::objective::Rounding = serde_json::from_value(serde_json::to_value(r).unwrap()).unwrap();
+            let back: ndfit::fit::Rounding = serde_json::from_value(serde_json::to_value(r).unwrap()).unwrap();
             let lobe = rep.to_model().unwrap();
             let m = nalgebra::Vector3::new(0.2, -0.1, 1.0).normalize();
             assert_eq!(back.seen_d(&lobe, m), r.seen_d(&lobe, m));

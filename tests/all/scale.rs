@@ -1,10 +1,10 @@
 //! Integration tests: the NDF at a renderer's footprint (src/scale, data_formats/scale.md).
 
 use nalgebra::{Matrix2, Vector3};
-use ndfit::scale::fields::{BumpField, FourierSurface};
-use ndfit::scale::filter::{filter_field, gaussian_taps};
-use ndfit::scale::footprint::{footprint_field, footprint_stats, footprint_stats_over, kernel_sigma, slope_field};
-use ndfit::scale::ndf_at::{bin_slopes, sample_slopes, slope_moments};
+use ndfit::scale::{bin_slopes, sample_slopes, slope_moments};
+use ndfit::scale::{filter_field, gaussian_taps};
+use ndfit::scale::{footprint_field, footprint_stats, footprint_stats_over, kernel_sigma, slope_field};
+use ndfit::scale::{BumpField, FourierSurface};
 
 const DX: f64 = 1e-6;
 
@@ -182,7 +182,7 @@ mod cli {
         };
         let hf = bumps.heightfield(96, DX).unwrap();
         let p = dir.join("bumps.x3p");
-        ndfit::io::x3p_write::write_x3p(&p, &hf).unwrap();
+        ndfit::io::write_x3p(&p, &hf).unwrap();
         p
     }
 
@@ -242,7 +242,7 @@ mod cli {
             }
         }
         let csv = std::fs::read_to_string(dir.path().join("a/scale.csv")).unwrap();
-        assert!(csv.starts_with(ndfit::scale::report::CSV_HEADER));
+        assert!(csv.starts_with(ndfit::scale::CSV_HEADER));
         // 5 footprints x 8 models (the single lobes and the mixtures) x 2 routes + header.
         let n_models = ndfit::models::ModelId::EVERY.len();
         assert_eq!(csv.lines().count(), 1 + 5 * n_models * 2);
@@ -276,9 +276,9 @@ mod cli {
 mod routes {
     use ndfit::models::{Model, ModelId};
     use ndfit::ndf::EmpiricalNdf;
-    use ndfit::scale::analyze::{analyze, recommend, Fitted, Fitter, ScaleOptions};
-    use ndfit::scale::ndf_at::{sample_slopes_with, Blur};
-    use ndfit::scale::roughness::{model_from_slope_form, SlopeForm};
+    use ndfit::scale::{analyze, recommend, Fitted, Fitter, ScaleOptions};
+    use ndfit::scale::{model_from_slope_form, SlopeForm};
+    use ndfit::scale::{sample_slopes_with, Blur};
 
     use super::*;
 
@@ -364,9 +364,9 @@ mod routes {
 
 mod fitted {
     use ndfit::models::ModelId;
-    use ndfit::scale::analyze::Fitter;
-    use ndfit::scale::fitter::FitFitter;
-    use ndfit::scale::ndf_at::{sample_slopes_with, Blur};
+    use ndfit::scale::FitFitter;
+    use ndfit::scale::Fitter;
+    use ndfit::scale::{sample_slopes_with, Blur};
 
     use super::*;
 
@@ -433,18 +433,14 @@ mod fitted {
             depth: 0.5 * DX,
         };
         let hf = bumps.heightfield(160, DX).unwrap();
-        let opts = ndfit::scale::analyze::ScaleOptions {
-            footprints: vec![0.0, 64.0 * DX],
-            models: vec![ModelId::Ellipsoid],
-            ..Default::default()
-        };
-        let res = ndfit::scale::analyze::analyze(&hf, &opts, Some(&FitFitter::default())).unwrap();
-        let skew = |r: &ndfit::scale::analyze::FootprintResult, analytic: bool| {
+        let opts = ndfit::scale::ScaleOptions { footprints: vec![0.0, 64.0 * DX], models: vec![ModelId::Ellipsoid], ..Default::default() };
+        let res = ndfit::scale::analyze(&hf, &opts, Some(&FitFitter::default())).unwrap();
+        let skew = |r: &ndfit::scale::FootprintResult, analytic: bool| {
             let m = &r.models[0];
             let rr = if analytic { &m.analytic } else { &m.empirical };
             let model = rr.model.expect("ellipsoid fit");
             let p = model.params();
-            (ndfit::scale::analyze::model_skew(&model), p[2].hypot(p[3]))
+            (ndfit::scale::model_skew(&model), p[2].hypot(p[3]))
         };
         let (e0, t0) = skew(&res[0], false);
         let (e1, t1) = skew(&res[1], false);
@@ -461,9 +457,9 @@ mod route_agreement {
     //! added in the model's own units. A GGX roughness matrix is no covariance, so Tokuyoshi's literal
     //! `A + 2 Sigma_F` over-filters GGX-shaped models by `1 / kappa` once the kernel dominates.
     use ndfit::models::ModelId;
-    use ndfit::scale::analyze::{analyze, FootprintResult, ScaleOptions};
-    use ndfit::scale::fitter::FitFitter;
-    use ndfit::scale::ndf_at::Blur;
+    use ndfit::scale::Blur;
+    use ndfit::scale::FitFitter;
+    use ndfit::scale::{analyze, FootprintResult, ScaleOptions};
 
     use super::*;
     use crate::common::shared_scans;
@@ -567,9 +563,9 @@ mod route_agreement {
 }
 
 mod robust {
-    use ndfit::scale::analyze::{analyze, ScaleOptions};
-    use ndfit::scale::fitter::FitFitter;
-    use ndfit::scale::report::footprint_json;
+    use ndfit::scale::footprint_json;
+    use ndfit::scale::FitFitter;
+    use ndfit::scale::{analyze, ScaleOptions};
 
     use super::*;
     use crate::common::shared_scans;

@@ -5,7 +5,7 @@
 
 use nalgebra::Vector3;
 use ndfit::models::Ndf;
-use ndfit::synth::ellipsoid::EllipsoidGeometry;
+use ndfit::synth::EllipsoidGeometry;
 use ndfit::synth::{ellipsoid_surface, gaussian_surface, tilted_planes, EllipsoidParams, GaussianParams, PlaneFacet, SynthSettings, Truth};
 
 /// Every valid height lies on the ellipsoid p^T A^T A p = C^2 (eq. 8), on the half with (A^T A p)_z >= 0,

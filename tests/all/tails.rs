@@ -1,13 +1,13 @@
 //! The tail the scan cannot resolve, spikes and the instrument's aperture (data_formats/objective.md).
 //! Truths are the synthetic ellipsoid caps, whose NDF is exactly the ellipsoid NDF (Walter et al. eq. 1).
 
-use ndfit::fit::metric::delta_to_model;
-use ndfit::fit::tail::TailRule;
+use ndfit::fit::delta_to_model;
+use ndfit::fit::TailRule;
 use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::{Model, ModelId};
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::preprocess::despike::{despike, Despike};
-use ndfit::synth::{ellipsoid::EllipsoidParams, ellipsoid_surface, gaussian_surface, GaussianParams, SynthSettings};
+use ndfit::preprocess::{despike, Despike};
+use ndfit::synth::{ellipsoid_surface, gaussian_surface, EllipsoidParams, GaussianParams, SynthSettings};
 use ndfit::Heightfield;
 
 fn cap(n: usize, p: [f64; 5]) -> (Heightfield, Model) {
@@ -305,7 +305,7 @@ mod floor;
 /// the lattice (`SlopeFrame::grid_turn`), over less than a factor 2.5, all within 0.3% like the scan.
 #[test]
 fn what_the_core_leaves_on_the_ten_to_one_cap() {
-    use ndfit::synth::ellipsoid::EllipsoidGeometry;
+    use ndfit::synth::EllipsoidGeometry;
     let p = [0.2, 0.02, 0.0, 0.4, 0.0];
     let ep = EllipsoidParams { alpha_x: p[0], alpha_y: p[1], theta_x: p[2], theta_y: p[3], theta_z: p[4], ..EllipsoidParams::default() };
     let s = SynthSettings { nx: 1024, ny: 1024, seed: 7, ..SynthSettings::default() };
@@ -437,8 +437,8 @@ fn two_caps_keep_the_wide_lobe_with_default_options() {
     let data = ndfit::fit::FitData::with_tail(&ndf, ndfit::fit::Objective::Poisson, max_theta, FitOptions::default().tail).expect("data");
     let t = &data.tail;
     assert_eq!(t.rule, "unresolved");
-    assert!(t.unresolved_alone_fraction < ndfit::fit::tail::MIN_ALONE_SHARE, "{}", t.unresolved_alone_fraction);
-    let inside = |k: usize| ndfit::fit::tail::usable(&ndf.bins[k]) && ndf.bins[k].m.z >= max_theta.cos() * ndf.bins[k].m.norm();
+    assert!(t.unresolved_alone_fraction < ndfit::fit::MIN_ALONE_SHARE, "{}", t.unresolved_alone_fraction);
+    let inside = |k: usize| ndfit::fit::usable(&ndf.bins[k]) && ndf.bins[k].m.z >= max_theta.cos() * ndf.bins[k].m.norm();
     let kept = (0..ndf.bins.len()).filter(|&k| inside(k) && 2 * ndf.unresolved[k] <= ndf.bins[k].count).count();
     assert_eq!(data.bins.len(), kept);
     assert!(t.excluded_fraction < 0.02, "{}", t.excluded_fraction);
@@ -467,8 +467,8 @@ fn two_caps_keep_the_wide_lobe_with_default_options() {
 /// stay within three binomial standard deviations of the measured rate; per bin the same.
 #[test]
 fn resolution_test_against_exact_slopes() {
-    use ndfit::ndf::resolution::confusion;
-    use ndfit::synth::ellipsoid::EllipsoidGeometry;
+    use ndfit::ndf::confusion;
+    use ndfit::synth::EllipsoidGeometry;
     // (truth, measured FP rate per normal, per bin)
     let cases = [([0.05, 0.05, 0.0, 0.0, 0.0], 0.00266, 0.0), ([0.4, 0.1, 0.0, 0.0, 0.6], 0.00757, 0.0105)];
     for (p, fp, bin_fp) in cases {

@@ -4,7 +4,7 @@
 //! command on a stored X3P (heights mapped) prints the whole-grid statistics of the same heights.
 
 use ndfit::preprocess::{apply, prepare, FormRemoval, Preprocess};
-use ndfit::scan::bands::set_band_rows;
+use ndfit::scan::set_band_rows;
 use ndfit::stats::{surface_stats, surface_stats_of};
 use ndfit::Heightfield;
 

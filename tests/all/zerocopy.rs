@@ -8,7 +8,7 @@
 use ndfit::ndf::{empirical_ndf, EmpiricalNdf, NdfOptions, NormalScheme};
 use ndfit::pipeline::{ndf_prepared, read_prepared};
 use ndfit::preprocess::{apply, prepare, FormRemoval, Preprocess};
-use ndfit::scan::bands::{set_band_rows, set_release_threshold};
+use ndfit::scan::{set_band_rows, set_release_threshold};
 use ndfit::synth::{gaussian_surface, GaussianParams, SynthSettings};
 use ndfit::Heightfield;
 
@@ -118,7 +118,7 @@ fn stored_x3p_is_read_in_place_and_gives_the_copying_path_bits() {
 fn misaligned_or_scaled_stored_x3p_is_decoded() {
     let hf = scan(1100, 700);
     let dir = tempfile::tempdir().expect("temp dir");
-    let bytes = ndfit::io::x3p_write::x3p_bytes(&hf).expect("bytes");
+    let bytes = ndfit::io::x3p_bytes(&hf).expect("bytes");
     // Rebuild the zip with the data entry one byte off alignment: a 1-byte longer comment file first.
     let mut src = zip::ZipArchive::new(std::io::Cursor::new(&bytes)).expect("zip");
     let mut out = std::io::Cursor::new(Vec::new());
@@ -165,7 +165,7 @@ fn stored_x3p_checks_hold_in_every_block() {
     hf.z[b] = f64::NEG_INFINITY;
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("inf.x3p");
-    let bytes = ndfit::io::x3p_write::x3p_bytes(&hf).expect("bytes");
+    let bytes = ndfit::io::x3p_bytes(&hf).expect("bytes");
     std::fs::write(&path, &bytes).expect("write");
     let read = ndfit::io::read_scan(&path, &Default::default()).expect("read");
     assert!(!read.z.is_mapped(), "infinities need the decoding copy");
@@ -179,10 +179,10 @@ fn stored_x3p_checks_hold_in_every_block() {
     // One byte of the last MiB of the point data changed: the zip's CRC-32 no longer matches. The scan
     // is above the size whose MD5 is checked (`MAX_POINT_MD5`), so the CRC-32 is the check that sees it.
     let (nx, ny) = (2100, 2050);
-    assert!(nx * ny * 8 > ndfit::io::x3p::MAX_POINT_MD5);
+    assert!(nx * ny * 8 > ndfit::io::MAX_POINT_MD5);
     let z: Vec<f64> = (0..nx * ny).map(|k| 1e-7 * ((k % nx) as f64 * 0.01).sin() + 1e-9 * (k / nx) as f64).collect();
     let big = Heightfield::new(nx, ny, 1e-6, 1e-6, z).expect("shape");
-    let bytes = ndfit::io::x3p_write::x3p_bytes(&big).expect("bytes");
+    let bytes = ndfit::io::x3p_bytes(&big).expect("bytes");
     let start = {
         let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&bytes)).expect("zip");
         let entry = zip.by_name("bindata/data.bin").expect("data entry");

@@ -80,7 +80,7 @@ pub fn fit_scan(cfg: &JobConfig, spec: &ScanSpec, ctx: &JobContext<'_>) -> Resul
         if let Some(dir) = csv.parent() {
             std::fs::create_dir_all(dir).map_err(|e| ndfit::Error::io(e).with_path(dir))?;
         }
-        ndfit::ndf::output::write_csv(&csv, &r.ndf).map_err(|e| e.with_path(&csv))?;
+        ndfit::ndf::write_csv(&csv, &r.ndf).map_err(|e| e.with_path(&csv))?;
     }
     if cfg.plots {
         let model = ndfit::batch::model_of_fit(&r.output.fit).map_err(|e| e.with_path(&path))?;
@@ -89,7 +89,7 @@ pub fn fit_scan(cfg: &JobConfig, spec: &ScanSpec, ctx: &JobContext<'_>) -> Resul
             std::fs::create_dir_all(dir).map_err(|e| ndfit::Error::io(e).with_path(dir))?;
         }
         let title = format!("{}: {} fit", spec.key, model.id());
-        ndfit::fit::plot::plot_fit(&png, &r.ndf, &model, &title).map_err(|e| e.with_path(&png))?;
+        ndfit::fit::plot_fit(&png, &r.ndf, &model, &title).map_err(|e| e.with_path(&png))?;
     }
     Ok(r.output)
 }

@@ -19,9 +19,9 @@
 //! other). One file cannot serve every reader: Mitsuba's RGB variants refuse a file with `wavelengths`, and
 //! pbrt-v4 and Mitsuba's spectral variants need them, so [`Flavour`] picks `rgb` or `spectra`.
 
-pub mod conductor;
-pub mod empirical;
-pub mod tensor;
+pub(crate) mod conductor;
+pub(crate) mod empirical;
+pub(crate) mod tensor;
 mod warp;
 
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -30,7 +30,8 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 pub use conductor::Material;
-use tensor::{Field, TensorFile};
+pub use empirical::Regularized;
+pub use tensor::{Dtype, Field, TensorFile};
 
 use crate::error::{Error, Result};
 

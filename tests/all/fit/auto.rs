@@ -5,8 +5,8 @@
 use ndfit::fit::{fit_auto, fit_auto_pruned, FitOptions};
 use ndfit::models::ModelId;
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::synth::ellipsoid::EllipsoidParams;
-use ndfit::synth::gaussian::GaussianParams;
+use ndfit::synth::EllipsoidParams;
+use ndfit::synth::GaussianParams;
 use ndfit::synth::{ellipsoid_surface, gaussian_surface, SynthSettings};
 use ndfit::Heightfield;
 

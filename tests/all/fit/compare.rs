@@ -38,7 +38,7 @@ fn lm_reaches_the_best_objective_with_fewest_evaluations() {
     for (i, t) in TRUTHS.iter().enumerate() {
         let truth = model(ModelId::Ellipsoid, t);
         // A coarser grid (63^2 cells, 3000 bins) keeps Nelder-Mead's thousands of evaluations quick.
-        let ndf = ndfit::fit::synthetic::binned_ndf(&truth, &ndfit::fit::synthetic::Grid::for_model(&truth, 63), N_1024, 7000 + i as u64);
+        let ndf = ndfit::fit::binned_ndf(&truth, &ndfit::fit::Grid::for_model(&truth, 63), N_1024, 7000 + i as u64);
         let mut rows = Vec::new();
         for solver in [Solver::Lm, Solver::Lbfgs, Solver::NelderMead] {
             let rep = fit_model(&ndf, ModelId::Ellipsoid, &FitOptions { solver, ..FitOptions::default() }).expect("fit");

@@ -1,7 +1,7 @@
 //! The rank-checked covariance against closed forms and a second algorithm (LU inverse of J^T J).
 
 use nalgebra::DMatrix;
-use ndfit::fit::covariance::covariance;
+use ndfit::fit::covariance;
 
 #[test]
 fn full_rank_matches_the_direct_inverse() {

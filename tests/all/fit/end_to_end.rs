@@ -5,10 +5,7 @@ use ndfit::fit::{fit_model, FitOptions};
 use ndfit::models::ModelId;
 use ndfit::ndf::NormalScheme;
 use ndfit::ndf::{empirical_ndf, NdfOptions};
-use ndfit::synth::{
-    ellipsoid::EllipsoidParams, ellipsoid_surface, gaussian::GaussianParams, gaussian_surface, planes::PlaneFacet, tilted_planes,
-    SynthSettings,
-};
+use ndfit::synth::{ellipsoid_surface, gaussian_surface, tilted_planes, EllipsoidParams, GaussianParams, PlaneFacet, SynthSettings};
 
 use super::fixtures::delta_to_truth;
 
@@ -33,7 +30,7 @@ fn ellipsoid_case(p: [f64; 5], n: usize, offset: f64, scheme: ndfit::ndf::Normal
         rep.quality.reduced_chi2
     );
     // A single-lobe truth that the fit recovers must be trusted (data_formats/objective.md, "The verdict").
-    assert_eq!(rep.quality.verdict, ndfit::fit::verdict::Verdict::Ok, "{p:?}: {:?}", rep.quality.reasons);
+    assert_eq!(rep.quality.verdict, ndfit::fit::Verdict::Ok, "{p:?}: {:?}", rep.quality.reasons);
     (d, rep)
 }
 
@@ -73,7 +70,7 @@ fn flat_tilted_plane_is_a_finite_specular_fit() {
         let mut rep = fit_model(&ndf, id, &FitOptions::default()).expect("a plane is a usable fit");
         rep.input = Some(ndfit::scan::InputInfo::new(std::path::Path::new("plane"), &hf));
         assert!(rep.specular, "{id}: not flagged specular");
-        assert_eq!(rep.quality.verdict, ndfit::fit::verdict::Verdict::Unresolved, "{id}: a lobe inside one bin is not resolved");
+        assert_eq!(rep.quality.verdict, ndfit::fit::Verdict::Unresolved, "{id}: a lobe inside one bin is not resolved");
         let v = serde_json::to_value(&rep).expect("json");
         super::schema::assert_valid(&v);
         assert!(rep.param_vec().iter().all(|x| x.is_finite()), "{id}: {:?}", rep.param_vec());
@@ -103,5 +100,5 @@ fn gaussian_scan_fits_beckmann_aniso_to_sqrt2_rms_slope() {
     eprintln!("gaussian: fit {p:?}, sqrt2 rms slopes ({ax}, {ay}), prescribed ({}, {})", 0.2 * 2f64.sqrt(), 0.08 * 2f64.sqrt());
     assert!((p[0] / ax - 1.0).abs() < 0.01 && (p[1] / ay - 1.0).abs() < 0.01, "{p:?} vs ({ax}, {ay})");
     assert!(super::fixtures::angle_diff(p[2], 0.4, std::f64::consts::PI).abs() < 0.01, "theta_z {}", p[2]);
-    assert_eq!(rep.quality.verdict, ndfit::fit::verdict::Verdict::Ok, "{:?}", rep.quality.reasons);
+    assert_eq!(rep.quality.verdict, ndfit::fit::Verdict::Ok, "{:?}", rep.quality.reasons);
 }

@@ -1,7 +1,7 @@
 //! Shared fixtures: synthetic binned NDFs with known truth and the accuracy metric against the truth.
 
-use ndfit::fit::metric::delta;
-use ndfit::fit::synthetic::{binned_ndf, Grid};
+use ndfit::fit::delta;
+use ndfit::fit::{binned_ndf, Grid};
 use ndfit::models::{Model, ModelId, Ndf};
 use ndfit::ndf::EmpiricalNdf;
 
@@ -34,7 +34,7 @@ pub fn ndf_on(truth: &Model, cells: usize, n: f64, seed: u64) -> EmpiricalNdf {
 /// `delta(D_fit; D_true)` (objective.md) by quadrature on a grid finer than the fixture's and matched
 /// to the truth (so the nodes sample `D_true(m)(m.n)` densely where it has mass).
 pub fn delta_to_truth(fit: &Model, truth: &Model) -> f64 {
-    let (bins, _) = ndfit::fit::synthetic::expected(truth, &Grid::for_model(truth, 256), 1.0);
+    let (bins, _) = ndfit::fit::expected(truth, &Grid::for_model(truth, 256), 1.0);
     delta(|m| fit.d(*m), |m| truth.d(*m), bins.iter().map(|b| (b.m, b.proj_solid_angle))).expect("truth has mass")
 }
 

@@ -5,12 +5,10 @@
 pub(crate) mod fixtures;
 
 mod auto;
-mod bound;
 mod cli;
 mod compare;
 mod covariance;
 mod end_to_end;
-mod jacobian;
 mod mixture;
 mod recovery;
 mod schema;

@@ -24,7 +24,7 @@ fn library_reports_of_every_model_validate() {
     use ndfit::models::ModelId;
     use ndfit::scan::InputInfo;
     let truth = super::fixtures::model(ModelId::Ellipsoid, &[0.3, 0.1, 0.1, -0.1, 0.4]);
-    let ndf = ndfit::fit::synthetic::binned_ndf(&truth, &ndfit::fit::synthetic::Grid::for_model(&truth, 63), 2e5, 9);
+    let ndf = ndfit::fit::binned_ndf(&truth, &ndfit::fit::Grid::for_model(&truth, 63), 2e5, 9);
     let input = InputInfo {
         path: "x.x3p".into(),
         format: "x3p".into(),

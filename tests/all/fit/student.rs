@@ -74,7 +74,7 @@ fn student_fits_recover_facet_heightfields() {
     for p in TRUTHS {
         let (id, t) = truth(p);
         let ndf = empirical_ndf(&facets(lobe(&t), 250_000, true), &tri).expect("ndf");
-        let opts = FitOptions { tail: ndfit::fit::tail::TailRule::All, ..FitOptions::default() };
+        let opts = FitOptions { tail: ndfit::fit::TailRule::All, ..FitOptions::default() };
         let rep = fit_model(&ndf, id, &opts).expect("fit");
         let d = delta_to_truth(&rep.to_model().expect("model"), &t);
         eprintln!("{id} {p:?} facets: fit {:?} delta {d:.2e}", rep.param_vec());
@@ -94,8 +94,8 @@ fn auto_on_a_heavy_tail_is_within_the_tolerance() {
     let ggx = fit_model(&ndf, ModelId::GgxAniso, &FitOptions::default()).expect("fit");
     let dg = delta_to_truth(&ggx.to_model().expect("model"), &t);
     eprintln!("auto {} at {d:.4}; ggx-aniso at {dg:.4}; {:?}", auto.model, auto.selection.as_ref().and_then(|s| s.ladder.clone()));
-    assert!(dg > ndfit::fit::verdict::DEFAULT_TOLERANCE, "GGX is within the tolerance of this truth ({dg}): no test");
-    assert!(d <= ndfit::fit::verdict::DEFAULT_TOLERANCE, "auto's {} is {d} from the truth", auto.model);
+    assert!(dg > ndfit::fit::DEFAULT_TOLERANCE, "GGX is within the tolerance of this truth ({dg}): no test");
+    assert!(d <= ndfit::fit::DEFAULT_TOLERANCE, "auto's {} is {d} from the truth", auto.model);
 }
 
 /// A scan whose best Student lobe sits at the Smith bound `gamma -> 3/2` (the shared TMD scan; the
@@ -109,6 +109,6 @@ fn fit_at_the_tail_bound_needs_shared() {
     let ndf = empirical_ndf(&scan, &NdfOptions::default()).expect("ndf");
     let rep = fit_model(&ndf, ModelId::Student, &FitOptions::default()).expect("a fit at the bound");
     let (alpha, gamma) = (rep.params["alpha"], rep.params["gamma"]);
-    assert!(gamma > ndfit::models::student::GAMMA_MIN && gamma < 1.5 + 1e-6, "gamma {gamma}");
+    assert!(gamma > ndfit::models::Student::GAMMA_MIN && gamma < 1.5 + 1e-6, "gamma {gamma}");
     assert!((alpha / 0.03360 - 1.0).abs() < 2e-3, "alpha {alpha} against nlopt's 0.03360");
 }

@@ -6,7 +6,7 @@ use std::f64::consts::PI;
 
 use nalgebra::{Complex, Matrix2, Matrix3, Rotation3, Unit, Vector3};
 use ndfit::models::{
-    disk_to_slope_jacobian, fresnel::checked_eta, fresnel_conductor, Ggx, GgxMatrix, MaskingShadowing, MicrofacetBrdf, Model, ModelId, Ndf,
+    checked_eta, disk_to_slope_jacobian, fresnel_conductor, Ggx, GgxMatrix, MaskingShadowing, MicrofacetBrdf, Model, ModelId, Ndf,
     SquaredEllipsoidalLobe,
 };
 

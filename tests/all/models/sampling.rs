@@ -6,7 +6,7 @@
 use std::f64::consts::PI;
 
 use nalgebra::Vector3;
-use ndfit::models::{fresnel::checked_eta, Ellipsoid, MaskingShadowing, MicrofacetBrdf, Model, Ndf};
+use ndfit::models::{checked_eta, Ellipsoid, MaskingShadowing, MicrofacetBrdf, Model, Ndf};
 
 use super::equivalence::Rng;
 

@@ -6,7 +6,8 @@
 use std::f64::consts::PI;
 
 use nalgebra::{Vector2, Vector3};
-use ndfit::models::student::{GAMMA_MAX, GAMMA_MIN};
+const GAMMA_MAX: f64 = ndfit::models::Student::GAMMA_MAX;
+const GAMMA_MIN: f64 = ndfit::models::Student::GAMMA_MIN;
 use ndfit::models::{Beckmann, Ggx, Masking, Ndf, Student};
 
 use super::equivalence::Rng;

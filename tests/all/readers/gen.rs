@@ -393,7 +393,7 @@ pub fn xyz(csv_header: bool) -> Vec<u8> {
 pub fn x3p() -> Vec<u8> {
     let z: Vec<f64> = (0..NX * NY).map(|k| if is_hole(k) { f64::NAN } else { stored(k / NX, k % NX) as f64 * 1e-9 }).collect();
     let hf = ndfit::Heightfield::new(NX, NY, 1e-6, 2e-6, z).expect("grid");
-    ndfit::io::x3p_write::x3p_bytes(&hf).expect("x3p")
+    ndfit::io::x3p_bytes(&hf).expect("x3p")
 }
 
 /// Every generated binary file with its file name.

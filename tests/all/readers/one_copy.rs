@@ -31,7 +31,7 @@ fn peak_rss(args: &[&std::ffi::OsStr]) -> f64 {
 /// it), so that the reader must decode it.
 fn unaligned_stored_x3p(nx: usize, ny: usize) -> Vec<u8> {
     let data = values("D", nx, ny);
-    let md5 = ndfit::io::md5::md5_hex(&data);
+    let md5 = crate::common::md5_hex(&data);
     // Blanks in main.xml (deflated before the data) move the data's offset.
     (0..32)
         .map(|pad| x3p("D", &" ".repeat(pad), nx, ny, &data, &md5, false))
@@ -74,7 +74,7 @@ fn decoded_scans_hold_one_copy_of_their_heights() {
             "deflated.x3p",
             |nx, ny| {
                 let data = values("D", nx, ny);
-                x3p("D", "", nx, ny, &data, &ndfit::io::md5::md5_hex(&data), true)
+                x3p("D", "", nx, ny, &data, &crate::common::md5_hex(&data), true)
             },
             true,
         ),
@@ -82,7 +82,7 @@ fn decoded_scans_hold_one_copy_of_their_heights() {
             "float32.x3p",
             |nx, ny| {
                 let data = values("F", nx, ny);
-                x3p("F", "", nx, ny, &data, &ndfit::io::md5::md5_hex(&data), false)
+                x3p("F", "", nx, ny, &data, &crate::common::md5_hex(&data), false)
             },
             false,
         ),
@@ -90,7 +90,7 @@ fn decoded_scans_hold_one_copy_of_their_heights() {
             "int16_deflated.x3p",
             |nx, ny| {
                 let data = values("I", nx, ny);
-                x3p("I", "<Increment>1e-8</Increment>", nx, ny, &data, &ndfit::io::md5::md5_hex(&data), true)
+                x3p("I", "<Increment>1e-8</Increment>", nx, ny, &data, &crate::common::md5_hex(&data), true)
             },
             false,
         ),

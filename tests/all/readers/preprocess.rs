@@ -2,8 +2,8 @@
 //! nothing of an exact form, holes stay holes, crop/subsample keep positions, Sdq's central
 //! differences are exact on quadratics.
 
-use ndfit::preprocess::form::{remove_cylinder, remove_polynomial};
 use ndfit::preprocess::{apply, crop, subsample, Crop, FormRemoval, Preprocess};
+use ndfit::preprocess::{remove_cylinder, remove_polynomial};
 use ndfit::stats::{sdq_central, surface_stats};
 use ndfit::Heightfield;
 

@@ -58,7 +58,7 @@ fn deflated_and_stored_point_data_read_and_fit_identically() {
         ("I", "<Increment>1e-7</Increment><Offset>-1e-6</Offset>", 97, 131),
     ] {
         let raw = values(ztype, nx, ny);
-        let md5 = ndfit::io::md5::md5_hex(&raw);
+        let md5 = crate::common::md5_hex(&raw);
         let (ps, pd) = (d.path().join(format!("s{ztype}{nx}.x3p")), d.path().join(format!("d{ztype}{nx}.x3p")));
         std::fs::write(&ps, x3p(ztype, cz, nx, ny, &raw, &md5, false)).unwrap();
         std::fs::write(&pd, x3p(ztype, cz, nx, ny, &raw, &md5, true)).unwrap();
@@ -98,7 +98,7 @@ fn a_deflated_data_bin_with_a_wrong_md5_or_a_damaged_stream_is_refused() {
 
     // Flip bytes inside the compressed point data: inflate fails or the CRC-32 (checked at the end of
     // the entry) does not match; either way a one-line corrupt error, never a panic.
-    let mut bytes = x3p("D", "", nx, ny, &raw, &ndfit::io::md5::md5_hex(&raw), true);
+    let mut bytes = x3p("D", "", nx, ny, &raw, &crate::common::md5_hex(&raw), true);
     let at = bytes.windows(16).position(|w| w == b"bindata/data.bin").unwrap() + 16 + 200;
     for b in &mut bytes[at..at + 64] {
         *b ^= 0x5a;

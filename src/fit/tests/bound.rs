@@ -1,18 +1,18 @@
-//! The mixtures' roughness bound ([`ndfit::fit::params::LOBE_ALPHA_MAX`]): the bounded map and its
+//! The mixtures' roughness bound ([`crate::fit::params::LOBE_ALPHA_MAX`]): the bounded map and its
 //! derivative against central differences, the single lobes' map unchanged, and a flat background lobe
 //! (a second lobe far wider than the bound, whose weight and width the region does not tell apart) fitted
 //! at the bound, flagged, with the truth's D over the region.
 
-use nalgebra::Vector3;
-use ndfit::fit::lnd::LnD;
-use ndfit::fit::params::{
+use crate::fit::lnd::LnD;
+use crate::fit::params::{
     alpha_of, at_lobe_bound, bounded_alpha_du, bounded_alpha_of, bounded_u_of, to_internal, to_public, LOBE_ALPHA_MAX,
 };
-use ndfit::fit::synthetic::{binned_ndf, Grid};
-use ndfit::fit::{fit_model, FitOptions};
-use ndfit::models::{ModelId, Ndf, ALPHA_MIN};
+use crate::fit::{binned_ndf, Grid};
+use crate::fit::{fit_model, FitOptions};
+use crate::models::{ModelId, Ndf, ALPHA_MIN};
+use nalgebra::Vector3;
 
-use super::fixtures::model;
+use super::model;
 
 /// The map stays inside `(ALPHA_MIN, LOBE_ALPHA_MAX)` for any `u`, inverts, and its derivative matches
 /// central differences (relative step, so the check holds near both ends).

@@ -4,17 +4,17 @@
 //! `eps |f| / h` (rounding); with `h = 1e-5`, `|ln D| < 30` and `|f'''| < 1e4` over the test domain that
 //! is below 2e-6, so `2e-5 (1 + |g|)` cannot hide a wrong term (those are O(|g|)) yet is safe.
 
+use crate::fit::lnd::LnD;
+use crate::fit::params::{to_internal, to_public};
+use crate::fit::problem::{jacobian_into, residuals_into};
+use crate::fit::{FitData, Objective, Rounding};
+use crate::models::{ModelId, Ndf, Role};
+use crate::ndf::HeightQuantum;
+use crate::ndf::NormalScheme;
 use nalgebra::{DMatrix, Vector3};
-use ndfit::fit::lnd::LnD;
-use ndfit::fit::objective::{FitData, Objective, Rounding};
-use ndfit::fit::params::{to_internal, to_public};
-use ndfit::fit::problem::{jacobian_into, residuals_into};
-use ndfit::models::{ModelId, Ndf, Role};
-use ndfit::ndf::quantum::HeightQuantum;
-use ndfit::ndf::NormalScheme;
 use rand::{RngExt, SeedableRng};
 
-use super::fixtures::model;
+use super::model;
 
 const H: f64 = 1e-5;
 
@@ -91,7 +91,7 @@ fn residual_jacobian_matches_central_differences() {
             (ModelId::Ggx, vec![0.1], vec![0.13]),
         ] {
             let t = model(id, &truth);
-            let ndf = ndfit::fit::synthetic::binned_ndf(&t, &ndfit::fit::synthetic::Grid::for_model(&t, 48), 2e4, 3);
+            let ndf = crate::fit::binned_ndf(&t, &crate::fit::Grid::for_model(&t, 48), 2e4, 3);
             let plain = FitData::new(&ndf, objective, max_theta.to_radians()).expect("data");
             // And with the height rounding of a quantized scan modelled (the rule of nine points per bin):
             // a lattice of a third of the truth's smaller alpha, for both normal schemes.
