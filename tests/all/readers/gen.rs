@@ -396,6 +396,22 @@ pub fn x3p() -> Vec<u8> {
     ndfit::io::x3p_bytes(&hf).expect("x3p")
 }
 
+/// X3P layouts other writers produce (instruments deflate the point data; float32 and int16 types), so
+/// the fuzzer starts from the inflate and conversion paths as well as ndfit's own stored float64.
+pub fn x3p_layouts() -> Vec<(&'static str, Vec<u8>)> {
+    use super::x3p_deflated::{values, x3p};
+    let make = |ztype: &str, cz: &str, deflated: bool| {
+        let data = values(ztype, NX, NY);
+        x3p(ztype, cz, NX, NY, &data, &crate::common::md5_hex(&data), deflated)
+    };
+    vec![
+        ("deflated_f64.x3p", make("D", "", true)),
+        ("deflated_f32.x3p", make("F", "", true)),
+        ("deflated_i16.x3p", make("I", "<Increment>1e-8</Increment>", true)),
+        ("stored_f32.x3p", make("F", "", false)),
+    ]
+}
+
 /// Every generated binary file with its file name.
 pub fn binary_files() -> Vec<(&'static str, Vec<u8>)> {
     vec![
@@ -478,7 +494,7 @@ pub fn write_seed_corpus(root: &std::path::Path) {
         };
         (target, name, bytes)
     });
-    let others = [("rgl", rgl_files()), ("x3p_write", x3p_write_inputs()), ("manifest", manifests())]
+    let others = [("x3p", x3p_layouts()), ("rgl", rgl_files()), ("x3p_write", x3p_write_inputs()), ("manifest", manifests())]
         .into_iter()
         .flat_map(|(target, files)| files.into_iter().map(move |(name, bytes)| (target, name, bytes)));
     for (target, name, bytes) in readers.chain(others) {
