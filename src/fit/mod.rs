@@ -145,7 +145,9 @@ impl Session {
 }
 
 /// Run the solver on `data` from every start (contract parameters): the index and result of the best
-/// finite one, and every start's objective; evaluations are added to `evaluations`.
+/// finite one, and every start's objective; evaluations are added to `evaluations`. The starts run side
+/// by side (each solve is serial and independent of the others, so the result is the same bit for bit
+/// as one after the other; the best is the first of the lowest, in the starts' order).
 fn best_of_starts(
     data: &FitData,
     id: ModelId,
@@ -153,11 +155,13 @@ fn best_of_starts(
     opts: &FitOptions,
     evaluations: &mut usize,
 ) -> Result<(usize, Option<solve::Local>, Vec<f64>)> {
+    use rayon::prelude::*;
+    let solved: Vec<Result<solve::Local>> =
+        starts.par_iter().map(|p0| solve::minimize(data, id, &params::to_internal(id, p0), opts.solver, opts.tolerances)).collect();
     let mut best: Option<(usize, solve::Local)> = None;
     let mut objs = Vec::with_capacity(starts.len());
-    for (i, p0) in starts.iter().enumerate() {
-        let x0 = params::to_internal(id, p0);
-        let local = solve::minimize(data, id, &x0, opts.solver, opts.tolerances)?;
+    for (i, local) in solved.into_iter().enumerate() {
+        let local = local?;
         *evaluations += local.evaluations;
         objs.push(local.f);
         if local.f.is_finite() && local.x.iter().all(|v| v.is_finite()) && best.as_ref().is_none_or(|(_, b)| local.f < b.f) {
