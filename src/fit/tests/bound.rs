@@ -3,7 +3,6 @@
 //! (a second lobe far wider than the bound, whose weight and width the region does not tell apart) fitted
 //! at the bound, flagged, with the truth's D over the region.
 
-use crate::fit::lnd::LnD;
 use crate::fit::params::{
     alpha_of, at_lobe_bound, bounded_alpha_du, bounded_alpha_of, bounded_u_of, to_internal, to_public, LOBE_ALPHA_MAX,
 };
@@ -12,7 +11,7 @@ use crate::fit::{fit_model, FitOptions};
 use crate::models::{ModelId, Ndf, ALPHA_MIN};
 use nalgebra::Vector3;
 
-use super::model;
+use super::{assert_ln_d_gradient, model};
 
 /// The map stays inside `(ALPHA_MIN, LOBE_ALPHA_MAX)` for any `u`, inverts, and its derivative matches
 /// central differences (relative step, so the check holds near both ends).
@@ -67,7 +66,6 @@ fn single_lobes_keep_their_map_and_mixtures_are_bounded() {
 /// derivative shrinks there, so this is where a slip in its chain rule would show).
 #[test]
 fn gradient_near_the_bound_matches_central_differences() {
-    let h = 1e-5;
     for (id, p) in [
         (ModelId::Ggx2, vec![0.2, 0.1, 900.0, 0.4, 0.3, 0.3]),
         (ModelId::Beckmann2, vec![0.2, 0.1, 0.5, 990.0, -0.4, 0.6]),
@@ -75,16 +73,7 @@ fn gradient_near_the_bound_matches_central_differences() {
     ] {
         let x = to_internal(id, &p);
         for dir in [Vector3::new(0.1, -0.2, 1.0), Vector3::new(-0.6, 0.3, 0.7), Vector3::new(0.9, 0.8, 0.3)] {
-            let dir = dir.normalize();
-            let mut g = vec![0.0; x.len()];
-            LnD::new(id, &x).value_grad(&dir, &mut g);
-            for j in 0..x.len() {
-                let (mut xp, mut xm) = (x.clone(), x.clone());
-                xp[j] += h;
-                xm[j] -= h;
-                let fd = (LnD::new(id, &xp).value(&dir) - LnD::new(id, &xm).value(&dir)) / (2.0 * h);
-                assert!((fd - g[j]).abs() < 2e-5 * (1.0 + g[j].abs()), "{id} param {j}: analytic {} vs FD {fd}", g[j]);
-            }
+            assert_ln_d_gradient(id, &x, &dir.normalize());
         }
     }
 }

@@ -1,22 +1,16 @@
-//! The analytic Jacobians against central finite differences.
-//!
-//! Tolerance: central differences with step `h` err by `h^2 |f'''| / 6` (truncation) plus
-//! `eps |f| / h` (rounding); with `h = 1e-5`, `|ln D| < 30` and `|f'''| < 1e4` over the test domain that
-//! is below 2e-6, so `2e-5 (1 + |g|)` cannot hide a wrong term (those are O(|g|)) yet is safe.
+//! The analytic Jacobians of the single-lobe models against central finite differences (tolerance: the
+//! module docs of `fit::tests`).
 
 use crate::fit::lnd::LnD;
 use crate::fit::params::{to_internal, to_public};
-use crate::fit::problem::{jacobian_into, residuals_into};
 use crate::fit::{FitData, Objective, Rounding};
 use crate::models::{ModelId, Ndf, Role};
 use crate::ndf::HeightQuantum;
 use crate::ndf::NormalScheme;
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
 
-use super::model;
-
-const H: f64 = 1e-5;
+use super::{assert_ln_d_gradient, assert_residual_jacobian, model};
 
 fn random_params(id: ModelId, rng: &mut rand::rngs::StdRng) -> Vec<f64> {
     let a = |rng: &mut rand::rngs::StdRng| 10f64.powf(rng.random_range(-2.5..0.5));
@@ -62,16 +56,8 @@ fn ln_d_gradient_matches_central_differences() {
         for _ in 0..40 {
             let x = to_internal(id, &random_params(id, &mut rng));
             let dir = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(0.2..1.0)).normalize();
-            let mut g = vec![0.0; x.len()];
-            let v = LnD::new(id, &x).value_grad(&dir, &mut g);
+            let v = assert_ln_d_gradient(id, &x, &dir);
             assert!((v - LnD::new(id, &x).value(&dir)).abs() < 1e-12 * v.abs().max(1.0));
-            for j in 0..x.len() {
-                let (mut xp, mut xm) = (x.clone(), x.clone());
-                xp[j] += H;
-                xm[j] -= H;
-                let fd = (LnD::new(id, &xp).value(&dir) - LnD::new(id, &xm).value(&dir)) / (2.0 * H);
-                assert!((fd - g[j]).abs() < 2e-5 * (1.0 + g[j].abs()), "{id} x={x:?} m={dir:?} param {j}: analytic {} vs FD {fd}", g[j]);
-            }
         }
     }
 }
@@ -109,26 +95,7 @@ fn residual_jacobian_matches_central_differences() {
             for rounding in [None, Some(NormalScheme::Central), Some(NormalScheme::Triangles)] {
                 let mut data = plain.clone();
                 data.rounding = rounding.map(|scheme| Rounding::new(&quantum, scheme, &data.bins).expect("kernel"));
-                let x = to_internal(id, &at);
-                let k = data.bins.len();
-                let mut r = vec![0.0; k];
-                let mut j = DMatrix::zeros(k, x.len());
-                jacobian_into(&data, id, &x, &mut r, &mut j);
-                for p in 0..x.len() {
-                    let (mut xp, mut xm) = (x.clone(), x.clone());
-                    xp[p] += H;
-                    xm[p] -= H;
-                    let (mut rp, mut rm) = (vec![0.0; k], vec![0.0; k]);
-                    residuals_into(&data, id, &xp, &mut rp);
-                    residuals_into(&data, id, &xm, &mut rm);
-                    for b in 0..k {
-                        let fd = (rp[b] - rm[b]) / (2.0 * H);
-                        // The Poisson residual has a kink in its second derivative only where c = 0 and
-                        // E -> 0 (sqrt(2E)); relative tolerance as above on |r| and |J|.
-                        let tol = 2e-5 * (1.0 + j[(b, p)].abs() + r[b].abs());
-                        assert!((fd - j[(b, p)]).abs() < tol, "{objective:?} {id} {rounding:?} bin {b} param {p}: {} vs {fd}", j[(b, p)]);
-                    }
-                }
+                assert_residual_jacobian(&data, id, &to_internal(id, &at), &format!("{objective:?} {rounding:?}"));
             }
             // Parameter maps round-trip.
             let x = to_internal(id, &at);

@@ -1,16 +1,14 @@
 //! The two-lobe mixtures' internals: their `ln D` against the models' own D, the analytic Jacobians
 //! against central differences, and the canonical form.
 
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
 
-use super::model;
+use super::{assert_ln_d_gradient, assert_residual_jacobian, model};
 use crate::fit::lnd::LnD;
 use crate::fit::objective::{FitData, Objective};
 use crate::fit::params::{to_internal, to_public};
-use crate::fit::problem::{jacobian_into, residuals_into};
 use crate::models::{Model, ModelId, Ndf};
-const H: f64 = 1e-5;
 
 fn random_params(id: ModelId, rng: &mut rand::rngs::StdRng) -> Vec<f64> {
     let a = |rng: &mut rand::rngs::StdRng| 10f64.powf(rng.random_range(-2.0..0.3));
@@ -49,7 +47,6 @@ fn mixture_ln_d_matches_the_lobes_mixed_by_hand() {
     }
 }
 
-/// Tolerance as in jacobian.rs: central differences with `h = 1e-5` err by far less than `2e-5 (1 + |g|)`.
 #[test]
 fn mixture_ln_d_gradient_matches_central_differences() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(12);
@@ -57,15 +54,7 @@ fn mixture_ln_d_gradient_matches_central_differences() {
         for _ in 0..40 {
             let x = to_internal(id, &random_params(id, &mut rng));
             let dir = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(0.2..1.0)).normalize();
-            let mut g = vec![0.0; x.len()];
-            LnD::new(id, &x).value_grad(&dir, &mut g);
-            for j in 0..x.len() {
-                let (mut xp, mut xm) = (x.clone(), x.clone());
-                xp[j] += H;
-                xm[j] -= H;
-                let fd = (LnD::new(id, &xp).value(&dir) - LnD::new(id, &xm).value(&dir)) / (2.0 * H);
-                assert!((fd - g[j]).abs() < 2e-5 * (1.0 + g[j].abs()), "{id} x={x:?} m={dir:?} param {j}: analytic {} vs FD {fd}", g[j]);
-            }
+            assert_ln_d_gradient(id, &x, &dir);
         }
     }
 }
@@ -82,23 +71,7 @@ fn mixture_residual_jacobian_matches_central_differences() {
             let ndf = crate::fit::binned_ndf(&t, &crate::fit::Grid::for_model(&t, 48), 2e4, 3);
             let data = FitData::new(&ndf, objective, max_theta.to_radians()).expect("data");
             let x = to_internal(id, &at);
-            let k = data.bins.len();
-            let mut r = vec![0.0; k];
-            let mut j = DMatrix::zeros(k, x.len());
-            jacobian_into(&data, id, &x, &mut r, &mut j);
-            for p in 0..x.len() {
-                let (mut xp, mut xm) = (x.clone(), x.clone());
-                xp[p] += H;
-                xm[p] -= H;
-                let (mut rp, mut rm) = (vec![0.0; k], vec![0.0; k]);
-                residuals_into(&data, id, &xp, &mut rp);
-                residuals_into(&data, id, &xm, &mut rm);
-                for b in 0..k {
-                    let fd = (rp[b] - rm[b]) / (2.0 * H);
-                    let tol = 2e-5 * (1.0 + j[(b, p)].abs() + r[b].abs());
-                    assert!((fd - j[(b, p)]).abs() < tol, "{objective:?} {id} bin {b} param {p}: {} vs {fd}", j[(b, p)]);
-                }
-            }
+            assert_residual_jacobian(&data, id, &x, &format!("{objective:?}"));
             let back = to_internal(id, &to_public(id, &x));
             for (a, b) in x.iter().zip(&back) {
                 assert!((a - b).abs() < 1e-9, "{id}: parameter map round trip {x:?} vs {back:?}");
