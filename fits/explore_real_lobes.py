@@ -11,23 +11,33 @@ auto` with default options. Then, on ndfit's own bins:
 - the metric: delta_data and delta_excess reimplemented here (objective.md: delta(D; D_empirical) over every bin of
   the NDF, w_k = c_k / N; noise^2 = (1/N) sum_k E[(lambda_k - c_k)^2 / c_k; c_k >= 1], lambda_k = N D(m_k) W_k) and
   checked against every ladder candidate ndfit reports (`check`: the largest relative difference);
-- the floor, two ways, neither using a lobe:
-  * `split`: sqrt(max(phi - 1, 0) noise^2), phi = `quality.dispersion` (ndfit's odd/even split of 16 row blocks:
-    the reduced chi-square a right model reaches). A model right for the scan's NDF leaves delta_data^2 ~ phi
-    noise^2 (Var c_k = phi lambda_k), i.e. an excess of sqrt((phi - 1)) times the counting noise. A lower bound:
+- the floor:
+  * `split` (no lobe): sqrt(max(phi - 1, 0) noise^2), phi = `quality.dispersion` (ndfit's odd/even split of 16 row
+    blocks: the reduced chi-square a right model reaches). A model right for the scan's NDF leaves delta_data^2 ~
+    phi noise^2 (Var c_k = phi lambda_k), i.e. an excess of sqrt(phi - 1) times the counting noise. A lower bound:
     the split misses variation across blocks;
-  * `smooth`: the empirical NDF itself, smoothed over neighbouring bins of ndfit's Lambert grid with a Gaussian
-    kernel that leaves the bin itself out (so it cannot follow a bin's own noise), priced as a model; the smallest
-    over kernel widths 0.5-2 cells. It keeps the bias of the smoothing and the noise of the neighbours, so it is an
-    upper estimate of what a smooth NDF finer than the lobes can reach;
+  * `smoothed NDF` (no lobe): the empirical NDF smoothed over neighbouring bins of ndfit's Lambert grid with a
+    Gaussian kernel that leaves the bin itself out (so it cannot follow a bin's own noise), priced as a model, the
+    smallest over kernel widths 0.5-2 cells. It keeps the smoothing's bias and the neighbours' noise: an upper
+    estimate of what a smooth NDF finer than the lobes reaches, and no floor where the NDF changes within a bin
+    (a spike, a coarse height lattice, few bins);
+  * `best new x smoothing`: the closest family's D times the leave-one-out smoothing of data over model (it keeps
+    the model's spikes), less the smoother's own noise: what a smooth correction of that model reaches; again no
+    floor where the NDF changes within a bin (st_plu-1's lobe itself does better);
 - the families, each fitted by the Poisson deviance (objective.md, the fit's own objective, over the fit region and
   tail cut of the default fit) with nlopt L-BFGS (analytic gradient) from starts grown from ndfit's fits of their
   parents: `student2` (two student-aniso lobes, each with its own theta_z: 9 parameters), `student+ggx`
   (student-aniso and ggx-aniso, 8), `ggx3` and `beckmann3` (three anisotropic lobes, each with its own theta_z: 11),
-  `ellipsoid+student` (10) and `student3` (14). Lobes of the Python package (ndfitpy.models); a mixture's weights are
-  a softmax of K - 1 logits (the last lobe's logit 0).
+  `ellipsoid+student` (10) and `student3` (14); and mixtures of lobes translated in slope space (an off-centre
+  peak: a facet orientation of its own), `shifted-ggx2` (11), `shifted-student2` (13), `shifted-ggx3` (17) and
+  `shifted-student3` (20). Lobes of the Python package (ndfitpy.models) and the shifted lobes here
+  (_shifted_log_d_grad); a mixture's weights are a softmax of K - 1 logits (the last lobe's logit 0). Each is also
+  fitted to delta_excess itself (BOBYQA from its deviance fit; today's closest ladder model and the scan's two
+  closest families): what the family could reach were it fitted in the metric it is priced in;
+- the residual maps (`--png DIR`): Pearson residuals (c - lambda) / sqrt(lambda) of the closest family per Lambert
+  cell, red where the data exceed the model, blue where they fall short (saturated at 5).
 
-Not part of CI (a research table, docs/REAL_SCANS.md "What a richer model could reach"): about 5-10 minutes on two
+Not part of CI (a research table, docs/REAL_SCANS.md "What a richer model could reach"): about 10 minutes on two
 cores.
 """
 
@@ -250,6 +260,7 @@ FAMILIES = {
     "shifted-ggx2": ("shifted-ggx", "shifted-ggx"),
     "shifted-student2": ("shifted-student", "shifted-student"),
     "shifted-ggx3": ("shifted-ggx", "shifted-ggx", "shifted-ggx"),
+    "shifted-student3": ("shifted-student", "shifted-student", "shifted-student"),
 }
 
 
@@ -513,9 +524,24 @@ def student3_starts(s2):
     return out
 
 
+def shifted_student3_starts(s2):
+    """shifted-student3 from a shifted-student2 fit: a third lobe as a spike at the first lobe's peak, as a wide
+    centred tail, or as 0.7 of the first lobe moved by half its width along +-x and +-y (a neighbouring facet
+    orientation)."""
+    a, b_, v = s2[:6], s2[6:12], s2[12]
+    w = 1.0 / (1.0 + math.exp(-v))
+    thirds = [(np.array([0.2 * a[0], 0.2 * a[1], a[2], 3.0, a[4], a[5]]), 0.03),
+              (np.array([3.0 * b_[0], 3.0 * b_[1], b_[2], 3.0, 0.0, 0.0]), 0.05)]
+    for dx, dy in ((0.5 * a[0], 0.0), (-0.5 * a[0], 0.0), (0.0, 0.5 * a[1]), (0.0, -0.5 * a[1])):
+        thirds.append((np.array([0.7 * a[0], 0.7 * a[1], a[2], 4.0, a[4] + dx, a[5] + dy]), 0.2))
+    return [np.array([*a, *b_, *t, *logit_weights([w * (1 - w3), (1 - w) * (1 - w3), w3])]) for t, w3 in thirds]
+
+
 def shifted_starts(name, fits):
     """A shifted family from its centred parent's fit: the lobes at offsets 0 and split by +-0.3 of the narrowest
     lobe's width along x and y (a pair of facet orientations), weights kept."""
+    if name == "shifted-student3":
+        return shifted_student3_starts(fits["shifted-student2"][0]) if "shifted-student2" in fits else []
     parent = {"shifted-ggx2": "ggx3", "shifted-student2": "student2", "shifted-ggx3": "ggx3"}[name]
     if parent not in fits:
         return []
