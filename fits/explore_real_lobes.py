@@ -37,8 +37,9 @@ auto` with default options. Then, on ndfit's own bins:
 - the residual maps (`--png DIR`): Pearson residuals (c - lambda) / sqrt(lambda) of the closest family per Lambert
   cell, red where the data exceed the model, blue where they fall short (saturated at 5).
 
-Not part of CI (a research table, docs/REAL_SCANS.md "What a richer model could reach"): about 10 minutes on two
-cores.
+Not part of CI (a research table, docs/REAL_SCANS.md "What a richer model could reach"): 15-20 minutes on two
+cores (the quantized st_sur-2 and surfalize_test_1.plu, whose rounding rule costs 16 lobe evaluations per bin, take
+the longest).
 """
 
 from __future__ import annotations
