@@ -96,7 +96,14 @@ def main():
                   "of older builds is larger where the dispersion is, e.g. st_al3d-1 and st_tmd-1)."]
     if failed:
         lines += ["", "Failed:", *[f"- {f}" for f in failed]]
-    Path(a.out).write_text("\n".join(lines) + "\n")
+    # Sections after the table (e.g. "What a richer model could reach", written by explore_real_lobes.py) stay.
+    out = Path(a.out)
+    kept = ""
+    if out.exists():
+        old = out.read_text()
+        at = old.find("\n## ")
+        kept = old[at:] if at >= 0 else ""
+    out.write_text("\n".join(lines) + "\n" + kept)
     print(f"wrote {a.out}", file=sys.stderr)
     return 1 if failed else 0
 
