@@ -36,9 +36,9 @@ fn moved(x: &[f64], p: usize, d: f64) -> Vec<f64> {
 fn assert_ln_d_gradient(id: ModelId, x: &[f64], dir: &Vector3<f64>) -> f64 {
     let mut g = vec![0.0; x.len()];
     let v = LnD::new(id, x).value_grad(dir, &mut g);
-    for j in 0..x.len() {
+    for (j, &gj) in g.iter().enumerate() {
         let fd = (LnD::new(id, &moved(x, j, H)).value(dir) - LnD::new(id, &moved(x, j, -H)).value(dir)) / (2.0 * H);
-        assert!((fd - g[j]).abs() < 2e-5 * (1.0 + g[j].abs()), "{id} x={x:?} m={dir:?} param {j}: analytic {} vs FD {fd}", g[j]);
+        assert!((fd - gj).abs() < 2e-5 * (1.0 + gj.abs()), "{id} x={x:?} m={dir:?} param {j}: analytic {gj} vs FD {fd}");
     }
     v
 }
