@@ -41,7 +41,9 @@ def main(argv=None) -> int:
     sub = ap.add_subparsers(dest="cmd", required=True)
     f = sub.add_parser("fit", help="fit a model to an empirical NDF CSV (ndfit ndf's output)")
     f.add_argument("ndf")
-    f.add_argument("--model", required=True, choices=models.MODELS)
+    # The single lobes: the contract's and the Student-t lobes (the mixtures start from a parent fit, as the
+    # cross-check gives them; not from the command line).
+    f.add_argument("--model", required=True, choices=models.MODELS + models.STUDENTS)
     f.add_argument("--objective", default="poisson", choices=obj.OBJECTIVES)
     f.add_argument("--method", default="bobyqa+lbfgs", choices=METHODS)
     f.add_argument("--input-json", help="JSON object merged into the output's 'input' (e.g. ndfit info --json)")
