@@ -68,6 +68,7 @@ pub mod fit;
 pub mod io;
 pub mod models;
 pub mod ndf;
+pub mod phases;
 pub mod pipeline;
 #[cfg(feature = "plot")]
 pub mod plot;

@@ -44,6 +44,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let title = format!("{name}: {} fit", report.model);
         ndfit::fit::plot_fit(png, &ndf, &m, &title)?;
     }
+    let _p = ndfit::phases::phase("write");
     let mut json = serde_json::to_string_pretty(&report).map_err(|e| anyhow!("{path}: cannot serialize the result ({e})"))?;
     json.push('\n');
     match &args.output {

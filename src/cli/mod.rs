@@ -126,6 +126,7 @@ enum Command {
 
 /// Parse, run, and turn any error into one line and a non-zero exit.
 pub fn main() -> ExitCode {
+    ndfit::phases::enabled();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => return usage_error(e),
@@ -146,6 +147,7 @@ pub fn main() -> ExitCode {
         Command::Scale(a) => scale::run(a),
     };
     progress::finish();
+    print_phases();
     if cli.report_memory {
         match ndfit::bench::mem::peak_rss() {
             Some(b) => eprintln!("ndfit: peak resident memory {:.1} MiB", b as f64 / (1024.0 * 1024.0)),
@@ -161,6 +163,18 @@ pub fn main() -> ExitCode {
             let _ = writeln!(std::io::stderr(), "ndfit: {}", one_line(&msg));
             ExitCode::from(2)
         }
+    }
+}
+
+/// With `NDFIT_PHASES` set, the command's phases on standard error, one line each
+/// (docs/PERFORMANCE.md, "Scaling with cores").
+fn print_phases() {
+    let (spans, end) = ndfit::phases::take();
+    if ndfit::phases::enabled() {
+        for s in &spans {
+            eprintln!("ndfit: phase {} at {:.2} ms took {:.2} ms", s.name, s.start_ms, s.ms);
+        }
+        eprintln!("ndfit: phases end at {end:.2} ms");
     }
 }
 

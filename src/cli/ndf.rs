@@ -106,6 +106,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         ndf::plot_slices(&p("slices"), &ndf, &format!("{name}: D through the peak"))
             .with_context(|| format!("{}", p("slices").display()))?;
     }
+    let _p = ndfit::phases::phase("write");
     match &args.output {
         Some(out) => write_ndf(out, &ndf, input_json(&input))?,
         None => {

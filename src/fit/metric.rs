@@ -2,9 +2,10 @@
 //! `delta(D; D_ref) = sqrt( E_{m ~ D_ref(m)(m.n)} [ (D(m)/D_ref(m) - 1)^2 ] )`, by quadrature.
 
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 use crate::models::{Model, Ndf};
-use crate::ndf::{BinGrid, EmpiricalNdf, QuadOrder, SlopeFrame};
+use crate::ndf::{BinGrid, EmpiricalNdf, NdfBin, QuadOrder, SlopeFrame};
 
 /// `delta` by quadrature on directions `m_k` with projected solid angles `W_k`:
 /// weights `w_k = D_ref(m_k) W_k`, `delta = sqrt( sum w_k (D/D_ref - 1)^2 / sum w_k )`.
@@ -36,19 +37,22 @@ pub fn delta_to_model(d: &Model, reference: &Model) -> Option<f64> {
 
 /// `delta(D_model; D_empirical)` over the bins of `ndf` (the fit error against the data; it includes
 /// the counting noise of the bins, [`counting_noise2`]).
-pub fn delta_to_data(model: &impl Ndf, ndf: &EmpiricalNdf) -> Option<f64> {
+pub fn delta_to_data(model: &(impl Ndf + Sync), ndf: &EmpiricalNdf) -> Option<f64> {
     let n: f64 = ndf.bins.iter().map(|b| b.count as f64).sum();
     // Guard: an NDF without counts has no reference distribution.
     if n <= 0.0 {
         return None;
     }
+    let held = |b: &&NdfBin| b.count > 0 && b.proj_solid_angle > 0.0;
+    // The model on every thread, the sums in bin order (the same bits for any thread count).
+    let d: Vec<f64> = ndf.bins.par_iter().filter(held).map(|b| model.d(b.m)).collect();
     let mut num = 0.0;
     let mut den = 0.0;
-    for b in ndf.bins.iter().filter(|b| b.count > 0 && b.proj_solid_angle > 0.0) {
+    for (b, d) in ndf.bins.iter().filter(held).zip(d) {
         // w_k = d_k W_k = c_k / N, and D/d_k with d_k = c_k / (N W_k).
         let wk = b.count as f64 / n;
         let dk = b.count as f64 / (n * b.proj_solid_angle);
-        num += wk * (model.d(b.m) / dk - 1.0).powi(2);
+        num += wk * (d / dk - 1.0).powi(2);
         den += wk;
     }
     (den > 0.0).then(|| (num / den).sqrt())
@@ -59,14 +63,19 @@ pub fn delta_to_data(model: &impl Ndf, ndf: &EmpiricalNdf) -> Option<f64> {
 /// `(1/N) sum_k E[(lambda_k - c_k)^2 / c_k; c_k >= 1]` ([`poisson_relative_noise`]). About `K / N` where
 /// every bin holds many normals, less where bins hold one or two (an empty bin has no weight), so a
 /// model's error is not hidden by noise that sparse bins do not have. `None` for an NDF without counts.
-pub fn counting_noise2(model: &impl Ndf, ndf: &EmpiricalNdf) -> Option<f64> {
+pub fn counting_noise2(model: &(impl Ndf + Sync), ndf: &EmpiricalNdf) -> Option<f64> {
     let n: f64 = ndf.bins.iter().map(|b| b.count as f64).sum();
     // Guard: an NDF without counts has no noise to speak of.
     if n <= 0.0 {
         return None;
     }
-    let sum: f64 =
-        ndf.bins.iter().filter(|b| b.proj_solid_angle > 0.0).map(|b| poisson_relative_noise(n * model.d(b.m) * b.proj_solid_angle)).sum();
+    let terms: Vec<f64> = ndf
+        .bins
+        .par_iter()
+        .filter(|b| b.proj_solid_angle > 0.0)
+        .map(|b| poisson_relative_noise(n * model.d(b.m) * b.proj_solid_angle))
+        .collect();
+    let sum: f64 = terms.iter().sum();
     Some(sum / n)
 }
 

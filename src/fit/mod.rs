@@ -146,8 +146,9 @@ impl Session {
 
 /// Run the solver on `data` from every start (contract parameters): the index and result of the best
 /// finite one, and every start's objective; evaluations are added to `evaluations`. The starts run side
-/// by side (each solve is serial and independent of the others, so the result is the same bit for bit
-/// as one after the other; the best is the first of the lowest, in the starts' order).
+/// by side (each solve is independent of the others and its sums over bins run in bin order, so the
+/// result is the same bit for bit as one after the other; the best is the first of the lowest, in the
+/// starts' order).
 fn best_of_starts(
     data: &FitData,
     id: ModelId,
@@ -536,8 +537,13 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
 /// (`solver.converged`, `warnings`), an error only when no usable fit exists.
 pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<FitReport> {
     let t0 = Instant::now();
+    let phase = crate::phases::phase("fit.session");
     let s = Session::new(ndf, opts)?;
+    drop(phase);
+    let phase = crate::phases::phase("fit.solve");
     let fit = fit_chain(&s, id, opts)?;
+    drop(phase);
+    let _p = crate::phases::phase("fit.report");
     build_report(ndf, &s, fit, opts, 0.0).map(|mut r| {
         r.timings.fit_ms = t0.elapsed().as_secs_f64() * 1e3;
         r

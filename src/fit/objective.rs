@@ -2,6 +2,7 @@
 //! and their derivative with respect to `ln D` (the chain rule then gives the Jacobian from [`super::lnd`]).
 
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::models::Ndf;
@@ -238,7 +239,7 @@ impl FitData {
         let cos_max = max_theta.cos();
         let tail = super::tail::tail_cut(ndf, cos_max, rule);
         let cut = tail.bins_excluded > 0;
-        let keep: Vec<bool> = (0..ndf.bins.len()).map(|k| !(cut && tail.excludes(ndf, k))).collect();
+        let keep: Vec<bool> = (0..ndf.bins.len()).into_par_iter().map(|k| !(cut && tail.excludes(ndf, k))).collect();
         let inside = |(k, b): &(usize, &crate::ndf::NdfBin)| keep[*k] && b.m.z >= cos_max * b.m.norm();
         let usable = |(_, b): &(usize, &crate::ndf::NdfBin)| usable(b);
         let n: f64 = ndf.bins.iter().enumerate().filter(usable).filter(inside).map(|(_, b)| b.count as f64).sum();
@@ -248,9 +249,10 @@ impl FitData {
                 format!("no normal within max_theta = {:.1} deg of the mean plane's normal", max_theta.to_degrees()),
             ));
         }
+        // In bin order (rayon's collect keeps it), built on every thread.
         let bins: Vec<Bin> = ndf
             .bins
-            .iter()
+            .par_iter()
             .enumerate()
             .filter(usable)
             .filter(inside)

@@ -9,14 +9,19 @@
 //! pass and adds the gradients of `ln D`, which need no transcendental function.
 //!
 //! For large regions LM is handed `p + 1` compressed residuals with the same normal equations instead of
-//! one per bin (`compress`), so its pivoted QR no longer runs over every bin. Everything here is
-//! serial and in a fixed order: results do not depend on the thread count of a batch.
+//! one per bin (`compress`), so its pivoted QR no longer runs over every bin.
+//!
+//! The per-bin work (`ln D`, its gradient, the exponentials and residuals) runs on rayon's threads in
+//! chunks of [`PAR_CHUNK`] bins; every sum over bins (`S`, the objective, `gbar`, the normal equations)
+//! is then taken on the calling thread in bin order, so results are bit for bit those of one thread,
+//! whatever the thread count.
 
 use std::cell::RefCell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use levenberg_marquardt::LeastSquaresProblem;
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use rayon::prelude::*;
 
 use super::lnd::LnD;
 use super::objective::{poisson_residual, residual, FitData, Objective};
@@ -27,6 +32,11 @@ use crate::models::ModelId;
 pub static RESIDUAL_BIN_EVALS: AtomicUsize = AtomicUsize::new(0);
 /// Bins evaluated by the Jacobian pass since the last reset (as [`RESIDUAL_BIN_EVALS`]).
 pub static JACOBIAN_BIN_EVALS: AtomicUsize = AtomicUsize::new(0);
+
+/// Bins per task of the residual and Jacobian passes: tens of microseconds of `ln D` work, well above
+/// rayon's per-task cost, and enough tasks for 16 threads on the merged bins of a 4096^2 scan
+/// (~13k bins); a region of fewer bins is one task, run on the calling thread.
+const PAR_CHUNK: usize = 512;
 
 /// Scratch of the residual and Jacobian passes, reused across evaluations (no allocation per
 /// evaluation), holding the last residual pass for the Jacobian at the same point.
@@ -70,48 +80,60 @@ fn residual_pass(data: &FitData, id: ModelId, x: &[f64], ws: &mut Workspace) -> 
     ws.dr.resize(nb, 0.0);
     ws.r.resize(nb, 0.0);
     let f = LnD::new(id, x);
-    let mut shift = f64::NEG_INFINITY;
-    match &data.rounding {
-        None => {
-            for (a, bin) in ws.a.iter_mut().zip(&data.bins) {
-                *a = f.value(&bin.m) + bin.ln_w;
-                shift = shift.max(*a);
-            }
-        }
-        Some(rounding) => {
-            for ((a, bin), pts) in ws.a.iter_mut().zip(&data.bins).zip(&rounding.points) {
-                *a = smoothed(pts.map(|(m, lw)| f.value(&m) + lw)).0 + bin.ln_w;
-                shift = shift.max(*a);
-            }
-        }
-    }
+    // The maximum is exact in any order (NaN terms are skipped, as a serial fold skips them).
+    let shift =
+        ws.a.par_chunks_mut(PAR_CHUNK)
+            .enumerate()
+            .map(|(c, a)| {
+                let k0 = c * PAR_CHUNK;
+                let bins = &data.bins[k0..k0 + a.len()];
+                let mut top = f64::NEG_INFINITY;
+                match &data.rounding {
+                    None => {
+                        for (a, bin) in a.iter_mut().zip(bins) {
+                            *a = f.value(&bin.m) + bin.ln_w;
+                            top = top.max(*a);
+                        }
+                    }
+                    Some(rounding) => {
+                        for ((a, bin), pts) in a.iter_mut().zip(bins).zip(&rounding.points[k0..]) {
+                            *a = smoothed(pts.map(|(m, lw)| f.value(&m) + lw)).0 + bin.ln_w;
+                            top = top.max(*a);
+                        }
+                    }
+                }
+                top
+            })
+            .reduce(|| f64::NEG_INFINITY, f64::max);
     // Guard: a model with no finite mass anywhere in R; the caller reports a failed evaluation.
     if !shift.is_finite() {
         ws.r.fill(f64::NAN);
         return f64::NAN;
     }
-    let mut s = 0.0;
-    for (p, a) in ws.p.iter_mut().zip(&ws.a) {
-        *p = (a - shift).exp();
-        s += *p;
-    }
+    ws.p.par_chunks_mut(PAR_CHUNK).zip(ws.a.par_chunks(PAR_CHUNK)).for_each(|(p, a)| {
+        for (p, a) in p.iter_mut().zip(a) {
+            *p = (a - shift).exp();
+        }
+    });
+    let s: f64 = ws.p.iter().sum();
     // s >= 1 (the largest term is exp(0)) unless NaN crept in: then ln_s is NaN and so is the result.
     let ln_s = shift + s.ln();
     let inv_s = 1.0 / s;
     let ln_n = data.n.ln();
-    let mut sum = 0.0;
-    for k in 0..nb {
-        let bin = &data.bins[k];
-        let p = ws.p[k] * inv_s;
-        ws.p[k] = p;
-        let (v, dr) = match data.objective {
-            Objective::Poisson => poisson_residual(bin.c, data.n * p, ws.a[k] - ln_s + (ln_n - bin.ln_c)),
-            Objective::Logd => residual(Objective::Logd, bin, ws.a[k] - bin.ln_w - ln_s),
-        };
-        ws.r[k] = v;
-        ws.dr[k] = dr;
-        sum += v * v;
-    }
+    (ws.r.par_chunks_mut(PAR_CHUNK), ws.dr.par_chunks_mut(PAR_CHUNK), ws.p.par_chunks_mut(PAR_CHUNK), ws.a.par_chunks(PAR_CHUNK))
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(c, (r, dr, p, a))| {
+            let bins = &data.bins[c * PAR_CHUNK..];
+            for ((((r, dr), p), a), bin) in r.iter_mut().zip(dr).zip(p).zip(a).zip(bins) {
+                *p *= inv_s;
+                (*r, *dr) = match data.objective {
+                    Objective::Poisson => poisson_residual(bin.c, data.n * *p, a - ln_s + (ln_n - bin.ln_c)),
+                    Objective::Logd => residual(Objective::Logd, bin, a - bin.ln_w - ln_s),
+                };
+            }
+        });
+    let sum: f64 = ws.r.iter().map(|v| v * v).sum();
     if ln_s.is_finite() && sum.is_finite() {
         ws.at = Some((x.to_vec(), sum));
         sum
@@ -137,34 +159,51 @@ fn jacobian_pass(data: &FitData, id: ModelId, x: &[f64], jac: &mut DMatrix<f64>,
     let np = x.len();
     let nb = data.bins.len();
     let js = jac.as_mut_slice();
-    let mut g = [0.0; 8];
-    let mut gbar = [0.0; 8];
-    let mut gq = [0.0; 8];
-    for (k, (bin, pk)) in data.bins.iter().zip(&ws.p).enumerate() {
-        match &data.rounding {
-            None => f.grad(&bin.m, &mut g[..np]),
-            Some(rounding) => {
-                // The gradient of the smoothed ln D: the points' gradients weighted by their shares.
-                let pts = &rounding.points[k];
-                let (_, w) = smoothed(pts.map(|(m, lw)| f.value(&m) + lw));
-                g[..np].fill(0.0);
-                for ((m, _), wq) in pts.iter().zip(w) {
-                    f.grad(m, &mut gq[..np]);
-                    for j in 0..np {
-                        g[j] += wq * gq[j];
+    // Each chunk of bins writes its rows of every column: the columns split at the same bins.
+    let mut parts: Vec<Vec<&mut [f64]>> = (0..nb.div_ceil(PAR_CHUNK)).map(|_| Vec::with_capacity(np)).collect();
+    for col in js.chunks_exact_mut(nb) {
+        for (part, rows) in parts.iter_mut().zip(col.chunks_mut(PAR_CHUNK)) {
+            part.push(rows);
+        }
+    }
+    parts.into_par_iter().enumerate().for_each(|(c, mut cols)| {
+        let k0 = c * PAR_CHUNK;
+        let mut g = [0.0; 8];
+        let mut gq = [0.0; 8];
+        for i in 0..cols.first().map_or(0, |col| col.len()) {
+            let (k, bin) = (k0 + i, &data.bins[k0 + i]);
+            match &data.rounding {
+                None => f.grad(&bin.m, &mut g[..np]),
+                Some(rounding) => {
+                    // The gradient of the smoothed ln D: the points' gradients weighted by their shares.
+                    let pts = &rounding.points[k];
+                    let (_, w) = smoothed(pts.map(|(m, lw)| f.value(&m) + lw));
+                    g[..np].fill(0.0);
+                    for ((m, _), wq) in pts.iter().zip(w) {
+                        f.grad(m, &mut gq[..np]);
+                        for (gj, gqj) in g[..np].iter_mut().zip(&gq[..np]) {
+                            *gj += wq * gqj;
+                        }
                     }
                 }
             }
+            for (col, gj) in cols.iter_mut().zip(&g[..np]) {
+                col[i] = *gj;
+            }
         }
-        for j in 0..np {
-            js[j * nb + k] = g[j];
-            gbar[j] += pk * g[j];
+    });
+    let mut gbar = [0.0; 8];
+    for (k, pk) in ws.p.iter().enumerate() {
+        for (j, gb) in gbar[..np].iter_mut().enumerate() {
+            *gb += pk * js[j * nb + k];
         }
     }
     for (col, gb) in js.chunks_exact_mut(nb).zip(&gbar[..np]) {
-        for (jk, dr) in col.iter_mut().zip(&ws.dr) {
-            *jk = dr * (*jk - gb);
-        }
+        col.par_chunks_mut(PAR_CHUNK).zip(ws.dr.par_chunks(PAR_CHUNK)).for_each(|(col, dr)| {
+            for (jk, dr) in col.iter_mut().zip(dr) {
+                *jk = dr * (*jk - gb);
+            }
+        });
     }
 }
 
@@ -212,15 +251,16 @@ fn compress(ws: &mut Workspace, sum: f64, rc: &mut [f64]) {
     let js = ws.jac.as_slice();
     let mut g = nalgebra::DMatrix::<f64>::zeros(np, np);
     let mut b = nalgebra::DVector::<f64>::zeros(np);
-    for i in 0..np {
-        let ci = &js[i * nb..(i + 1) * nb];
-        b[i] = dot(ci, &ws.r);
-        for j in 0..=i {
-            let v = dot(ci, &js[j * nb..(j + 1) * nb]);
-            g[(i, j)] = v;
-            g[(j, i)] = v;
-        }
+    let col = |i: usize| &js[i * nb..(i + 1) * nb];
+    // Each dot product on its own thread, each in its fixed order: the same sums as one thread's.
+    let pairs: Vec<(usize, usize)> = (0..np).flat_map(|i| (0..=i).map(move |j| (i, j))).collect();
+    let dots: Vec<f64> = pairs.par_iter().map(|&(i, j)| dot(col(i), col(j))).collect();
+    for (&(i, j), &v) in pairs.iter().zip(&dots) {
+        g[(i, j)] = v;
+        g[(j, i)] = v;
     }
+    let rs: Vec<f64> = (0..np).into_par_iter().map(|i| dot(col(i), &ws.r)).collect();
+    b.as_mut_slice().copy_from_slice(&rs);
     rc.fill(0.0);
     // Guard: a non-finite Jacobian (an overflowing lobe) is reported to LM when it asks for the Jacobian
     // here; the residuals keep their norm so the step's acceptance test is still right.

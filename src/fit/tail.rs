@@ -12,6 +12,8 @@
 //! The model is normalized over the bins that remain, so the likelihood stays the exact conditional one
 //! of objective.md for the smaller region.
 
+use rayon::prelude::*;
+
 use crate::ndf::{EmpiricalNdf, NdfBin};
 
 pub use crate::ndf::resolution::MAX_UNRESOLVED_SHARE;
@@ -147,12 +149,16 @@ pub fn tail_cut(ndf: &EmpiricalNdf, cos_max: f64, rule: TailRule) -> TailCut {
             ..TailCut::none()
         };
     }
-    let region: Vec<usize> =
-        (0..ndf.bins.len()).filter(|&i| usable(&ndf.bins[i]) && ndf.bins[i].m.z >= cos_max * ndf.bins[i].m.norm()).collect();
+    let region: Vec<usize> = (0..ndf.bins.len())
+        .into_par_iter()
+        .filter(|&i| usable(&ndf.bins[i]) && ndf.bins[i].m.z >= cos_max * ndf.bins[i].m.norm())
+        .collect();
     let n: f64 = region.iter().map(|&i| ndf.bins[i].count as f64).sum();
-    let frac = |out: &dyn Fn(usize) -> bool| {
-        let cut = region.iter().filter(|&&i| out(i)).fold(0.0, |a, &i| a + ndf.bins[i].count as f64);
-        (cut, region.iter().filter(|&&i| out(i)).count(), if n > 0.0 { cut / n } else { 0.0 })
+    // The test of each bin on every thread, the sums in bin order.
+    let frac = |out: &(dyn Fn(usize) -> bool + Sync)| {
+        let outs: Vec<bool> = region.par_iter().map(|&i| out(i)).collect();
+        let cut = region.iter().zip(&outs).filter(|(_, &o)| o).fold(0.0, |a, (&i, _)| a + ndf.bins[i].count as f64);
+        (cut, outs.iter().filter(|&&o| o).count(), if n > 0.0 { cut / n } else { 0.0 })
     };
     let (_, _, tail) = frac(&|i| is_unresolved(ndf, i));
     // Unresolved normals of the region, and those in bins they dominate.

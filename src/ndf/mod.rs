@@ -264,6 +264,7 @@ fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize
     // The strided subsample gives the robust frame and the valid fraction (for the automatic grid size;
     // the exact count is known only after the full pass).
     let need_sample = opts.frame.is_none() || opts.cells_across.is_none();
+    let phase = crate::phases::phase("ndf.frame");
     // The frame and the height lattice are independent passes over the data: side by side.
     let ((mut sample, visited, frame), lattice) = rayon::join(
         || {
@@ -310,6 +311,8 @@ fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize
         warnings.extend(q.unresolved_reason());
     }
     let grid = BinGrid::new(cells);
+    drop(phase);
+    let phase = crate::phases::phase("ndf.histogram");
 
     // The resolution test (central differences) runs in the same pass, on the rows in cache, unless the
     // caller said nothing reads it.
@@ -329,9 +332,11 @@ fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize
             (res, acc)
         }
     };
+    drop(phase);
     if acc.n == 0 {
         return Err(no_valid());
     }
+    let phase = crate::phases::phase("ndf.bins");
     let n = acc.n as f64;
     let mean = [acc.m1[0] / n, acc.m1[1] / n];
     let cov = [
@@ -375,7 +380,9 @@ fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize
         resolution_tolerance: resolution::RESOLUTION_TOLERANCE,
         warnings,
     };
+    drop(phase);
     if let Some(t) = res {
+        let _p = crate::phases::phase("ndf.resolution");
         t.finish(std::mem::take(&mut acc.res), &mut ndf);
     }
     Ok(ndf)

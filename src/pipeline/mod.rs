@@ -249,7 +249,9 @@ pub fn read_prepared(path: &Path, opts: &ReadOptions, pre: &Preprocess) -> Resul
         let rest = Preprocess { subsample: 1, ..pre.clone() };
         return crate::preprocess::prepare(hf, &rest).map_err(|e| e.with_path(path));
     }
+    let phase = crate::phases::phase("read");
     let hf = crate::io::read_scan(path, opts)?;
+    drop(phase);
     crate::preprocess::prepare(hf, pre).map_err(|e| e.with_path(path))
 }
 

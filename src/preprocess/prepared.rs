@@ -49,8 +49,10 @@ pub fn prepare<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Prepared<'a>> {
     }
     if pre.form != FormRemoval::None && hf.meta.height_quantum.is_none() {
         // The lattice is found on the heights as stored: a form removal shifts every height off `k q`.
+        let _p = crate::phases::phase("quantum");
         hf.meta.height_quantum = crate::ndf::quantum::height_quantum(&hf);
     }
+    let phase = crate::phases::phase("form");
     let form = match pre.form {
         FormRemoval::None => None,
         FormRemoval::Plane => Some(super::form::fit_polynomial(&hf, 1)?),
@@ -60,6 +62,8 @@ pub fn prepare<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Prepared<'a>> {
             None
         }
     };
+    drop(phase);
+    let _p = crate::phases::phase("despike");
     let mut p = Prepared { raw: hf, form, masked: Vec::new() };
     let raw = p.form.as_ref().map(|form| despike::RawPlane { raw: &p.raw, form });
     if let Some((masked, report)) = despike::find_spikes_over(&p, raw, pre.despike, p.raw.meta.height_quantum) {

@@ -45,3 +45,55 @@ fn a_missing_scan_gives_one_line_naming_it_and_no_output() {
         }
     }
 }
+
+/// `NDFIT_PHASES` (docs/PERFORMANCE.md, "Scaling with cores"): `ndfit fit` prints one line per phase of
+/// the pipeline, in the order they ran, none overlapping the next (they run one after the other; the
+/// times are printed to 0.01 ms), all within the command's span, and covering most of it (the rest is
+/// argument parsing and the summary line). Without the variable, no such line.
+#[test]
+fn phases_are_printed_in_order_without_overlap_only_when_asked() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scan = dir.path().join("s.x3p");
+    let o = Command::new(ndfit_bin()).args(["synth", "--nx", "256", "--ny", "256"]).arg(&scan).output().expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let fit = |phases: bool| {
+        let mut c = Command::new(ndfit_bin());
+        c.arg("fit").arg(&scan).args(["--model", "ggx-aniso", "-o"]).arg(dir.path().join("f.json"));
+        if phases {
+            c.env("NDFIT_PHASES", "1");
+        } else {
+            c.env_remove("NDFIT_PHASES");
+        }
+        let o = c.output().expect("runs");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    assert!(!fit(false).contains("phase"), "phase lines without NDFIT_PHASES");
+    let err = fit(true);
+    let mut spans = Vec::new();
+    let mut end = None;
+    for line in err.lines() {
+        let w: Vec<&str> = line.split_whitespace().collect();
+        match w.as_slice() {
+            ["ndfit:", "phase", name, "at", s, "ms", "took", d, "ms"] => {
+                spans.push((name.to_string(), s.parse::<f64>().expect("start"), d.parse::<f64>().expect("duration")))
+            }
+            ["ndfit:", "phases", "end", "at", e, "ms"] => end = Some(e.parse::<f64>().expect("end")),
+            _ => {}
+        }
+    }
+    let end = end.expect("a closing `phases end` line");
+    let names: Vec<&str> = spans.iter().map(|s| s.0.as_str()).collect();
+    for want in ["read", "form", "despike", "ndf.frame", "ndf.histogram", "ndf.bins", "fit.session", "fit.solve", "fit.report", "write"] {
+        assert!(names.contains(&want), "no `{want}` phase in {names:?}");
+    }
+    for pair in spans.windows(2) {
+        let ((a, sa, da), (b, sb, _)) = (&pair[0], &pair[1]);
+        assert!(sa <= sb, "{a} at {sa} listed before {b} at {sb}");
+        assert!(sa + da <= sb + 0.02, "{a} ({sa} + {da} ms) overlaps {b} at {sb} ms");
+    }
+    let (last, s, d) = spans.last().expect("phases");
+    assert!(s + d <= end + 0.02, "{last} ends after the command's end {end}");
+    let covered: f64 = spans.iter().map(|s| s.2).sum();
+    assert!(covered > 0.5 * end && covered <= end + 0.1, "the phases cover {covered} ms of {end}");
+}

@@ -13,3 +13,4 @@ mod mixture;
 mod recovery;
 mod schema;
 mod student;
+mod threads;
