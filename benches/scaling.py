@@ -132,9 +132,12 @@ def main():
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--batch-repeats", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="small data, one repeat: a check that the script runs")
+    ap.add_argument("--single-only", action="store_true", help="the single-scan commands alone (no batch, no auto)")
     a = ap.parse_args()
     if a.quick:
         a.size, a.batch_size, a.scans, a.repeats, a.batch_repeats = 512, 128, 8, 1, 1
+    if a.single_only:
+        a.scans = 0
     cores = os.cpu_count() or 1
     threads = [int(t) for t in a.threads.split(",")] if a.threads else [t for t in (1, 2, 4, 8, 16, 32, 64) if t <= cores]
     if threads[-1] != cores and not a.threads:
@@ -194,7 +197,7 @@ def main():
         print(f"single-scan round {r + 1}/{a.repeats} done", flush=True)
 
     out_dir = os.path.join(scratch, "batch_out")
-    for r in range(a.batch_repeats):
+    for r in range(0 if a.single_only else a.batch_repeats):
         for j in threads:
             shutil.rmtree(out_dir, ignore_errors=True)
             for tag, b in bins.items():
@@ -213,8 +216,8 @@ def main():
         res["batch"].append({"model": "auto", "bin": "new", "jobs": top, "s": dt})
         print(f"batch round {r + 1}/{a.batch_repeats} done", flush=True)
 
-    one = files[0]
-    for r in range(a.repeats):
+    one = files[0] if files else None
+    for r in range(0 if a.single_only else a.repeats):
         for t in sorted({1, top}):
             for model in ("ggx-aniso", "auto"):
                 dt = run([bins["new"], "fit", one, "--model", model, "-o", fitjson], env(t))
@@ -224,7 +227,7 @@ def main():
     with open(os.path.join(a.out, "scaling.json"), "w") as fh:
         json.dump(res, fh, indent=1)
 
-    md = tables(res, threads, bins, have_unzip)
+    md = tables(res, threads, bins, have_unzip and not a.single_only)
     with open(os.path.join(a.out, "scaling.md"), "w") as fh:
         fh.write(md)
     print(md)
@@ -254,6 +257,8 @@ def tables(res, threads, bins, have_unzip):
             v = {t: med([r["timings"][stage] for r in res["single"] if "timings" in r and r["bin"] == tag and r["threads"] == t]) for t in threads}
             lines.append(f"| fit's `{stage}` | " + " | ".join(f"{v[t]:.1f} ({ratio(v[threads[0]], v[t]):.1f}x)" for t in threads) + " |")
         lines.append("")
+    if not res["batch"]:
+        return "\n".join(lines) + "\n"
     lines += [f"Batch, {m['scans']} deflated {m['batch_size']}^2 X3Ps: median wall s", "",
               "| jobs | `batch --model ggx-aniso` | speed-up | floor (`unzip -p`, as many processes) | batch / floor |",
               "| --- | --- | --- | --- | --- |"]

@@ -432,11 +432,6 @@ fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64, valid: usize, top: f64)
     Ok(FormModel { mean, valid, top, kind: FormKind::Plane { c: [c[0], c[1], c[2]], u, ny } })
 }
 
-/// Residuals after removing the least-squares plane (order 1).
-pub fn remove_plane(hf: &Scan) -> Result<Vec<f64>> {
-    remove_polynomial(hf, 1)
-}
-
 /// A fitted cylinder and the residual heights.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CylinderFit {
