@@ -91,7 +91,7 @@ pub fn sdq_central(z: &[f64], nx: usize, ny: usize, dx: f64, dy: f64) -> (f64, u
 
 /// [`surface_stats`] of heights read in row bands ([`BandSource`], e.g. a [`crate::preprocess::Prepared`]
 /// scan whose heights stay memory-mapped), with working memory of a few bands per thread, so that
-/// `ndfit info` on a tiled scan never holds the heights or their residual. Blocks of [`SUM_ROWS`] rows
+/// `ndfit info` on a tiled scan never holds the heights or their residual. Blocks of 32 rows
 /// on every thread; the plane is fitted by `fit_polynomial`.
 pub fn surface_stats_of<S: BandSource<T = f64>>(src: &S) -> Result<SurfaceStats> {
     let GridShape { nx, ny, dx, dy, .. } = src.shape();
