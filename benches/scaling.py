@@ -14,7 +14,7 @@ every command interleaved with the others round by round (medians of REPEATS):
 - `batch --model ggx-aniso --jobs J` over the deflated set at each job count, beside the input's floor:
   J processes at a time running `unzip -p SCAN bindata/data.bin` (Info-ZIP) over the same files;
 - `batch --model auto` at the most jobs, and one scan's `fit --model auto` against `--model ggx-aniso` at
-  one thread and at the most threads (issue 37's price of `auto`).
+  one thread and at the most threads (the price of `auto`).
 With `--base` (and `--also TAG=PATH`), the single-scan commands and the batch at the fewest and the most
 jobs also run with other binaries (the build before a change), in the same rounds. The new binary runs
 with `NDFIT_PHASES` set, so its tables also show each phase's time. First of all, the machine's own

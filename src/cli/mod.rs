@@ -169,13 +169,14 @@ pub fn main() -> ExitCode {
 /// With `NDFIT_PHASES` set, the command's phases on standard error, one line each
 /// (docs/PERFORMANCE.md, "Scaling with cores").
 fn print_phases() {
-    let (spans, end) = ndfit::phases::take();
-    if ndfit::phases::enabled() {
-        for s in &spans {
-            eprintln!("ndfit: phase {} at {:.2} ms took {:.2} ms", s.name, s.start_ms, s.ms);
-        }
-        eprintln!("ndfit: phases end at {end:.2} ms");
+    if !ndfit::phases::enabled() {
+        return;
     }
+    let (spans, end) = ndfit::phases::take();
+    for s in &spans {
+        eprintln!("ndfit: phase {} at {:.2} ms took {:.2} ms", s.name, s.start_ms, s.ms);
+    }
+    eprintln!("ndfit: phases end at {end:.2} ms");
 }
 
 /// Help and version go to standard output as clap prints them; an argument error becomes one line

@@ -597,7 +597,11 @@ fn fit_on_rung(s: &Session, id: ModelId, parent: Option<&Fitted>, opts: &FitOpti
 /// come after it in the order of the choice). Public so a test can hold the two to the same choice.
 pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Result<FitReport> {
     let t0 = Instant::now();
+    let phase = crate::phases::phase("fit.session");
     let s = Session::new(ndf, opts)?;
+    drop(phase);
+    // The ladder's fits, their reports and the choice.
+    let _p = crate::phases::phase("fit.ladder");
     // A candidate that cannot be fitted is left out (and said so); only when none is usable is it an error.
     let mut warnings = Vec::new();
     // A delta NDF: every model is at its floor; the simplest wins (only the first rung is fitted).

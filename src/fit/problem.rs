@@ -33,9 +33,9 @@ pub static RESIDUAL_BIN_EVALS: AtomicUsize = AtomicUsize::new(0);
 /// Bins evaluated by the Jacobian pass since the last reset (as [`RESIDUAL_BIN_EVALS`]).
 pub static JACOBIAN_BIN_EVALS: AtomicUsize = AtomicUsize::new(0);
 
-/// Bins per task of the residual and Jacobian passes: tens of microseconds of `ln D` work, well above
-/// rayon's per-task cost, and enough tasks for 16 threads on the merged bins of a 4096^2 scan
-/// (~13k bins); a region of fewer bins is one task, run on the calling thread.
+/// Bins per task of the residual and Jacobian passes: enough `ln D` work to outweigh rayon's per-task
+/// cost, small enough that the merged bins of a large scan still give every thread tasks; a region of
+/// fewer bins is one task, run on the calling thread.
 const PAR_CHUNK: usize = 512;
 
 /// Scratch of the residual and Jacobian passes, reused across evaluations (no allocation per

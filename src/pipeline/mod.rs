@@ -244,15 +244,14 @@ pub fn read_preprocessed(path: &Path, opts: &ReadOptions, pre: &Preprocess) -> R
 /// `path`.
 pub fn read_prepared(path: &Path, opts: &ReadOptions, pre: &Preprocess) -> Result<Prepared<'static>> {
     crate::io::atomic::protect_input(path);
-    if pre.crop.is_none() && pre.subsample > 1 {
-        let hf = crate::io::read_scan_subsampled(path, opts, pre.subsample)?;
-        let rest = Preprocess { subsample: 1, ..pre.clone() };
-        return crate::preprocess::prepare(hf, &rest).map_err(|e| e.with_path(path));
-    }
     let phase = crate::phases::phase("read");
-    let hf = crate::io::read_scan(path, opts)?;
+    let (hf, rest) = if pre.crop.is_none() && pre.subsample > 1 {
+        (crate::io::read_scan_subsampled(path, opts, pre.subsample)?, Preprocess { subsample: 1, ..pre.clone() })
+    } else {
+        (crate::io::read_scan(path, opts)?, pre.clone())
+    };
     drop(phase);
-    crate::preprocess::prepare(hf, pre).map_err(|e| e.with_path(path))
+    crate::preprocess::prepare(hf, &rest).map_err(|e| e.with_path(path))
 }
 
 /// Stage 2 for a [`Prepared`] scan: its empirical NDF, read band by band (the same frame and bins as
