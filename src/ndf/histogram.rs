@@ -27,8 +27,12 @@ pub(super) struct Acc {
     /// Samples counted into `counters` since they were last folded.
     pending: u64,
     pub(super) n: u64,
+    /// The slope moments `sum dx, sum dy` and `sum dx^2, sum dx dy, sum dy^2` about the frame centre: of
+    /// the open tile while counting, of the whole pass after [`histogram`] summed the tiles.
     pub(super) m1: [f64; 2],
     pub(super) m2: [f64; 3],
+    /// The moments of each closed tile, by tile index ([`Acc::close_tile`]).
+    tiles: Vec<(usize, [f64; 5])>,
     /// The resolution test's tallies, when it runs in this pass.
     pub(super) res: Tally,
 }
@@ -44,6 +48,7 @@ impl Acc {
             n: 0,
             m1: [0.0; 2],
             m2: [0.0; 3],
+            tiles: Vec::new(),
             res: Tally::default(),
         }
     }
@@ -70,6 +75,27 @@ impl Acc {
         self.pending = 0;
     }
 
+    /// Close tile `index`: its moments (counted since the last close) are set aside under its index.
+    fn close_tile(&mut self, index: usize) {
+        let [m0, m1] = self.m1;
+        let [m2, m3, m4] = self.m2;
+        self.tiles.push((index, [m0, m1, m2, m3, m4]));
+        (self.m1, self.m2) = ([0.0; 2], [0.0; 3]);
+    }
+
+    /// The moments of the whole pass: the closed tiles' sums added in tile order, so that they do not
+    /// depend on which task counted which tile.
+    fn sum_tiles(&mut self) {
+        self.tiles.sort_unstable_by_key(|t| t.0);
+        let mut m = [0.0f64; 5];
+        for (_, t) in &self.tiles {
+            for (a, b) in m.iter_mut().zip(t) {
+                *a += b;
+            }
+        }
+        (self.m1, self.m2) = ([m[0], m[1]], [m[2], m[3], m[4]]);
+    }
+
     fn merge(mut self, mut o: Acc) -> Acc {
         self.fold();
         o.fold();
@@ -84,12 +110,8 @@ impl Acc {
             }
         }
         self.n += o.n;
-        for k in 0..2 {
-            self.m1[k] += o.m1[k];
-        }
-        for k in 0..3 {
-            self.m2[k] += o.m2[k];
-        }
+        // Moments travel as the closed tiles' sums (the open tile's are zero between tiles).
+        self.tiles.append(&mut o.tiles);
         self.res = std::mem::take(&mut self.res).merge(o.res);
         self
     }
@@ -372,8 +394,23 @@ fn dispersion_block(i: usize, rows: usize) -> usize {
     i * DISPERSION_BLOCKS / rows.max(1)
 }
 
-/// The parallel pass: rows split into a few contiguous chunks per thread, one histogram per chunk. With
-/// `res` (central differences only) the resolution test runs on each row too, while its rows are in cache.
+/// Rows per tile of the counting pass, for `rows` rows: about [`TILES`] tiles, each at least
+/// [`MIN_TILE_ROWS`] rows. A function of the scan alone, never of the thread count.
+fn tile_rows(rows: usize) -> usize {
+    rows.div_ceil(TILES).max(MIN_TILE_ROWS)
+}
+
+/// Tiles the counting pass aims at: enough for every thread of a large machine to take several.
+const TILES: usize = 128;
+
+/// The fewest rows in a tile: each tile reads its stencil's rows above and below once more.
+const MIN_TILE_ROWS: usize = 8;
+
+/// The parallel pass over `rows`, in tiles of [`tile_rows`] rows. Each task counts a run of whole tiles
+/// into its own histogram (integer counts, merged in any order); the slope moments are summed per tile
+/// and the tiles' sums added in tile order, so the whole result is the same bit for bit on any number of
+/// threads. With `res` (central differences only) the resolution test runs on each row too, while its
+/// rows are in cache.
 pub(super) fn histogram<S: BandSource>(
     src: &S,
     scheme: NormalScheme,
@@ -383,60 +420,66 @@ pub(super) fn histogram<S: BandSource>(
     res: Option<&RowTest>,
 ) -> Acc {
     let cells = grid.cells();
-    let chunks = (rayon::current_num_threads() * 2).max(1);
-    let len = rows.len().div_ceil(chunks).max(1);
-    let starts: Vec<usize> = rows.clone().step_by(len).collect();
-    let end = rows.end;
+    let tile = tile_rows(rows.len());
+    let tiles = rows.len().div_ceil(tile);
+    // Runs of at least this many tiles per task: at most two tasks per thread, each with its own
+    // counters (a large grid's counters are megabytes), as few as the tiles allow. Only speed and
+    // memory depend on it.
+    let run = tiles.div_ceil(rayon::current_num_threads() * 2).max(1);
     let rows = &rows;
     let (ny, step) = (src.shape().ny, src.band_rows());
-    let mut acc = starts
-        .into_par_iter()
-        .map(|start| {
-            let mut acc = Acc::new(cells);
-            let mut blk = Block::new();
-            let mut buf = Vec::new();
-            let mut rs = RowSlopes::default();
-            for b in bands_of(start..(start + len).min(end), step) {
-                let (lo, hi) = match res {
-                    Some(t) => (t.stencil_rows(b.start).0, t.stencil_rows(b.end - 1).1),
-                    None => (scheme.stencil_rows(b.start, ny).0, scheme.stencil_rows(b.end - 1, ny).1),
-                };
-                let hf = &src.band(lo, hi, &mut buf);
-                for i in b {
-                    // The dispersion split: samples of odd row blocks are also counted apart (the block
-                    // is flushed where the parity changes, so that none mixes the two).
-                    let odd = dispersion_block(i - rows.start, rows.len()) % 2 == 1;
-                    if odd != acc.odd_pending {
-                        blk.flush(frame, grid, &mut acc);
-                        acc.odd_pending = odd;
-                    }
-                    if scheme == NormalScheme::Central {
-                        // Slopes (and the resolution test) of the whole row in one vectorized loop.
-                        let bin = match res {
-                            Some(t) => t.row(hf, i, &mut acc.res, &mut rs),
-                            None => {
-                                rs.central(hf, i);
-                                false
-                            }
-                        };
-                        acc.n += rs.counted;
-                        blk.feed(&rs, bin, res, frame, grid, &mut acc);
-                        continue;
-                    }
-                    acc.n += scheme.row_slopes(hf, i, 1, |sx, sy| blk.push(sx, sy, false, frame, grid, &mut acc));
+    let count_tile = |(mut acc, mut blk, mut buf, mut rs): (Acc, Block, Vec<S::T>, RowSlopes), t: usize| {
+        let start = rows.start + t * tile;
+        for b in bands_of(start..(start + tile).min(rows.end), step) {
+            let (lo, hi) = match res {
+                Some(t) => (t.stencil_rows(b.start).0, t.stencil_rows(b.end - 1).1),
+                None => (scheme.stencil_rows(b.start, ny).0, scheme.stencil_rows(b.end - 1, ny).1),
+            };
+            let hf = &src.band(lo, hi, &mut buf);
+            for i in b {
+                // The dispersion split: samples of odd row blocks are also counted apart (the block
+                // is flushed where the parity changes, so that none mixes the two).
+                let odd = dispersion_block(i - rows.start, rows.len()) % 2 == 1;
+                if odd != acc.odd_pending {
+                    blk.flush(frame, grid, &mut acc);
+                    acc.odd_pending = odd;
                 }
+                if scheme == NormalScheme::Central {
+                    // Slopes (and the resolution test) of the whole row in one vectorized loop.
+                    let bin = match res {
+                        Some(t) => t.row(hf, i, &mut acc.res, &mut rs),
+                        None => {
+                            rs.central(hf, i);
+                            false
+                        }
+                    };
+                    acc.n += rs.counted;
+                    blk.feed(&rs, bin, res, frame, grid, &mut acc);
+                    continue;
+                }
+                acc.n += scheme.row_slopes(hf, i, 1, |sx, sy| blk.push(sx, sy, false, frame, grid, &mut acc));
             }
-            blk.flush(frame, grid, &mut acc);
+        }
+        blk.flush(frame, grid, &mut acc);
+        acc.close_tile(t);
+        (acc, blk, buf, rs)
+    };
+    let mut acc = (0..tiles)
+        .into_par_iter()
+        .with_min_len(run)
+        .fold(|| (Acc::new(cells), Block::new(), Vec::new(), RowSlopes::default()), count_tile)
+        .map(|(mut acc, ..)| {
             acc.fold();
             if let Some(t) = res {
                 t.settle(&mut acc.res);
             }
             acc
         })
-        // No identity accumulators (each would allocate and zero the counters): the chunks
-        // are merged pairwise, and there is at least one chunk (the caller checked for stencils).
+        // No identity accumulators (each would allocate and zero the counters): the tasks' histograms
+        // are merged pairwise, and there is at least one (the caller checked for stencils).
         .reduce_with(Acc::merge)
         .unwrap_or_else(|| Acc::new(cells));
+    acc.sum_tiles();
     if let Some(t) = res {
         t.bin_deferred(src, &mut acc.res);
     }
