@@ -53,8 +53,26 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     if !args.quiet {
         eprintln!("ndfit: {path}: {}", summary_line(&report));
+        if let Some(hint) = measured_hint(&report, &path) {
+            eprintln!("ndfit: {path}: {hint}");
+        }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Where no fitted model is within the tolerance (`misfit`), the way on: the scan's own NDF tabulated
+/// for the renderers' measured materials, and, for one named model, `auto`'s ladder.
+fn measured_hint(report: &ndfit::fit::FitReport, path: &str) -> Option<String> {
+    if report.quality.verdict != ndfit::fit::Verdict::Misfit {
+        return None;
+    }
+    let lead = match report.selection {
+        Some(_) => "no model of `auto`'s ladder is within the tolerance".to_string(),
+        None => format!("{} is not within the tolerance (`--model auto` tries the others)", report.model),
+    };
+    Some(format!(
+        "{lead}; `ndfit export --to rgl {path} -o NAME.bsdf` gives a renderer the measured NDF itself (Mitsuba 3's and pbrt-v4's `measured` material)"
+    ))
 }
 
 /// One line on a fit: the model, its main parameters and the verdict.

@@ -97,3 +97,50 @@ fn phases_are_printed_in_order_without_overlap_only_when_asked() {
     let covered: f64 = spans.iter().map(|s| s.2).sum();
     assert!(covered > 0.5 * end && covered <= end + 0.1, "the phases cover {covered} ms of {end}");
 }
+
+/// A `misfit` fit ends with the way on: for a named model, `--model auto`, and for any, the command that
+/// tabulates the scan's own NDF for a renderer, which runs as printed and writes the file. A fit within
+/// the tolerance says neither. Real metal under `auto` (st_x3p-2, `misfit` with every rung) names the ladder.
+#[test]
+fn a_misfit_names_the_measured_route_and_it_runs_needs_shared() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scan = dir.path().join("g.x3p");
+    let o = Command::new(ndfit_bin())
+        .args(["synth", "--surface", "gaussian", "--sigma-x", "0.3", "--sigma-y", "0.1", "--nx", "256", "--ny", "256"])
+        .arg(&scan)
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let fit = |scan: &std::path::Path, model: &str, form: &str| {
+        let o = Command::new(ndfit_bin())
+            .arg("fit")
+            .arg(scan)
+            .args(["--model", model, "--form", form, "-o"])
+            .arg(dir.path().join("f.json"))
+            .output()
+            .expect("runs");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("f.json")).expect("fit written")).expect("json");
+        (v["quality"]["verdict"].as_str().expect("verdict").to_string(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    // An isotropic lobe on a 3:1 anisotropic Gaussian surface: far beyond the tolerance.
+    let (verdict, err) = fit(&scan, "ggx", "none");
+    assert_eq!(verdict, "misfit", "{err}");
+    let hint = err.lines().find(|l| l.contains("export --to rgl")).unwrap_or_else(|| panic!("no measured route in: {err}"));
+    assert!(hint.contains("ggx is not within the tolerance (`--model auto` tries the others)"), "{hint}");
+    // The printed command runs as printed (NAME made a path) and writes the tabulated BSDF.
+    let cmd = hint.split('`').find(|s| s.starts_with("ndfit export")).expect("a command in backticks");
+    let out = dir.path().join("g.bsdf");
+    let args: Vec<String> =
+        cmd.split_whitespace().skip(1).map(|a| if a == "NAME.bsdf" { out.display().to_string() } else { a.to_string() }).collect();
+    let o = Command::new(ndfit_bin()).args(&args).output().expect("runs");
+    assert!(o.status.success() && std::fs::metadata(&out).expect("written").len() > 0, "{}", String::from_utf8_lossy(&o.stderr));
+    // The truth's own family: within the tolerance, no hint.
+    let (verdict, err) = fit(&scan, "beckmann-aniso", "none");
+    assert_eq!(verdict, "ok", "{err}");
+    assert!(!err.contains("export --to rgl"), "{err}");
+    let Some(scans) = crate::common::shared_scans("a_misfit_names_the_measured_route_and_it_runs_needs_shared") else { return };
+    let (verdict, err) = fit(&scans.join("st_x3p-2.x3p"), "auto", "plane");
+    assert_eq!(verdict, "misfit", "{err}");
+    assert!(err.contains("no model of `auto`'s ladder is within the tolerance; `ndfit export --to rgl"), "{err}");
+}
