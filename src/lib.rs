@@ -42,7 +42,7 @@
 //! - [`models`]: pure math of the analytic NDFs (no I/O), the roughness-matrix algebra included;
 //! - [`scan`]: the one in-memory scan type and its row bands; [`io`]: readers and writers of scan files;
 //! - [`ndf`], [`preprocess`]: normals and the binned empirical NDF; form removal and despiking;
-//! - [`fit`]: least-squares fits, model selection (QBIC) and uncertainty;
+//! - [`fit`]: least-squares fits, model selection (by the tolerance, with a QBIC guard) and uncertainty;
 //! - [`pipeline`]: the facade above, its stages and the presets;
 //! - [`synth`]: synthetic scans with known truth; [`export`]: renderer parameters for a fit;
 //!   [`scale`]: the NDF at a renderer's footprint;

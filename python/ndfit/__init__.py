@@ -1,5 +1,6 @@
 """ndfit: empirical normal distribution functions (NDFs) of heightfield scans, and fits of the Ellipsoid
-NDF of Walter, Dong, Marschner and Greenberg, GGX and Beckmann to them with Levenberg-Marquardt.
+NDF of Walter, Dong, Marschner and Greenberg, GGX, Beckmann, Student-t slopes and two-lobe mixtures to them
+with Levenberg-Marquardt.
 
 The compiled core is the ndfit Rust library: a fit here and ``ndfit fit`` on the command line are the same
 computation with the same options (``Fit.to_json()`` is the document the CLI writes), and the work runs

@@ -498,7 +498,8 @@ fn directions(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(V
 
 #[pymethods]
 impl Fit {
-    /// The model id: ggx, ggx-aniso, beckmann, beckmann-aniso or ellipsoid (for `auto`, the one chosen).
+    /// The model id: ggx, beckmann, student, ggx-aniso, beckmann-aniso, student-aniso, ellipsoid, ggx2,
+    /// beckmann2 or ellipsoid+ggx (for `auto`, the one chosen).
     #[getter]
     fn model(&self) -> &'static str {
         self.report.model.as_str()
@@ -609,9 +610,11 @@ fn finish<'py>(py: Python<'py>, out: Vec<f64>, single: bool) -> PyResult<Bound<'
 /// preprocess, build the empirical NDF and fit, as `ndfit fit` does with the same options; the result's
 /// `to_json()` is the document `ndfit fit` writes.
 ///
-/// - `model`: ggx, ggx-aniso, beckmann, beckmann-aniso, ellipsoid, the mixtures ggx2, beckmann2, ellipsoid+ggx,
-///   or auto (the nested models and their mixtures, chosen by
-///   the quasi-likelihood BIC).
+/// - `model`: ggx, beckmann, student, ggx-aniso, beckmann-aniso, student-aniso, ellipsoid, the mixtures
+///   ggx2, beckmann2, ellipsoid+ggx, or auto (as `--model auto`: the ladder of these models, climbed while
+///   no model fitted is within `tolerance` on the NDF error beyond counting noise; the simplest whose error
+///   exceeds the smallest by no more than `tolerance`, in quadrature, is chosen; a model competes only if
+///   its quasi-likelihood BIC is below its parent's).
 /// - reading (files only): `dx`, `dy` (m), `z_scale` (m per stored unit), `format`.
 /// - preprocessing: `form` (none|plane|poly2|poly3|cylinder), `crop` ("NXxNY+X+Y"), `subsample`,
 ///   `despike` (median|none).

@@ -37,7 +37,12 @@ pub struct Args {
     #[arg(short = 'o', long = "out", required_unless_present = "worker")]
     pub out: Option<PathBuf>,
     /// Model to fit, as `ndfit fit --model`. A manifest's `model` column overrides it per scan.
-    #[arg(long, default_value = "auto", help = format!("{} A manifest's `model` column overrides it per scan.", super::model_help()))]
+    #[arg(
+        long,
+        default_value = "auto",
+        help = format!("{} A manifest's `model` column overrides it per scan; --tolerance goes with the scan options after `--`.",
+            super::model_help())
+    )]
     pub model: String,
     /// Scans fitted at once (default: the number of cores). Results do not depend on it.
     #[arg(long, short = 'j')]

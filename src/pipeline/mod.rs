@@ -37,7 +37,8 @@ pub struct Options {
     pub preset: Option<Preset>,
     /// How the empirical NDF is built.
     pub ndf: NdfOptions,
-    /// One model, or `auto` (fit the nested models and choose by QBIC, [`crate::fit::fit_auto`]).
+    /// One model, or `auto` (the model table's ladder, chosen by the NDF error within the tolerance,
+    /// [`crate::fit::fit_auto`]).
     pub model: ModelChoice,
     /// How to fit (objective, solver, tolerances, fitted region `max_theta`).
     pub fit: FitOptions,
