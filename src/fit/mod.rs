@@ -556,9 +556,9 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 /// ([`FitOptions::tolerance`], `verdict::excess_delta`); the models of a step are fitted side by side.
 ///
 /// The choice is the rule `scale` uses (`verdict::select`), at the scan's own footprint: the candidates
-/// ordered simplest first (rung, then parameters, then error), the first whose error exceeds the smallest
-/// by no more than the tolerance (in quadrature): the first within the tolerance, or when every model is
-/// visibly off, the simplest a renderer cannot tell from the closest. The likelihood is a guard, not the
+/// ordered simplest first (rung, then parameters, then error), the first within the tolerance, or when
+/// every model is visibly off, the first whose error exceeds the smallest by no more than the tolerance
+/// (in quadrature): the simplest a renderer cannot tell from the closest. The likelihood is a guard, not the
 /// decider: a model enters the choice only when its quasi-likelihood BIC (`qbic`, `F / c_data + p ln N`
 /// with the data's own overdispersion) is below its parent's, so the data support its added parameters.
 pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {

@@ -111,11 +111,10 @@ pub fn beyond_noise(delta2: f64, noise2: f64) -> f64 {
 pub const DEFAULT_TOLERANCE: f64 = 0.05;
 
 /// The one rule by which a model is chosen from candidates listed simplest first with their NDF errors
-/// beyond noise `errors` (`NaN` or infinite: a candidate that cannot be chosen): the first whose error
-/// exceeds the smallest one by no more than `tolerance`, the two compared in quadrature
-/// (`sqrt(e^2 - e_min^2) <= tolerance`: what the richer models buy is invisible). With a candidate
-/// within the tolerance (`e_min <= tolerance`) that is the first within it; when every candidate is
-/// visibly off, it is the simplest that a renderer cannot tell from the closest. Returns its index and
+/// beyond noise `errors` (`NaN` or infinite: a candidate that cannot be chosen): the first within the
+/// tolerance; when every candidate is visibly off, the first whose error exceeds the smallest one by no
+/// more than `tolerance`, the two compared in quadrature (`sqrt(e^2 - e_min^2) <= tolerance`: what the
+/// richer models buy is invisible), the simplest that a renderer cannot tell from the closest. Returns its index and
 /// whether its own error is within the tolerance; `None` when no error is finite. `scale` recommends
 /// only a model within the tolerance, for the worst error over the footprints; `auto` takes either, for
 /// the scan's own footprint.
@@ -124,7 +123,14 @@ pub fn select(errors: &[f64], tolerance: f64) -> Option<(usize, bool)> {
     if !best.is_finite() {
         return None;
     }
-    errors.iter().position(|&e| e.is_finite() && beyond_noise(e * e, best * best) <= tolerance).map(|i| (i, errors[i] <= tolerance))
+    // A model within the tolerance of the data beats a simpler one that is only within it of the closest
+    // model: the simpler one's own error is visible.
+    let chosen = if best <= tolerance {
+        errors.iter().position(|&e| e <= tolerance)
+    } else {
+        errors.iter().position(|&e| e.is_finite() && beyond_noise(e * e, best * best) <= tolerance)
+    };
+    chosen.map(|i| (i, errors[i] <= tolerance))
 }
 
 /// What the verdict looks at, gathered by the fit.
@@ -209,5 +215,25 @@ pub fn judge(ndf: &EmpiricalNdf, e: &Evidence) -> (Verdict, Vec<String>) {
         (Verdict::Ok, invisible)
     } else {
         (Verdict::Misfit, misfit)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The rule as its documentation states it, case by case at the tolerance 0.05: the first within the
+    /// tolerance when one is (even where a simpler model is within the tolerance of the closest in
+    /// quadrature, `sqrt(0.06^2 - 0.04^2) = 0.045`), else the first within it of the closest.
+    #[test]
+    fn select_takes_the_first_within_the_tolerance_else_the_first_near_the_closest() {
+        let t = 0.05;
+        assert_eq!(select(&[0.06, 0.04], t), Some((1, true)));
+        assert_eq!(select(&[0.06, 0.04, 0.01], t), Some((1, true)));
+        assert_eq!(select(&[0.03, 0.01], t), Some((0, true)));
+        assert_eq!(select(&[f64::NAN, 0.2, 0.049], t), Some((2, true)));
+        // None within: sqrt(0.09^2 - 0.07^2) = 0.057 is visible, sqrt(0.08^2 - 0.07^2) = 0.039 is not.
+        assert_eq!(select(&[0.09, 0.08, 0.07], t), Some((1, false)));
+        assert_eq!(select(&[f64::INFINITY, f64::NAN], t), None);
     }
 }
