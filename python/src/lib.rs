@@ -612,9 +612,9 @@ fn finish<'py>(py: Python<'py>, out: Vec<f64>, single: bool) -> PyResult<Bound<'
 ///
 /// - `model`: ggx, beckmann, student, ggx-aniso, beckmann-aniso, student-aniso, ellipsoid, the mixtures
 ///   ggx2, beckmann2, ellipsoid+ggx, or auto (as `--model auto`: the ladder of these models, climbed while
-///   no model fitted is within `tolerance` on the NDF error beyond counting noise; the simplest whose error
-///   exceeds the smallest by no more than `tolerance`, in quadrature, is chosen; a model competes only if
-///   its quasi-likelihood BIC is below its parent's).
+///   no model fitted is within `tolerance` on the NDF error beyond counting noise; the simplest within it
+///   is chosen, or when none is, the simplest whose error exceeds the smallest by no more than `tolerance`,
+///   in quadrature; a model competes only if its quasi-likelihood BIC is below its parent's).
 /// - reading (files only): `dx`, `dy` (m), `z_scale` (m per stored unit), `format`.
 /// - preprocessing: `form` (none|plane|poly2|poly3|cylinder), `crop` ("NXxNY+X+Y"), `subsample`,
 ///   `despike` (median|none).

@@ -44,8 +44,8 @@ pub struct FitArgs {
     /// The NDF error beyond counting noise a renderer cannot show (default 0.05: a highlight's radiance is
     /// linear in D, and 5% is about one just-noticeable colour difference at a highlight's lightness;
     /// data_formats/objective.md, "The tolerance"). `auto` climbs to a richer model only while no model
-    /// fitted is within it, and a richer one wins only by lowering the error by more than it; a fit is
-    /// `misfit` only beyond it.
+    /// fitted is within it and takes the simplest within it; when none is, a richer one wins only by
+    /// lowering the error by more than it (in quadrature). A fit is `misfit` only beyond it.
     #[arg(long, allow_hyphen_values = true)]
     pub tolerance: Option<f64>,
     /// Speed/accuracy preset measured in docs/PERFORMANCE.md (`balanced` = the defaults). Sets the

@@ -213,8 +213,8 @@ pub(crate) fn model_help() -> String {
     let ids: Vec<String> = ndfit::models::ModelId::EVERY.iter().map(|id| format!("{} ({})", id.as_str(), id.spec().about)).collect();
     format!(
         "Model id: {}; or `auto`: climb these models rung by rung (one lobe, its richer forms, two lobes) while none fitted \
-         is within --tolerance on the NDF error beyond counting noise, then take the simplest whose error exceeds the smallest \
-         by no more than --tolerance (in quadrature); a model competes only if its quasi-likelihood BIC is below its \
+         is within --tolerance on the NDF error beyond counting noise, then take the simplest within it, or when none is, the \
+         simplest whose error exceeds the smallest by no more than it (in quadrature); a model competes only if its quasi-likelihood BIC is below its \
          parent's (data_formats/objective.md, \"The tolerance\").",
         ids.join(", ")
     )
