@@ -25,7 +25,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         bail!("{}: only X3P output is written; name the output *.x3p", args.out.display());
     }
     let mut pre = args.scan.preprocess();
-    if args.scan.form.is_none() {
+    if args.scan.how.form.is_none() {
         pre.form = ndfit::preprocess::FormRemoval::None;
     }
     args.scan.check_outputs([args.out.as_path()])?;

@@ -10,6 +10,9 @@ use ndfit::export::rgl::{self, Flavour, Material, RglOptions};
 use ndfit::export::{export, Target};
 use ndfit::models::{Model, Ndf};
 
+use super::fit_args::FitHow;
+use super::scan_args::ReadArgs;
+
 /// Arguments of `ndfit export`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -48,6 +51,12 @@ pub struct Args {
     /// square times theta_i x phi_i).
     #[arg(long, default_value_t = RglOptions::default().warp_res)]
     pub warp_res: usize,
+    /// `--to rgl` of a scan: how it is read, preprocessed, binned and fitted (the flags of `ndfit fit`,
+    /// `auto` as the fit the tabulated NDF's tails come from); unused for a fit file.
+    #[command(flatten, next_help_heading = "Reading, binning and fitting a scan (--to rgl of a scan; as ndfit fit)")]
+    pub read: ReadArgs,
+    #[command(flatten)]
+    pub how: FitHow,
 }
 
 /// Run `ndfit export`.
@@ -111,7 +120,8 @@ fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
         let description = format!("ndfit tabulated {} model of {name} {}; {tail}", model.id(), params_text(&model));
         rgl::tabulate(&|m| model.d(m), &description, &opts, false).map_err(fail)?
     } else {
-        let outcome = ndfit::Pipeline::default().run_path(&args.fit)?;
+        let options = args.how.options(&args.read, ndfit::ModelChoice::Auto, &args.fit)?;
+        let outcome = ndfit::Pipeline::new(options).run_path(&args.fit)?;
         let fit = outcome.fit.to_model()?;
         let max_theta = outcome.fit.quality.max_theta_deg;
         let reg = rgl::Regularized::new(&outcome.ndf, &fit, max_theta);

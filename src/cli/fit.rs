@@ -71,7 +71,7 @@ fn measured_hint(report: &ndfit::fit::FitReport, path: &str) -> Option<String> {
         None => format!("{} is not within the tolerance (`--model auto` tries the others)", report.model),
     };
     Some(format!(
-        "{lead}; `ndfit export --to rgl {path} -o NAME.bsdf` gives a renderer the measured NDF itself (Mitsuba 3's and pbrt-v4's `measured` material)"
+        "{lead}; `ndfit export --to rgl {path} -o NAME.bsdf`, with the reading and fit options given here, gives a renderer the measured NDF itself (Mitsuba 3's and pbrt-v4's `measured` material)"
     ))
 }
 

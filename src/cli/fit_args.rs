@@ -7,13 +7,20 @@ use ndfit::pipeline::check::{self, Spelling};
 use ndfit::{ModelChoice, Options, Preset};
 
 use super::ndf::NdfArgs;
-use super::scan_args::ScanArgs;
+use super::scan_args::{ReadArgs, ScanArgs};
 
 /// How one scan is read, preprocessed, binned and fitted (everything but the model and the outputs).
 #[derive(Debug, Clone, clap::Args)]
 pub struct FitArgs {
     #[command(flatten)]
     pub scan: ScanArgs,
+    #[command(flatten)]
+    pub how: FitHow,
+}
+
+/// How a scan's NDF is binned and fitted (the flags after reading and preprocessing).
+#[derive(Debug, Clone, clap::Args)]
+pub struct FitHow {
     #[command(flatten)]
     pub ndf: NdfArgs,
     /// Residuals: `poisson` (deviance of the bin counts) or `logd` (count-weighted log D); see
@@ -59,6 +66,14 @@ impl FitArgs {
     /// The pipeline options these flags ask for, fitting `model`; out-of-range values are refused here,
     /// naming the flag, and the result passes [`Options::validate`].
     pub fn options(&self, model: ModelChoice) -> ndfit::Result<Options> {
+        self.how.options(&self.scan.how, model, &self.scan.scan)
+    }
+}
+
+impl FitHow {
+    /// The pipeline options these flags and the reading flags `read` ask for, fitting `model`, for the
+    /// scan `path` (named in the errors the flags' own checks leave).
+    pub fn options(&self, read: &ReadArgs, model: ModelChoice, path: &std::path::Path) -> ndfit::Result<Options> {
         let bad = |flag: &str, e: ndfit::Error| ndfit::Error::invalid(format!("{flag}: {}", e.message()));
         let objective = self.objective.parse::<Objective>().map_err(|e| bad("--objective", e))?;
         let solver = self.solver.parse::<Solver>().map_err(|e| bad("--solver", e))?;
@@ -69,9 +84,9 @@ impl FitArgs {
         let tolerance = check::tolerance(self.tolerance, Spelling::Flag)?;
         let fit =
             FitOptions { objective, solver, extra_starts, max_theta: max_theta.to_radians(), tail, tolerance, ..FitOptions::default() };
-        let options = Options { read: self.scan.read_options(), preprocess: self.scan.preprocess(), preset: self.preset, ndf, model, fit };
+        let options = Options { read: read.read_options(), preprocess: read.preprocess(), preset: self.preset, ndf, model, fit };
         // What the flags' own checks leave (a --subsample of 0) is refused naming the scan.
-        options.validate().map_err(|e| e.with_path(&self.scan.scan))?;
+        options.validate().map_err(|e| e.with_path(path))?;
         Ok(options)
     }
 }

@@ -10,6 +10,13 @@ use ndfit::preprocess::{Crop, FormRemoval, Preprocess};
 pub struct ScanArgs {
     /// The scan file (format detected from content, then extension).
     pub scan: PathBuf,
+    #[command(flatten)]
+    pub how: ReadArgs,
+}
+
+/// How a scan is read and preprocessed (the flags of every command that reads one).
+#[derive(Debug, Clone, clap::Args)]
+pub struct ReadArgs {
     /// Spacing along x in metres, for formats that carry none.
     #[arg(long, allow_hyphen_values = true)]
     pub dx: Option<f64>,
@@ -39,7 +46,7 @@ pub struct ScanArgs {
     pub despike: ndfit::preprocess::Despike,
 }
 
-impl ScanArgs {
+impl ReadArgs {
     /// The reader options these arguments ask for.
     pub fn read_options(&self) -> ReadOptions {
         ReadOptions { dx: self.dx, dy: self.dy, z_scale: self.z_scale, format: self.format.clone() }
@@ -48,6 +55,18 @@ impl ScanArgs {
     /// The preprocessing these arguments ask for.
     pub fn preprocess(&self) -> Preprocess {
         Preprocess { form: self.form.unwrap_or(FormRemoval::Plane), crop: self.crop, subsample: self.subsample, despike: self.despike }
+    }
+}
+
+impl ScanArgs {
+    /// The reader options these arguments ask for.
+    pub fn read_options(&self) -> ReadOptions {
+        self.how.read_options()
+    }
+
+    /// The preprocessing these arguments ask for.
+    pub fn preprocess(&self) -> Preprocess {
+        self.how.preprocess()
     }
 
     /// Record the scan as this process's input and refuse any of `outputs` that is a directory or the

@@ -144,3 +144,45 @@ fn a_misfit_names_the_measured_route_and_it_runs_needs_shared() {
     assert_eq!(verdict, "misfit", "{err}");
     assert!(err.contains("no model of `auto`'s ladder is within the tolerance; `ndfit export --to rgl"), "{err}");
 }
+
+/// `export --to rgl` of a scan takes the reading and fit flags of `ndfit fit`: a raw `.npy` grid without
+/// `--dx` is refused in one line naming the flag (and nothing is written); with `--dx` and `--z-scale` the
+/// measured table is written, and a misfit's hint says to pass those options on.
+#[test]
+fn export_of_a_scan_takes_the_reading_options() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let s = ndfit::synth::SynthSettings { nx: 200, ny: 160, seed: 4, ..Default::default() };
+    let gp = ndfit::synth::GaussianParams { sigma_x: 0.3, sigma_y: 0.1, ..Default::default() };
+    let (hf, _) = ndfit::synth::gaussian_surface(&s, &gp).expect("synth");
+    // A little-endian float64 .npy (format 1.0): magic, header length, the header padded to 64 bytes, data.
+    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, {}), }}", hf.ny, hf.nx);
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut npy = b"\x93NUMPY\x01\x00".to_vec();
+    npy.extend((header.len() as u16).to_le_bytes());
+    npy.extend(header.as_bytes());
+    npy.extend(hf.z.iter().flat_map(|v| v.to_le_bytes()));
+    let scan = dir.path().join("g.npy");
+    std::fs::write(&scan, npy).expect("write npy");
+    let out = dir.path().join("g.bsdf");
+    let export = |flags: &[&str]| {
+        Command::new(ndfit_bin()).arg("export").arg(&scan).args(["--to", "rgl", "-o"]).arg(&out).args(flags).output().expect("runs")
+    };
+    let o = export(&["--z-scale", "1"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.trim().lines().count() == 1 && err.contains("--dx"), "{err}");
+    assert!(!out.exists(), "a refused export wrote {}", out.display());
+    let o = export(&["--dx", &hf.dx.to_string(), "--z-scale", "1", "--form", "none"]);
+    assert!(o.status.success() && std::fs::metadata(&out).expect("written").len() > 0, "{}", String::from_utf8_lossy(&o.stderr));
+    let o = Command::new(ndfit_bin())
+        .arg("fit")
+        .arg(&scan)
+        .args(["--dx", &hf.dx.to_string(), "--z-scale", "1", "--form", "none", "--model", "ggx", "-o"])
+        .arg(dir.path().join("f.json"))
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success() && err.contains("with the reading and fit options given here"), "{err}");
+}
