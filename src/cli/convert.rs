@@ -24,7 +24,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if ext.as_deref() != Some("x3p") {
         bail!("{}: only X3P output is written; name the output *.x3p", args.out.display());
     }
-    let mut pre = args.scan.preprocess();
+    let mut pre = args.scan.how.preprocess();
     if args.scan.how.form.is_none() {
         pre.form = ndfit::preprocess::FormRemoval::None;
     }

@@ -23,7 +23,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     // The file as stored (after any crop/subsample the user asked for): its own invalid points, its
     // height range, and Sq and Sdq after the requested form removal (the plane by default), with nothing
     // masked. What the requested preprocessing would mask on top (`spikes`) is reported apart.
-    let pre = args.scan.preprocess();
+    let pre = args.scan.how.preprocess();
     let pre_form = pre.form;
     let path = &args.scan.scan;
     let as_stored = ndfit::preprocess::Preprocess { despike: ndfit::preprocess::Despike::None, ..pre.clone() };

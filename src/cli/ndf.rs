@@ -88,8 +88,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let pngs: Vec<PathBuf> =
         args.png.iter().flat_map(|p| ["map", "slices"].map(|s| PathBuf::from(format!("{}.{s}.png", p.display())))).collect();
     args.scan.check_outputs(args.output.as_deref().into_iter().chain(args.exr.as_deref()).chain(pngs.iter().map(|p| p.as_path())))?;
-    let pipeline =
-        Pipeline::new(Options { read: args.scan.read_options(), preprocess: args.scan.preprocess(), ndf: opts, ..Options::default() });
+    let pipeline = Pipeline::new(Options {
+        read: args.scan.how.read_options(),
+        preprocess: args.scan.how.preprocess(),
+        ndf: opts,
+        ..Options::default()
+    });
     let (input, ndf) = pipeline.ndf_path(&args.scan.scan)?;
     for w in &ndf.warnings {
         eprintln!("ndfit: {}: warning: {w}", args.scan.scan.display());

@@ -59,16 +59,6 @@ impl ReadArgs {
 }
 
 impl ScanArgs {
-    /// The reader options these arguments ask for.
-    pub fn read_options(&self) -> ReadOptions {
-        self.how.read_options()
-    }
-
-    /// The preprocessing these arguments ask for.
-    pub fn preprocess(&self) -> Preprocess {
-        self.how.preprocess()
-    }
-
     /// Record the scan as this process's input and refuse any of `outputs` that is a directory or the
     /// scan itself, before any work (each write checks again).
     pub fn check_outputs<'a>(&self, outputs: impl IntoIterator<Item = &'a std::path::Path>) -> anyhow::Result<()> {
@@ -81,12 +71,12 @@ impl ScanArgs {
 
     /// Read the scan as stored (no preprocessing).
     pub fn load_raw(&self) -> anyhow::Result<ndfit::Heightfield> {
-        Ok(ndfit::read(&self.scan, &self.read_options())?)
+        Ok(ndfit::read(&self.scan, &self.how.read_options())?)
     }
 
     /// Read the scan AND preprocess it (crop, subsample, form removal), the way every command wants it
     /// (the pipeline's first stage, [`ndfit::pipeline::read_preprocessed`]).
     pub fn load(&self) -> anyhow::Result<ndfit::Heightfield> {
-        Ok(ndfit::pipeline::read_preprocessed(&self.scan, &self.read_options(), &self.preprocess())?)
+        Ok(ndfit::pipeline::read_preprocessed(&self.scan, &self.how.read_options(), &self.how.preprocess())?)
     }
 }
