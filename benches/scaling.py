@@ -16,9 +16,12 @@ every command interleaved with the others round by round (medians of REPEATS):
 - `batch --model auto` at the most jobs, and one scan's `fit --model auto` against `--model ggx-aniso` at
   one thread and at the most threads (the price of `auto`).
 With `--base` (and `--also TAG=PATH`), the single-scan commands and the batch at the fewest and the most
-jobs also run with other binaries (the build before a change), in the same rounds. The new binary runs
+jobs also run with other binaries (the build before a change), in the same rounds; `--variant TAG=OF:VAR=VALUE`
+runs the binary tagged OF again with one more environment variable set (an experiment's switch). The new binary runs
 with `NDFIT_PHASES` set, so its tables also show each phase's time. First of all, the machine's own
-ceiling: as many copies of a CPU-bound one-thread loop as there are threads, against one. Writes
+ceiling: as many copies of a CPU-bound one-thread loop as there are threads, against one; then each
+workload's own ceiling: as many one-thread `ndf` (or `fit`) processes of the big scan at once as there are
+threads, against one alone (what the machine gives that very work when nothing in it is shared). Writes
 scaling.json (every run) and scaling.md (the tables), and prints the tables.
 """
 
@@ -99,6 +102,26 @@ def floor_pool(files, jobs):
     return time.perf_counter() - t
 
 
+def split_batches(ndfit, files, parts, scratch, env):
+    """`parts` one-job `batch` processes at once, each over its share of the files (a manifest each):
+    the batch's own ceiling, what the machine gives this work when no process shares anything."""
+    procs = []
+    for k in range(parts):
+        manifest = os.path.join(scratch, f"part{k}.csv")
+        with open(manifest, "w") as fh:
+            fh.write("path\n" + "".join(f + "\n" for f in files[k::parts]))
+        out = os.path.join(scratch, f"part{k}_out")
+        shutil.rmtree(out, ignore_errors=True)
+        procs.append([ndfit, "batch", manifest, "-o", out, "--model", "ggx-aniso", "--jobs", "1"])
+    t = time.perf_counter()
+    running = [subprocess.Popen(p, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for p in procs]
+    codes = [p.wait() for p in running]
+    dt = time.perf_counter() - t
+    if any(codes):
+        raise SystemExit(f"scaling: the split batches exited {codes}")
+    return dt
+
+
 def cpu_ceiling(copies):
     """Seconds for `copies` simultaneous processes of the same CPU-bound one-thread loop (the machine's
     own parallel capacity: 16 copies taking as long as one means 16 independent cores)."""
@@ -108,6 +131,34 @@ def cpu_ceiling(copies):
     for p in procs:
         p.wait()
     return time.perf_counter() - t
+
+
+def workload_ceiling(argv_of, copies, env):
+    """Seconds for `copies` simultaneous one-thread processes of the same command (each its own output),
+    as `cpu_ceiling` but with ndfit's own work: its memory traffic and vector units included."""
+    t = time.perf_counter()
+    procs = [subprocess.Popen(argv_of(k), env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for k in range(copies)]
+    codes = [p.wait() for p in procs]
+    if any(codes):
+        raise SystemExit(f"scaling: the workload ceiling's processes exited {codes}")
+    return time.perf_counter() - t
+
+
+def machine_facts():
+    """The CPU's topology and vector units as the machine reports them (`lscpu`, /proc/cpuinfo)."""
+    facts = {}
+    if shutil.which("lscpu"):
+        p = subprocess.run(["lscpu"], capture_output=True, text=True)
+        for line in p.stdout.splitlines():
+            k, _, v = line.partition(":")
+            if k.strip() in ("Thread(s) per core", "Core(s) per socket", "Socket(s)", "CPU MHz", "CPU max MHz", "L2 cache", "L3 cache", "NUMA node(s)"):
+                facts[k.strip()] = v.strip()
+    try:
+        flags = next(l.split(":", 1)[1].split() for l in open("/proc/cpuinfo") if l.startswith("flags"))
+        facts["vector"] = " ".join(f for f in ("avx2", "fma", "avx512f", "avx512vl", "avx512dq", "avx512bw") if f in flags)
+    except (OSError, StopIteration):
+        pass
+    return facts
 
 
 def ratio(a, b):
@@ -123,6 +174,7 @@ def main():
     ap.add_argument("--ndfit", required=True)
     ap.add_argument("--base", help="a second ndfit binary timed beside --ndfit on the single-scan commands")
     ap.add_argument("--also", action="append", default=[], metavar="TAG=PATH", help="more binaries for the single-scan commands")
+    ap.add_argument("--variant", action="append", default=[], metavar="TAG=OF:VAR=VALUE", help="the binary tagged OF (new, base or an --also) again, with one more environment variable")
     ap.add_argument("--out", default="scaling_out")
     ap.add_argument("--work", help="data folder (kept; default OUT/work)")
     ap.add_argument("--threads", default=None, help="comma-separated (default 1,2,4,... up to the cores)")
@@ -147,12 +199,18 @@ def main():
     work = a.work or os.path.join(a.out, "work")
     scratch = os.path.join(work, "scratch")
     os.makedirs(scratch, exist_ok=True)
-    bins = {"new": os.path.abspath(a.ndfit)}
+    # Every binary by tag: its path and the environment variables it runs with beside the thread count.
+    bins = {"new": (os.path.abspath(a.ndfit), {})}
     if a.base:
-        bins["base"] = os.path.abspath(a.base)
+        bins["base"] = (os.path.abspath(a.base), {})
     for tb in a.also:
         tag, path = tb.split("=", 1)
-        bins[tag] = os.path.abspath(path)
+        bins[tag] = (os.path.abspath(path), {})
+    for tv in a.variant:
+        tag, rest = tv.split("=", 1)
+        of, setting = rest.split(":", 1)
+        var, value = setting.split("=", 1)
+        bins[tag] = (bins[of][0], {**bins[of][1], var: value})
     have_unzip = shutil.which("unzip") is not None
     res_ceiling = []
 
@@ -160,20 +218,28 @@ def main():
     for _ in range(3):
         for k in sorted({1, top}):
             res_ceiling.append({"copies": k, "s": cpu_ceiling(k)})
-    big, folder, files = make_data(bins["new"], work, a.size, a.batch_size, a.scans)
+    big, folder, files = make_data(bins["new"][0], work, a.size, a.batch_size, a.scans)
     print(f"data ready in {time.perf_counter() - t0:.1f} s: {big}, {len(files)} deflated scans", flush=True)
     res = {"machine": {}, "single": [], "batch": [], "floor": [], "auto": [], "ceiling": res_ceiling}
+
+    def save(res):
+        """scaling.json as it stands: a run cut short keeps what it measured."""
+        with open(os.path.join(a.out, "scaling.json.part"), "w") as fh:
+            json.dump(res, fh, indent=1)
+        os.replace(os.path.join(a.out, "scaling.json.part"), os.path.join(a.out, "scaling.json"))
+
     try:
         cpu = next(l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name"))
     except (OSError, StopIteration):
         cpu = platform.processor()
-    res["machine"] = {"cpu": cpu, "cores": cores, "python": platform.python_version(), "size": a.size,
+    res["machine"] = {"cpu": cpu, "cores": cores, **machine_facts(), "python": platform.python_version(), "size": a.size,
                       "batch_size": a.batch_size, "scans": a.scans, "loadavg_start": os.getloadavg()}
 
-    def env(t):
+    def env(t, extra=None):
         e = dict(os.environ)
         e["RAYON_NUM_THREADS"] = str(t)
         e["NDFIT_PHASES"] = "1"  # a build without phases ignores it
+        e.update(extra or {})
         return e
 
     fitjson = os.path.join(scratch, "fit.json")
@@ -184,48 +250,63 @@ def main():
         "info": lambda b: [b, "info", big],
         "--version": lambda b: [b, "--version"],
     }
+    # Each workload's ceiling: `top` one-thread processes at once against one, the new binary.
+    res["workload_ceiling"] = []
+    ceiling_cmds = {
+        "ndf": lambda k: [bins["new"][0], "ndf", big, "-o", os.path.join(scratch, f"c{k}.csv")],
+        "fit --model ggx-aniso": lambda k: [bins["new"][0], "fit", big, "--model", "ggx-aniso", "-o", os.path.join(scratch, f"c{k}.json")],
+    }
+    for _ in range(min(3, a.repeats)):
+        for name, argv_of in ceiling_cmds.items():
+            for k in sorted({1, top}):
+                res["workload_ceiling"].append({"cmd": name, "copies": k, "s": workload_ceiling(argv_of, k, env(1))})
     for r in range(a.repeats):
         for t in threads:
             for name, argv in single.items():
-                for tag, b in bins.items():
+                for tag, (b, extra) in bins.items():
+                    if tag != "new" and name in ("info", "--version"):
+                        continue  # the other binaries time the commands being compared
                     phases = {}
-                    dt = run(argv(b), env(t), phases=phases)
+                    dt = run(argv(b), env(t, extra), phases=phases)
                     row = {"cmd": name, "bin": tag, "threads": t, "s": dt, "phases": phases}
                     if name.startswith("fit"):
                         row["timings"] = json.load(open(fitjson))["timings"]
                     res["single"].append(row)
         print(f"single-scan round {r + 1}/{a.repeats} done", flush=True)
+        save(res)
 
     out_dir = os.path.join(scratch, "batch_out")
     for r in range(0 if a.single_only else a.batch_repeats):
         for j in threads:
             shutil.rmtree(out_dir, ignore_errors=True)
-            for tag, b in bins.items():
-                if tag != "new" and j not in (threads[0], top):
-                    continue
+            for tag, (b, extra) in bins.items():
+                if tag != "new" and j != top and (tag != "base" or j != threads[0]):
+                    continue  # the other binaries at the most jobs (and the base at the fewest too)
                 shutil.rmtree(out_dir, ignore_errors=True)
-                dt = run([b, "batch", folder, "-o", out_dir, "--model", "ggx-aniso", "--jobs", str(j)])
+                dt = run([b, "batch", folder, "-o", out_dir, "--model", "ggx-aniso", "--jobs", str(j)], {**os.environ, **extra})
                 res["batch"].append({"model": "ggx-aniso", "bin": tag, "jobs": j, "s": dt})
             if have_unzip:
                 res["floor"].append({"jobs": j, "s": floor_pool(files, j)})
+            one_thread = {**os.environ, "RAYON_NUM_THREADS": "1"}
+            res.setdefault("split", []).append({"jobs": j, "s": split_batches(bins["new"][0], files, j, scratch, one_thread)})
         shutil.rmtree(out_dir, ignore_errors=True)
-        dt = run([bins["new"], "batch", folder, "-o", out_dir, "--model", "ggx-aniso", "--jobs", str(top), "--isolate", "process"])
+        dt = run([bins["new"][0], "batch", folder, "-o", out_dir, "--model", "ggx-aniso", "--jobs", str(top), "--isolate", "process"])
         res["batch"].append({"model": "ggx-aniso --isolate process", "bin": "new", "jobs": top, "s": dt})
         shutil.rmtree(out_dir, ignore_errors=True)
-        dt = run([bins["new"], "batch", folder, "-o", out_dir, "--model", "auto", "--jobs", str(top)])
+        dt = run([bins["new"][0], "batch", folder, "-o", out_dir, "--model", "auto", "--jobs", str(top)])
         res["batch"].append({"model": "auto", "bin": "new", "jobs": top, "s": dt})
         print(f"batch round {r + 1}/{a.batch_repeats} done", flush=True)
+        save(res)
 
     one = files[0] if files else None
     for r in range(0 if a.single_only else a.repeats):
         for t in sorted({1, top}):
             for model in ("ggx-aniso", "auto"):
-                dt = run([bins["new"], "fit", one, "--model", model, "-o", fitjson], env(t))
+                dt = run([bins["new"][0], "fit", one, "--model", model, "-o", fitjson], env(t))
                 res["auto"].append({"model": model, "threads": t, "s": dt})
     res["machine"]["loadavg_end"] = os.getloadavg()
     res["machine"]["wall_s"] = time.perf_counter() - t0
-    with open(os.path.join(a.out, "scaling.json"), "w") as fh:
-        json.dump(res, fh, indent=1)
+    save(res)
 
     md = tables(res, threads, bins, have_unzip and not a.single_only)
     with open(os.path.join(a.out, "scaling.md"), "w") as fh:
@@ -241,10 +322,19 @@ def tables(res, threads, bins, have_unzip):
              f"{m['loadavg_end'][0]:.2f} at the end; {m['wall_s']:.0f} s in all. The machine's ceiling: "
              f"{threads[-1]} copies of a CPU-bound one-thread loop take {ck / c1:.2f}x as long as one "
              f"(a throughput of {threads[-1] * c1 / ck:.1f} cores).", ""]
+    facts = {k: v for k, v in m.items() if k in ("Thread(s) per core", "Core(s) per socket", "Socket(s)", "NUMA node(s)", "L2 cache", "L3 cache", "vector")}
+    if facts:
+        lines += ["The CPU as reported: " + "; ".join(f"{k} {v}" for k, v in facts.items()) + ".", ""]
+    wc = res.get("workload_ceiling", [])
+    for cmd in dict.fromkeys(r["cmd"] for r in wc):
+        w1 = med([r["s"] for r in wc if r["cmd"] == cmd and r["copies"] == 1])
+        wk = med([r["s"] for r in wc if r["cmd"] == cmd and r["copies"] == threads[-1]])
+        lines += [f"The workload's ceiling, `{cmd}`: {threads[-1]} one-thread processes at once take {1e3 * wk:.0f} ms "
+                  f"against {1e3 * w1:.0f} ms for one alone: the machine gives this work at most {threads[-1] * w1 / wk:.1f}x.", ""]
     for tag in bins:
         lines += [f"Single scan, {m['size']}^2 stored X3P, binary `{tag}`: median wall ms (speed-up over 1 thread)", ""]
         lines += ["| command | " + " | ".join(f"{t} thr" for t in threads) + " |", "| --- |" + " --- |" * len(threads)]
-        for name in dict.fromkeys(r["cmd"] for r in res["single"]):
+        for name in dict.fromkeys(r["cmd"] for r in res["single"] if r["bin"] == tag):
             v = {t: med([r["s"] for r in res["single"] if r["cmd"] == name and r["bin"] == tag and r["threads"] == t]) for t in threads}
             lines.append(f"| `{name}` | " + " | ".join(f"{1e3 * v[t]:.1f} ({ratio(v[threads[0]], v[t]):.1f}x)" for t in threads) + " |")
         names = list(dict.fromkeys(k for r in res["single"] if r["bin"] == tag for k in r.get("phases", {})))
@@ -260,8 +350,8 @@ def tables(res, threads, bins, have_unzip):
     if not res["batch"]:
         return "\n".join(lines) + "\n"
     lines += [f"Batch, {m['scans']} deflated {m['batch_size']}^2 X3Ps: median wall s", "",
-              "| jobs | `batch --model ggx-aniso` | speed-up | floor (`unzip -p`, as many processes) | batch / floor |",
-              "| --- | --- | --- | --- | --- |"]
+              "| jobs | `batch --model ggx-aniso` | speed-up | floor (`unzip -p`, as many processes) | batch / floor | as many one-job batches, one thread each | batch / those |",
+              "| --- | --- | --- | --- | --- | --- | --- |"]
     def batch(tag, j, model="ggx-aniso"):
         return med([r["s"] for r in res["batch"] if r["model"] == model and r["bin"] == tag and r["jobs"] == j])
 
@@ -269,10 +359,12 @@ def tables(res, threads, bins, have_unzip):
     for j in threads:
         b = batch("new", j)
         f = med([r["s"] for r in res["floor"] if r["jobs"] == j]) if have_unzip else float("nan")
-        lines.append(f"| {j} | {b:.2f} | {b1 / b:.1f}x | {f:.2f} | {b / f:.2f} |")
+        sp = med([r["s"] for r in res.get("split", []) if r["jobs"] == j])
+        lines.append(f"| {j} | {b:.2f} | {b1 / b:.1f}x | {f:.2f} | {b / f:.2f} | {sp:.2f} | {b / sp:.2f} |")
     for tag in bins:
         if tag != "new":
-            lines += ["", f"The same batch with binary `{tag}`: " + ", ".join(f"{batch(tag, j):.2f} s at {j} job(s)" for j in sorted({threads[0], threads[-1]})) + "."]
+            js = sorted({threads[0], threads[-1]}) if tag == "base" else [threads[-1]]
+            lines += ["", f"The same batch with binary `{tag}`: " + ", ".join(f"{batch(tag, j):.2f} s at {j} job(s)" for j in js) + "."]
     top = threads[-1]
     auto_b, gb = batch("new", top, "auto"), batch("new", top)
     iso = batch("new", top, "ggx-aniso --isolate process")
