@@ -1,5 +1,7 @@
 //! The counting pass of the empirical NDF: slopes mapped to the Lambert disk in vectorized blocks and
-//! counted into per-task u32 counters, merged once (step 3 of [`super`]).
+//! counted into u32 counters, about one set per thread, merged once (step 3 of [`super`]).
+
+use std::sync::{Mutex, PoisonError};
 
 use rayon::prelude::*;
 
@@ -406,11 +408,15 @@ const TILES: usize = 128;
 /// The fewest rows in a tile: each tile reads its stencil's rows above and below once more.
 const MIN_TILE_ROWS: usize = 8;
 
-/// The parallel pass over `rows`, in tiles of [`tile_rows`] rows. Each task counts a run of whole tiles
-/// into its own histogram (integer counts, merged in any order); the slope moments are summed per tile
-/// and the tiles' sums added in tile order, so the whole result is the same bit for bit on any number of
-/// threads. With `res` (central differences only) the resolution test runs on each row too, while its
-/// rows are in cache.
+/// What a tile is counted with: a histogram, the block of slopes being mapped, a band buffer and a
+/// row's slopes.
+type Counting<T> = (Acc, Block, Vec<T>, RowSlopes);
+
+/// The parallel pass over `rows`, in tiles of [`tile_rows`] rows, handed out one by one. Each tile is
+/// counted into a histogram of a free list, about one per thread (integer counts, merged in any order); the
+/// slope moments are summed per tile and the tiles' sums added in tile order, so the whole result is the
+/// same bit for bit on any number of threads. With `res` (central differences only) the resolution test
+/// runs on each row too, while its rows are in cache.
 pub(super) fn histogram<S: BandSource>(
     src: &S,
     scheme: NormalScheme,
@@ -422,13 +428,9 @@ pub(super) fn histogram<S: BandSource>(
     let cells = grid.cells();
     let tile = tile_rows(rows.len());
     let tiles = rows.len().div_ceil(tile);
-    // Runs of at least this many tiles per task: at most two tasks per thread, each with its own
-    // counters (a large grid's counters are megabytes), as few as the tiles allow. Only speed and
-    // memory depend on it.
-    let run = tiles.div_ceil(rayon::current_num_threads() * 2).max(1);
     let rows = &rows;
     let (ny, step) = (src.shape().ny, src.band_rows());
-    let count_tile = |(mut acc, mut blk, mut buf, mut rs): (Acc, Block, Vec<S::T>, RowSlopes), t: usize| {
+    let count_tile = |(mut acc, mut blk, mut buf, mut rs): Counting<S::T>, t: usize| {
         let start = rows.start + t * tile;
         for b in bands_of(start..(start + tile).min(rows.end), step) {
             let (lo, hi) = match res {
@@ -464,18 +466,30 @@ pub(super) fn histogram<S: BandSource>(
         acc.close_tile(t);
         (acc, blk, buf, rs)
     };
-    let mut acc = (0..tiles)
+    // Counting states are kept in a free list and reused tile after tile, not made per task: a state's
+    // counters are fresh memory (megabytes for a large grid), and a process's threads fault fresh pages
+    // in slowly all at once. So tiles go out one by one (balance) for about one state per thread. A
+    // tile takes a state out for its whole count, so no two tiles ever share one.
+    let free: Mutex<Vec<Counting<S::T>>> = Mutex::new(Vec::new());
+    // The list is only pushed and popped; a poisoned lock means a panic that is already unwinding.
+    let list = || free.lock().unwrap_or_else(PoisonError::into_inner);
+    (0..tiles).into_par_iter().for_each(|t| {
+        let reused = list().pop();
+        let state = reused.unwrap_or_else(|| (Acc::new(cells), Block::new(), Vec::new(), RowSlopes::default()));
+        let state = count_tile(state, t);
+        list().push(state);
+    });
+    let states: Vec<Acc> = free.into_inner().unwrap_or_else(PoisonError::into_inner).into_iter().map(|s| s.0).collect();
+    let mut acc = states
         .into_par_iter()
-        .with_min_len(run)
-        .fold(|| (Acc::new(cells), Block::new(), Vec::new(), RowSlopes::default()), count_tile)
-        .map(|(mut acc, ..)| {
+        .map(|mut acc| {
             acc.fold();
             if let Some(t) = res {
                 t.settle(&mut acc.res);
             }
             acc
         })
-        // No identity accumulators (each would allocate and zero the counters): the tasks' histograms
+        // No identity accumulators (each would allocate and zero the counters): the list's histograms
         // are merged pairwise, and there is at least one (the caller checked for stencils).
         .reduce_with(Acc::merge)
         .unwrap_or_else(|| Acc::new(cells));
