@@ -242,23 +242,21 @@ impl FitData {
         let keep: Vec<bool> = (0..ndf.bins.len()).into_par_iter().map(|k| !(cut && tail.excludes(ndf, k))).collect();
         let inside = |(k, b): &(usize, &crate::ndf::NdfBin)| keep[*k] && b.m.z >= cos_max * b.m.norm();
         let usable = |(_, b): &(usize, &crate::ndf::NdfBin)| usable(b);
-        let n: f64 = ndf.bins.iter().enumerate().filter(usable).filter(inside).map(|(_, b)| b.count as f64).sum();
+        // The region's bins by index, and their count summed in bin order.
+        let region: Vec<usize> = ndf.bins.iter().enumerate().filter(usable).filter(inside).map(|(k, _)| k).collect();
+        let n: f64 = region.iter().map(|&k| ndf.bins[k].count as f64).sum();
         if n <= 0.0 {
             return Err(Error::new(
                 ErrorKind::BadData,
                 format!("no normal within max_theta = {:.1} deg of the mean plane's normal", max_theta.to_degrees()),
             ));
         }
-        // In bin order (rayon's collect keeps it), built on every thread.
-        let bins: Vec<Bin> = ndf
-            .bins
+        // In bin order, built on every thread straight into place (an indexed collect: no pieces to join).
+        let bins: Vec<Bin> = region
             .par_iter()
-            .enumerate()
-            .filter(usable)
-            .filter(inside)
-            .map(|(_, b)| {
-                let c = b.count as f64;
-                Bin::new(b.m, c, b.proj_solid_angle, n)
+            .map(|&k| {
+                let b = &ndf.bins[k];
+                Bin::new(b.m, b.count as f64, b.proj_solid_angle, n)
             })
             .collect();
         let carries = |b: &&Bin| objective == Objective::Poisson || b.c >= LOGD_MIN_COUNT;
@@ -296,7 +294,9 @@ impl FitData {
             a.1 += b.proj_solid_angle;
             a.2 += b.proj_solid_angle * b.m.normalize();
         }
-        let bins: Vec<Bin> = acc.into_iter().filter(|a| a.1 > 0.0).map(|(c, w, m)| Bin::new(m, c, w, self.n)).collect();
+        // The merged cells with area, in cell order, made into bins on every thread.
+        let merged: Vec<_> = acc.into_iter().filter(|a| a.1 > 0.0).collect();
+        let bins: Vec<Bin> = merged.into_par_iter().map(|(c, w, m)| Bin::new(m, c, w, self.n)).collect();
         if bins.len() < min_bins {
             return None;
         }

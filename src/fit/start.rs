@@ -12,7 +12,9 @@
 //! The ellipsoid's skew starts from the mean normal direction (the peak of a narrow lobe lies along the
 //! ellipsoid's third axis, row 3 of R in Walter et al. eq. 3).
 
-use super::objective::FitData;
+use rayon::prelude::*;
+
+use super::objective::{Bin, FitData};
 use crate::models::table::{Kernel, L1};
 use crate::models::{ModelId, Role};
 
@@ -103,19 +105,19 @@ pub fn summarize(data: &FitData) -> SlopeSummary {
     let phi = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
     let tz = -phi;
     let (s, c) = tz.sin_cos();
-    let mut ax = Vec::with_capacity(data.bins.len());
-    let mut ay = Vec::with_capacity(data.bins.len());
-    let mut rad = Vec::with_capacity(data.bins.len());
-    for b in data.bins.iter().filter(|b| b.c > 0.0) {
-        let (sx, sy) = (-b.m.x / b.m.z, -b.m.y / b.m.z);
-        ax.push(((c * sx - s * sy).abs(), b.c));
-        ay.push(((s * sx + c * sy).abs(), b.c));
-        rad.push((sx.hypot(sy), b.c));
-    }
+    // The bins with counts, in bin order; each median's list is made on every thread in that order,
+    // and the three medians are independent: side by side.
+    let counted: Vec<&Bin> = data.bins.iter().filter(|b| b.c > 0.0).collect();
+    let slope = |b: &Bin| (-b.m.x / b.m.z, -b.m.y / b.m.z);
+    let median_of = |f: &(dyn Fn((f64, f64)) -> f64 + Sync)| {
+        let mut v: Vec<(f64, f64)> = counted.par_iter().map(|b| (f(slope(b)), b.c)).collect();
+        weighted_median(&mut v)
+    };
     let norm = (mx * mx + my * my + mz * mz).sqrt();
-    // The three medians are independent: side by side.
-    let ((mx_med, my_med), rad_med) =
-        rayon::join(|| rayon::join(|| weighted_median(&mut ax), || weighted_median(&mut ay)), || weighted_median(&mut rad));
+    let ((mx_med, my_med), rad_med) = rayon::join(
+        || rayon::join(|| median_of(&|(sx, sy)| (c * sx - s * sy).abs()), || median_of(&|(sx, sy)| (s * sx + c * sy).abs())),
+        || median_of(&|(sx, sy)| sx.hypot(sy)),
+    );
     SlopeSummary { theta_z: tz, median_abs: [mx_med, my_med], median_radial: rad_med, mean_normal: [mx / norm, my / norm, mz / norm] }
 }
 
