@@ -154,15 +154,8 @@ fn export_of_a_scan_takes_the_reading_options() {
     let s = ndfit::synth::SynthSettings { nx: 200, ny: 160, seed: 4, ..Default::default() };
     let gp = ndfit::synth::GaussianParams { sigma_x: 0.3, sigma_y: 0.1, ..Default::default() };
     let (hf, _) = ndfit::synth::gaussian_surface(&s, &gp).expect("synth");
-    // A little-endian float64 .npy (format 1.0): magic, header length, the header padded to 64 bytes, data.
-    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, {}), }}", hf.ny, hf.nx);
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut npy = b"\x93NUMPY\x01\x00".to_vec();
-    npy.extend((header.len() as u16).to_le_bytes());
-    npy.extend(header.as_bytes());
+    // A little-endian float64 .npy in C order, through the readers' own test header.
+    let mut npy = crate::readers::gen::npy_header("<f8", false, hf.ny, hf.nx);
     npy.extend(hf.z.iter().flat_map(|v| v.to_le_bytes()));
     let scan = dir.path().join("g.npy");
     std::fs::write(&scan, npy).expect("write npy");
