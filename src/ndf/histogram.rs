@@ -160,18 +160,22 @@ impl Block {
         }
     }
 
-    /// Add the counted samples of a row, in order, flushing each time the block fills: whole runs
-    /// copied when every sample of the row counts (the usual case), one by one otherwise. With `bin`,
-    /// the unresolved ones are binned among the unresolved too (those the histogram does not count,
-    /// through `res` apart).
+    /// Add the counted samples of a row, in order, flushing each time the block fills: each run of
+    /// counted samples is copied whole (a row without holes is one run; a scan's edge or a hole ends
+    /// one). With `bin`, the unresolved ones are binned among the unresolved too (those the histogram
+    /// does not count, through `res` apart). The blocks hold the same samples in the same order as
+    /// samples pushed one by one ([`Block::push`]), so counts and moments are the same bits.
     fn feed(&mut self, rs: &RowSlopes, bin: bool, res: Option<&RowTest>, frame: &SlopeFrame, grid: &BinGrid, acc: &mut Acc) {
         let m = rs.sx.len();
         let unresolved = |c: u8| bin && c & (VALID | UNRESOLVED) == VALID | UNRESOLVED;
-        if rs.counted == m as u64 {
-            let mut k = 0;
-            while k < m {
+        let counted = |c: &u8| c & COUNTED != 0;
+        let mut k = 0;
+        while k < m {
+            // The run of counted samples from k, then the samples not counted after it.
+            let run = rs.code[k..].iter().position(|c| !counted(c)).map_or(m, |p| k + p);
+            while k < run {
                 let n = self.n;
-                let len = (BLOCK - n).min(m - k);
+                let len = (BLOCK - n).min(run - k);
                 self.sx[n..n + len].copy_from_slice(&rs.sx[k..k + len]);
                 self.sy[n..n + len].copy_from_slice(&rs.sy[k..k + len]);
                 let mut nu = 0;
@@ -186,15 +190,15 @@ impl Block {
                     self.flush(frame, grid, acc);
                 }
             }
-            return;
-        }
-        for k in 0..m {
-            let c = rs.code[k];
-            if c & COUNTED != 0 {
-                self.push(rs.sx[k], rs.sy[k], unresolved(c), frame, grid, acc);
-            } else if let (true, Some(t)) = (unresolved(c), res) {
-                t.bin_apart(rs.sx[k], rs.sy[k], &mut acc.res);
+            let end = rs.code[k..].iter().position(counted).map_or(m, |p| k + p);
+            if let (true, Some(t)) = (bin, res) {
+                for j in k..end {
+                    if unresolved(rs.code[j]) {
+                        t.bin_apart(rs.sx[j], rs.sy[j], &mut acc.res);
+                    }
+                }
             }
+            k = end;
         }
     }
 
@@ -557,6 +561,55 @@ mod tests {
         }
         assert_eq!(ndf.n_samples, want.iter().sum::<u64>());
         assert!((ndf.total() - 1.0).abs() < 1e-12);
+    }
+
+    /// A row fed in runs ([`Block::feed`]) fills the blocks with the same samples in the same order as
+    /// samples pushed one by one: the same counts, unresolved cells and moments, bit for bit, over rows
+    /// with holes at the start, inside and at the end, unresolved samples counted and not counted, and
+    /// blocks that fill across rows.
+    #[test]
+    fn feeding_runs_matches_pushing_one_by_one() {
+        use crate::scan::bands::GridShape;
+        let frame = SlopeFrame::new([0.02, -0.01], [[0.04, 0.01], [0.01, 0.02]]);
+        let grid = BinGrid::new(33);
+        let shape = GridShape { nx: 1000, ny: 10, dx: 1e-6, dy: 1e-6, quantum: None };
+        let test = RowTest::new(frame, grid, shape, 10_000);
+        let (mut fed, mut pushed) = ((Acc::new(grid.cells()), Block::new()), (Acc::new(grid.cells()), Block::new()));
+        for row in 0..7u64 {
+            let m = 300 + 97 * row as usize;
+            let mut rs = RowSlopes::default();
+            for k in 0..m {
+                let h = (k as u64 * 2654435761 + row * 40503) % 1000;
+                rs.sx.push(0.3 * ((k as f64) * 0.37 + row as f64).sin());
+                rs.sy.push(0.2 * ((k as f64) * 0.11 - row as f64).cos());
+                // Holes: the first row's first 40, runs inside, the last row's tail, and scattered ones.
+                let hole = (row == 0 && k < 40) || (k / 50) % 5 == 3 || (row == 6 && k + 30 > m) || h < 30;
+                let unresolved = h.is_multiple_of(7);
+                rs.code.push(VALID | (unresolved as u8) << 1 | (!hole as u8) << 2);
+            }
+            rs.counted = rs.code.iter().filter(|&&c| c & COUNTED != 0).count() as u64;
+            let bin = row != 3;
+            fed.1.feed(&rs, bin, Some(&test), &frame, &grid, &mut fed.0);
+            let (acc, blk) = (&mut pushed.0, &mut pushed.1);
+            for k in 0..m {
+                let (c, unresolved) = (rs.code[k], bin && rs.code[k] & UNRESOLVED != 0);
+                if c & COUNTED != 0 {
+                    blk.push(rs.sx[k], rs.sy[k], unresolved, &frame, &grid, acc);
+                } else if unresolved {
+                    test.bin_apart(rs.sx[k], rs.sy[k], &mut acc.res);
+                }
+            }
+        }
+        for (acc, blk) in [&mut fed, &mut pushed] {
+            blk.flush(&frame, &grid, acc);
+            acc.fold();
+            test.settle(&mut acc.res);
+        }
+        let (a, b) = (&fed.0, &pushed.0);
+        assert!(a.counts.iter().sum::<u64>() > 1000 && a.res.cells.iter().sum::<u64>() > 100);
+        assert_eq!((&a.counts, &a.odd, &a.res.cells), (&b.counts, &b.odd, &b.res.cells));
+        let bits = |acc: &Acc| [acc.m1[0], acc.m1[1], acc.m2[0], acc.m2[1], acc.m2[2]].map(f64::to_bits);
+        assert_eq!(bits(a), bits(b));
     }
 
     /// The odd row blocks' counts of the dispersion split against a scalar count of the samples of the
