@@ -257,6 +257,39 @@ impl Block {
         self.n = 0;
     }
 
+    /// Map the block's slopes and hand each to `f` in order as `(k, slope, Lambert point, cell)`, the point
+    /// and the cell those of `frame.to_lambert` and `grid.cell_of` slope by slope (the vectorized map of
+    /// [`Block::flush`], bit for bit where `1 + |s'|^2` stays below 1e300), then empty the block.
+    pub(super) fn map_each(&mut self, frame: &SlopeFrame, grid: &BinGrid, mut f: impl FnMut(usize, [f64; 2], [f64; 2], usize)) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if avx512() {
+                // SAFETY: the CPU supports these AVX-512 subsets (checked just above); the body is safe Rust.
+                unsafe { self.map_avx512(frame, grid) };
+            } else if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+                unsafe { self.map_avx2(frame, grid) };
+            } else {
+                self.map_body(frame, grid);
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        self.map_body(frame, grid);
+        for k in 0..self.n {
+            let s = [self.sx[k], self.sy[k]];
+            // Where the guard marked the vector result, the exact map gives the point as well as the cell.
+            let p = if self.cell[k] >= 0 { [self.px[k], self.py[k]] } else { frame.to_lambert(s[0], s[1]) };
+            f(k, s, p, self.cell_at(k, frame, grid));
+        }
+        self.n = 0;
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq")]
+    unsafe fn map_avx512(&mut self, frame: &SlopeFrame, grid: &BinGrid) {
+        self.map_body(frame, grid)
+    }
+
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn map_avx2(&mut self, frame: &SlopeFrame, grid: &BinGrid) {
