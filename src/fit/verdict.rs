@@ -11,7 +11,7 @@ use crate::ndf::EmpiricalNdf;
 pub enum Verdict {
     /// The model describes the data to within the data's own dispersion, or its NDF error beyond noise
     /// is within the tolerance (a difference the counts show but a renderer cannot), and the data resolve
-    /// the NDF.
+    /// the NDF. Either way with a reason when the two tests disagree.
     #[default]
     Ok,
     /// The deviance per dof exceeds the data's own dispersion by more than `MISFIT_RATIO` and the NDF
@@ -160,7 +160,8 @@ pub struct Evidence {
 
 /// The verdict and its reasons (one line each), from the evidence and the NDF's quantization. A
 /// significant but invisible difference (deviance beyond the dispersion, NDF error within the tolerance)
-/// is `ok`, with that reason.
+/// is `ok`, with that reason; so is a visible error that the data's dispersion could hold (NDF error
+/// beyond the tolerance, deviance within the dispersion), with that one.
 pub fn judge(ndf: &EmpiricalNdf, e: &Evidence) -> (Verdict, Vec<String>) {
     let mut unresolved = Vec::new();
     unresolved.extend(ndf.quantization.as_ref().and_then(|q| q.unresolved_reason()));
@@ -209,6 +210,13 @@ pub fn judge(ndf: &EmpiricalNdf, e: &Evidence) -> (Verdict, Vec<String>) {
                     100.0 * e.tolerance
                 )),
             }
+        } else if let Some(d) = e.delta_excess.filter(|&d| d > e.tolerance) {
+            // Not silent: a visible error the data's own variation could hold is `ok` with its reason.
+            invisible.push(format!(
+                "the NDF error beyond counting noise, {:.1}%, is above the tolerance {:.1}%, but the deviance per dof {chi2:.3} is within {MISFIT_RATIO} times the data's own dispersion {phi:.3}: the scan's two halves differ about as much, so the data do not confirm the error as the model's (a smooth or non-stationary surface, such as a single cap, reads a large dispersion)",
+                100.0 * d,
+                100.0 * e.tolerance
+            ));
         }
     }
     if misfit.is_empty() {
@@ -235,5 +243,39 @@ mod tests {
         // None within: sqrt(0.09^2 - 0.07^2) = 0.057 is visible, sqrt(0.08^2 - 0.07^2) = 0.039 is not.
         assert_eq!(select(&[0.09, 0.08, 0.07], t), Some((1, false)));
         assert_eq!(select(&[f64::INFINITY, f64::NAN], t), None);
+    }
+
+    /// Each way the deviance test and the tolerance can fall, with its verdict and reason: both beyond
+    /// (`misfit`), only the deviance (`ok`, invisible), only the NDF error (`ok`, not confirmed by the
+    /// data: an isotropic GGX on a 4:1 cap, 348% beyond noise, deviance 18.8 against a dispersion 41.6),
+    /// neither (`ok`, no reason).
+    #[test]
+    fn every_disagreement_of_the_two_tests_is_ok_with_its_reason() {
+        let ndf = EmpiricalNdf::from_bins(Vec::new(), 0);
+        let base = Evidence {
+            n_params: 1,
+            n_samples: 1e6,
+            n_samples_total: 1e6,
+            n_bins_nonzero: 1000,
+            reduced_chi2: None,
+            dispersion: None,
+            delta_excess: None,
+            specular: false,
+            converged: true,
+            tolerance: DEFAULT_TOLERANCE,
+        };
+        let case = |chi2: f64, phi: f64, d: f64| {
+            judge(&ndf, &Evidence { reduced_chi2: Some(chi2), dispersion: Some(phi), delta_excess: Some(d), ..base })
+        };
+        let (v, r) = case(9.0, 1.2, 0.2);
+        assert!(v == Verdict::Misfit && r.len() == 1 && r[0].contains("above the tolerance 5.0%"), "{r:?}");
+        let (v, r) = case(9.0, 1.2, 0.01);
+        assert!(v == Verdict::Ok && r.len() == 1 && r[0].contains("within the tolerance 5.0%"), "{r:?}");
+        let (v, r) = case(18.8, 41.6, 3.48);
+        assert!(v == Verdict::Ok && r.len() == 1 && r[0].contains("348.0%, is above the tolerance 5.0%"), "{r:?}");
+        assert!(r[0].contains("dispersion 41.600"), "{r:?}");
+        assert_eq!(case(1.1, 1.0, 0.01), (Verdict::Ok, Vec::new()));
+        // Without a dispersion the deviance is measured against 1.
+        assert_eq!(judge(&ndf, &Evidence { reduced_chi2: Some(1.5), delta_excess: Some(0.2), ..base }).0, Verdict::Ok);
     }
 }
