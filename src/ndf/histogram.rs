@@ -240,17 +240,7 @@ impl Block {
     /// Count the block's slopes into `counts` (one counter per cell, as
     /// `counts[grid.cell_of(frame.to_lambert(sx, sy))] += 1`) and empty the block.
     pub(super) fn count_into(&mut self, frame: &SlopeFrame, grid: &BinGrid, counts: &mut [u64]) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
-                unsafe { self.map_avx2(frame, grid) };
-            } else {
-                self.map_body(frame, grid);
-            }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        self.map_body(frame, grid);
+        self.map(frame, grid);
         for k in 0..self.n {
             counts[self.cell_at(k, frame, grid)] += 1;
         }
@@ -261,20 +251,7 @@ impl Block {
     /// and the cell those of `frame.to_lambert` and `grid.cell_of` slope by slope (the vectorized map of
     /// [`Block::flush`], bit for bit where `1 + |s'|^2` stays below 1e300), then empty the block.
     pub(super) fn map_each(&mut self, frame: &SlopeFrame, grid: &BinGrid, mut f: impl FnMut(usize, [f64; 2], [f64; 2], usize)) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if avx512() {
-                // SAFETY: the CPU supports these AVX-512 subsets (checked just above); the body is safe Rust.
-                unsafe { self.map_avx512(frame, grid) };
-            } else if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
-                unsafe { self.map_avx2(frame, grid) };
-            } else {
-                self.map_body(frame, grid);
-            }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        self.map_body(frame, grid);
+        self.map(frame, grid);
         for k in 0..self.n {
             let s = [self.sx[k], self.sy[k]];
             // Where the guard marked the vector result, the exact map gives the point as well as the cell.
@@ -282,6 +259,22 @@ impl Block {
             f(k, s, p, self.cell_at(k, frame, grid));
         }
         self.n = 0;
+    }
+
+    /// [`Block::map_body`] compiled for the widest vectors the CPU has (the same IEEE arithmetic).
+    fn map(&mut self, frame: &SlopeFrame, grid: &BinGrid) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if avx512() {
+                // SAFETY: the CPU supports these AVX-512 subsets (checked just above); the body is safe Rust.
+                return unsafe { self.map_avx512(frame, grid) };
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+                return unsafe { self.map_avx2(frame, grid) };
+            }
+        }
+        self.map_body(frame, grid)
     }
 
     #[cfg(target_arch = "x86_64")]

@@ -35,20 +35,22 @@ const GL2: f64 = 0.577_350_269_189_625_8;
 /// Per-cell sums over the nodes of a lattice: `[W, Omega, W p_x, W p_y]`.
 type Sums = [f64; 4];
 
-/// Replace the integrals of the cells that hold few lattice nodes by sums over their nodes.
-///
-/// `cells` are the grid cells of the bins and `ints[k] = (W, Omega, centroid)` their Lambert integrals,
-/// replaced in place. Returns how many cells were replaced.
-pub(crate) fn respect_lattice(
-    frame: &SlopeFrame,
-    grid: &BinGrid,
-    lat: &SlopeLattice,
-    cells: &[usize],
-    ints: &mut [(f64, f64, [f64; 2])],
-) -> usize {
+/// The cells whose integrals are summed node by node, and the nodes to visit.
+struct Picks {
+    /// Per grid cell, its index in `picked` (`u32::MAX`: not picked).
+    slot: Vec<u32>,
+    /// The picked cells, as indices into the bins' `cells`.
+    picked: Vec<usize>,
+    /// Node index ranges along x and y of the box around the picked cells.
+    range: [(i64, i64); 2],
+}
+
+/// The cells to sum node by node and the box of nodes around them; `None` when there are none, or the
+/// box holds more than [`MAX_NODES`].
+fn picks(frame: &SlopeFrame, grid: &BinGrid, lat: &SlopeLattice, cells: &[usize], ints: &[(f64, f64, [f64; 2])]) -> Option<Picks> {
     let cell_area = lat.step[0] * lat.step[1];
     if !(cell_area > 0.0 && cell_area.is_finite()) {
-        return 0;
+        return None;
     }
     // The cells to sum node by node: wholly inside the disk (off the rim zone of infinite slopes), and
     // with few nodes (slope-space area W / m_z^4 at the centroid).
@@ -89,7 +91,7 @@ pub(crate) fn respect_lattice(
         }
     }
     if picked.is_empty() {
-        return 0;
+        return None;
     }
     // Node index ranges of the padded box.
     let mut range = [(0i64, 0i64); 2];
@@ -98,14 +100,26 @@ pub(crate) fn respect_lattice(
         let i0 = ((lo[a] - pad - lat.offset[a]) / lat.step[a]).floor();
         let i1 = ((hi[a] + pad - lat.offset[a]) / lat.step[a]).ceil();
         if !(i0.is_finite() && i1.is_finite()) {
-            return 0;
+            return None;
         }
         range[a] = (i0 as i64, i1 as i64);
     }
     let count = |r: (i64, i64)| (r.1 - r.0 + 1) as f64;
-    if count(range[0]) * count(range[1]) > MAX_NODES {
-        return 0;
-    }
+    (count(range[0]) * count(range[1]) <= MAX_NODES).then_some(Picks { slot, picked, range })
+}
+
+/// Replace the integrals of the cells that hold few lattice nodes by sums over their nodes.
+///
+/// `cells` are the grid cells of the bins and `ints[k] = (W, Omega, centroid)` their Lambert integrals,
+/// replaced in place. Returns how many cells were replaced.
+pub(crate) fn respect_lattice(
+    frame: &SlopeFrame,
+    grid: &BinGrid,
+    lat: &SlopeLattice,
+    cells: &[usize],
+    ints: &mut [(f64, f64, [f64; 2])],
+) -> usize {
+    let Some(Picks { slot, picked, range }) = picks(frame, grid, lat, cells, ints) else { return 0 };
     // Node rows in fixed chunks, summed in order: the result does not depend on the thread count.
     const CHUNK: i64 = 64;
     let (j0, j1) = range[1];
@@ -204,43 +218,10 @@ mod tests {
         let picked = respect_lattice(&frame, &grid, &lat, &cells, &mut got);
         assert!(picked > 100 && picked < cells.len(), "{picked} of {} cells summed node by node", cells.len());
         // The reference: the same picks, then every node of the same box, one at a time.
-        let changed: Vec<usize> = (0..cells.len()).filter(|&k| got[k] != ints[k]).collect();
-        assert!(changed.len() > 100);
-        let slot = |c: usize| cells.iter().position(|&x| x == c);
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        let inner = LAMBERT_RADIUS * 0.98;
-        let mut chosen = vec![false; cells.len()];
-        for (k, &c) in cells.iter().enumerate() {
-            let [x0, x1, y0, y1] = grid.bounds(c);
-            let (w, _, p) = ints[k];
-            let mz = frame.normal_at(p).z;
-            let area = lat.step[0] * lat.step[1];
-            if x0.abs().max(x1.abs()).hypot(y0.abs().max(y1.abs())) >= inner || !(w > 0.0 && mz > 0.0 && w / mz.powi(4) / area <= NODE_CAP)
-            {
-                continue;
-            }
-            chosen[k] = true;
-            for (px, py) in [
-                (x0, y0),
-                (x1, y0),
-                (x0, y1),
-                (x1, y1),
-                (0.5 * (x0 + x1), y0),
-                (0.5 * (x0 + x1), y1),
-                (x0, 0.5 * (y0 + y1)),
-                (x1, 0.5 * (y0 + y1)),
-            ] {
-                let s = SlopeFrame::slope_of(frame.normal_at([px, py]));
-                for a in 0..2 {
-                    (lo[a], hi[a]) = (lo[a].min(s[a]), hi[a].max(s[a]));
-                }
-            }
-        }
-        let range = [0, 1].map(|a| {
-            let pad = 0.05 * (hi[a] - lo[a]) + 2.0 * lat.step[a];
-            (((lo[a] - pad - lat.offset[a]) / lat.step[a]).floor() as i64, ((hi[a] + pad - lat.offset[a]) / lat.step[a]).ceil() as i64)
-        });
+        let Picks { slot, picked: chosen, range } = picks(&frame, &grid, &lat, &cells, &ints).expect("cells to sum");
+        assert_eq!(chosen.len(), picked);
         let mut total = vec![[0.0f64; 4]; cells.len()];
+        let is_chosen: Vec<bool> = (0..cells.len()).map(|k| chosen.contains(&k)).collect();
         let (hx, hy) = (0.5 * lat.step[0], 0.5 * lat.step[1]);
         for js in (range[1].0..=range[1].1).step_by(64) {
             let mut part = vec![[0.0f64; 4]; cells.len()];
@@ -248,7 +229,7 @@ mod tests {
                 let sy = lat.offset[1] + j as f64 * lat.step[1];
                 for i in range[0].0..=range[0].1 {
                     let sx = lat.offset[0] + i as f64 * lat.step[0];
-                    let Some(k) = slot(grid.cell_of(frame.to_lambert(sx, sy))).filter(|&k| chosen[k]) else { continue };
+                    let Some(&k) = chosen.get(slot[grid.cell_of(frame.to_lambert(sx, sy))] as usize) else { continue };
                     for (ux, uy) in GL2_POINTS {
                         let (x, y) = (sx + ux * hx, sy + uy * hy);
                         let t = 1.0 + x * x + y * y;
@@ -269,7 +250,7 @@ mod tests {
         }
         for k in 0..cells.len() {
             let t = total[k];
-            let want = if !chosen[k] { ints[k] } else { (t[0], t[1], if t[0] > 0.0 { [t[2] / t[0], t[3] / t[0]] } else { ints[k].2 }) };
+            let want = if !is_chosen[k] { ints[k] } else { (t[0], t[1], if t[0] > 0.0 { [t[2] / t[0], t[3] / t[0]] } else { ints[k].2 }) };
             assert_eq!(got[k], want, "cell {}", cells[k]);
         }
     }
