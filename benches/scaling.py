@@ -12,7 +12,8 @@ every command interleaved with the others round by round (medians of REPEATS):
   timings of its JSON) and `info` (the reading pass) of the big scan at each thread count
   (`RAYON_NUM_THREADS`);
 - `batch --model ggx-aniso --jobs J` over the deflated set at each job count, beside the input's floor:
-  J processes at a time running `unzip -p SCAN bindata/data.bin` (Info-ZIP) over the same files;
+  J processes at a time running `unzip -p SCAN bindata/data.bin` (Info-ZIP) over the same files where
+  `unzip` is installed, and always J worker processes inflating the same entries with Python's zlib;
 - `batch --model auto` at the most jobs, and one scan's `fit --model auto` against `--model ggx-aniso` at
   one thread and at the most threads (the price of `auto`).
 With `--base` (and `--also TAG=PATH`), the single-scan commands and the batch at the fewest and the most
@@ -102,6 +103,24 @@ def floor_pool(files, jobs):
     return time.perf_counter() - t
 
 
+def _inflate_entry(path):
+    """One worker's job in [`floor_zlib`]: the height entry inflated (zlib, CRC-32 checked), its size."""
+    with zipfile.ZipFile(path) as z:
+        return len(z.read("bindata/data.bin"))
+
+
+def floor_zlib(files, jobs):
+    """zlib's inflate of every file's height entry in `jobs` worker processes (started and warmed before the
+    clock starts): the batch's floor where Info-ZIP's `unzip` is not installed, and beside it where it is
+    (no process start per file, and zlib's inflate rather than Info-ZIP's own)."""
+    import multiprocessing as mp
+    with mp.get_context("fork").Pool(jobs) as pool:
+        pool.map(_inflate_entry, files[:jobs], chunksize=1)
+        t = time.perf_counter()
+        pool.map(_inflate_entry, files, chunksize=1)
+        return time.perf_counter() - t
+
+
 def split_batches(ndfit, files, parts, scratch, env):
     """`parts` one-job `batch` processes at once, each over its share of the files (a manifest each):
     the batch's own ceiling, what the machine gives this work when no process shares anything."""
@@ -109,7 +128,7 @@ def split_batches(ndfit, files, parts, scratch, env):
     for k in range(parts):
         manifest = os.path.join(scratch, f"part{k}.csv")
         with open(manifest, "w") as fh:
-            fh.write("path\n" + "".join(f + "\n" for f in files[k::parts]))
+            fh.write("path\n" + "".join(os.path.abspath(f) + "\n" for f in files[k::parts]))
         out = os.path.join(scratch, f"part{k}_out")
         shutil.rmtree(out, ignore_errors=True)
         procs.append([ndfit, "batch", manifest, "-o", out, "--model", "ggx-aniso", "--jobs", "1"])
@@ -185,6 +204,7 @@ def main():
     ap.add_argument("--batch-repeats", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="small data, one repeat: a check that the script runs")
     ap.add_argument("--single-only", action="store_true", help="the single-scan commands alone (no batch, no auto)")
+    ap.add_argument("--batch-only", action="store_true", help="the batch alone (no single-scan commands, no ceilings, no auto)")
     a = ap.parse_args()
     if a.quick:
         a.size, a.batch_size, a.scans, a.repeats, a.batch_repeats = 512, 128, 8, 1, 1
@@ -256,11 +276,11 @@ def main():
         "ndf": lambda k: [bins["new"][0], "ndf", big, "-o", os.path.join(scratch, f"c{k}.csv")],
         "fit --model ggx-aniso": lambda k: [bins["new"][0], "fit", big, "--model", "ggx-aniso", "-o", os.path.join(scratch, f"c{k}.json")],
     }
-    for _ in range(min(3, a.repeats)):
+    for _ in range(0 if a.batch_only else min(3, a.repeats)):
         for name, argv_of in ceiling_cmds.items():
             for k in sorted({1, top}):
                 res["workload_ceiling"].append({"cmd": name, "copies": k, "s": workload_ceiling(argv_of, k, env(1))})
-    for r in range(a.repeats):
+    for r in range(0 if a.batch_only else a.repeats):
         for t in threads:
             for name, argv in single.items():
                 for tag, (b, extra) in bins.items():
@@ -287,6 +307,7 @@ def main():
                 res["batch"].append({"model": "ggx-aniso", "bin": tag, "jobs": j, "s": dt})
             if have_unzip:
                 res["floor"].append({"jobs": j, "s": floor_pool(files, j)})
+            res.setdefault("floor_zlib", []).append({"jobs": j, "s": floor_zlib(files, j)})
             one_thread = {**os.environ, "RAYON_NUM_THREADS": "1"}
             res.setdefault("split", []).append({"jobs": j, "s": split_batches(bins["new"][0], files, j, scratch, one_thread)})
         shutil.rmtree(out_dir, ignore_errors=True)
@@ -299,7 +320,7 @@ def main():
         save(res)
 
     one = files[0] if files else None
-    for r in range(0 if a.single_only else a.repeats):
+    for r in range(0 if a.single_only or a.batch_only else a.repeats):
         for t in sorted({1, top}):
             for model in ("ggx-aniso", "auto"):
                 dt = run([bins["new"][0], "fit", one, "--model", model, "-o", fitjson], env(t))
@@ -331,7 +352,7 @@ def tables(res, threads, bins, have_unzip):
         wk = med([r["s"] for r in wc if r["cmd"] == cmd and r["copies"] == threads[-1]])
         lines += [f"The workload's ceiling, `{cmd}`: {threads[-1]} one-thread processes at once take {1e3 * wk:.0f} ms "
                   f"against {1e3 * w1:.0f} ms for one alone: the machine gives this work at most {threads[-1] * w1 / wk:.1f}x.", ""]
-    for tag in bins:
+    for tag in bins if res["single"] else []:
         lines += [f"Single scan, {m['size']}^2 stored X3P, binary `{tag}`: median wall ms (speed-up over 1 thread)", ""]
         lines += ["| command | " + " | ".join(f"{t} thr" for t in threads) + " |", "| --- |" + " --- |" * len(threads)]
         for name in dict.fromkeys(r["cmd"] for r in res["single"] if r["bin"] == tag):
@@ -350,8 +371,9 @@ def tables(res, threads, bins, have_unzip):
     if not res["batch"]:
         return "\n".join(lines) + "\n"
     lines += [f"Batch, {m['scans']} deflated {m['batch_size']}^2 X3Ps: median wall s", "",
-              "| jobs | `batch --model ggx-aniso` | speed-up | floor (`unzip -p`, as many processes) | batch / floor | as many one-job batches, one thread each | batch / those |",
-              "| --- | --- | --- | --- | --- | --- | --- |"]
+              "| jobs | `batch --model ggx-aniso` | speed-up | floor (`unzip -p`, as many processes) | batch / floor "
+              "| floor (zlib, as many worker processes) | batch / zlib floor | as many one-job batches, one thread each | batch / those |",
+              "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     def batch(tag, j, model="ggx-aniso"):
         return med([r["s"] for r in res["batch"] if r["model"] == model and r["bin"] == tag and r["jobs"] == j])
 
@@ -359,8 +381,9 @@ def tables(res, threads, bins, have_unzip):
     for j in threads:
         b = batch("new", j)
         f = med([r["s"] for r in res["floor"] if r["jobs"] == j]) if have_unzip else float("nan")
+        fz = med([r["s"] for r in res.get("floor_zlib", []) if r["jobs"] == j])
         sp = med([r["s"] for r in res.get("split", []) if r["jobs"] == j])
-        lines.append(f"| {j} | {b:.2f} | {b1 / b:.1f}x | {f:.2f} | {b / f:.2f} | {sp:.2f} | {b / sp:.2f} |")
+        lines.append(f"| {j} | {b:.2f} | {b1 / b:.1f}x | {f:.2f} | {b / f:.2f} | {fz:.2f} | {b / fz:.2f} | {sp:.2f} | {b / sp:.2f} |")
     for tag in bins:
         if tag != "new":
             js = sorted({threads[0], threads[-1]}) if tag == "base" else [threads[-1]]
