@@ -138,8 +138,11 @@ impl Session {
     fn new(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<Session> {
         opts.validate()?;
         let data = FitData::with_tail(ndf, opts.objective, opts.max_theta, opts.tail)?;
-        let summary = start::summarize(&data);
-        let coarse = if data.bins.len() >= COARSE_PASS_MIN_BINS { data.coarsened(ndf, 50) } else { None };
+        // Independent reads of the region's bins, each with serial sums in its own order: side by side.
+        let (summary, coarse) = rayon::join(
+            || start::summarize(&data),
+            || if data.bins.len() >= COARSE_PASS_MIN_BINS { data.coarsened(ndf, 50) } else { None },
+        );
         Ok(Session { data, coarse, summary })
     }
 }
@@ -404,27 +407,42 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     let reduced = (dof > 0).then(|| fit.f / dof as f64);
     // Standard errors scale with the residual variance (objective.md); with no dof, unscaled.
     let s2 = reduced.unwrap_or(1.0);
-    let mut r = vec![0.0; s.data.bins.len()];
-    let mut j = DMatrix::zeros(s.data.bins.len(), p);
-    problem::jacobian_into(&s.data, id, &fit.x, &mut r, &mut j);
-    let cov0 = covariance::covariance(&j, s2);
     let g = params::public_derivative(id, &fit.x);
     let se_of = |c: &covariance::Covariance, a: usize| g[a].abs() * c.cov[(a, a)].max(0.0).sqrt();
-    // theta_z of a nearly isotropic lobe: the anisotropy that locates the axes is below 3 of its
-    // standard errors (THETA_Z_SE_MAX), so the angle is noise, not a measurement with an uncertainty.
-    let tz_free: Vec<bool> =
-        (0..p).map(|a| id.param_names()[a] == "theta_z" && !cov0.undetermined[a] && !(se_of(&cov0, a) <= THETA_Z_SE_MAX)).collect();
-    let tz_se: Vec<f64> = (0..p).map(|a| se_of(&cov0, a)).collect();
-    // The other parameters' errors are then those at the reported theta_z (its column dropped): an
-    // unlocated theta_z trades off against the skew angles, which would otherwise inherit its spread.
-    let cov = if tz_free.iter().any(|t| *t) {
-        for (a, _) in tz_free.iter().enumerate().filter(|(_, t)| **t) {
-            j.column_mut(a).fill(0.0);
-        }
-        covariance::covariance(&j, s2)
-    } else {
-        cov0.clone()
+    // The standard errors and the NDF error against the data read the fit and the NDF alone, each with
+    // its sums in its own order: side by side (their serial parts overlap, the results are the same).
+    let errors = || {
+        let mut r = vec![0.0; s.data.bins.len()];
+        let mut j = DMatrix::zeros(s.data.bins.len(), p);
+        problem::jacobian_into(&s.data, id, &fit.x, &mut r, &mut j);
+        let cov0 = covariance::covariance(&j, s2);
+        // theta_z of a nearly isotropic lobe: the anisotropy that locates the axes is below 3 of its
+        // standard errors (THETA_Z_SE_MAX), so the angle is noise, not a measurement with an uncertainty.
+        let tz_free: Vec<bool> =
+            (0..p).map(|a| id.param_names()[a] == "theta_z" && !cov0.undetermined[a] && !(se_of(&cov0, a) <= THETA_Z_SE_MAX)).collect();
+        // The other parameters' errors are then those at the reported theta_z (its column dropped): an
+        // unlocated theta_z trades off against the skew angles, which would otherwise inherit its spread.
+        let cov = if tz_free.iter().any(|t| *t) {
+            for (a, _) in tz_free.iter().enumerate().filter(|(_, t)| **t) {
+                j.column_mut(a).fill(0.0);
+            }
+            covariance::covariance(&j, s2)
+        } else {
+            cov0.clone()
+        };
+        (cov0, tz_free, cov)
     };
+    // The error against the data of the model as the bins see it (smoothed by a modelled rounding), and
+    // its counting noise (used only when that error is defined).
+    let seen = objective::Seen { model: &model, rounding: s.data.rounding.as_ref() };
+    let against_data = || {
+        rayon::join(
+            || rayon::join(|| verdict::data_dispersion(ndf, s.data.max_theta), || metric::delta_to_data(&seen, ndf)),
+            || metric::counting_noise2(&seen, ndf),
+        )
+    };
+    let ((cov0, tz_free, cov), ((dispersion, delta_data), noise2)) = rayon::join(errors, against_data);
+    let tz_se: Vec<f64> = (0..p).map(|a| se_of(&cov0, a)).collect();
     let unident: Vec<bool> = (0..p).map(|a| !fit.delta && (cov0.undetermined[a] || tz_free[a])).collect();
     let se: Vec<Option<f64>> = (0..p).map(|a| (!unident[a] && !fit.delta).then(|| se_of(&cov, a))).collect();
     let correlation: Vec<Vec<Option<f64>>> = (0..p)
@@ -460,11 +478,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
     if specular {
         warnings.push("specular: over half of the normals fall in one NDF bin; alpha is bounded by the bin size, not measured".into());
     }
-    let dispersion = verdict::data_dispersion(ndf, s.data.max_theta);
-    // The error against the data of the model as the bins see it (smoothed by a modelled rounding).
-    let seen = objective::Seen { model: &model, rounding: s.data.rounding.as_ref() };
-    let delta_data = metric::delta_to_data(&seen, ndf);
-    let delta_excess = delta_data.and_then(|d| verdict::excess_delta(d, metric::counting_noise2(&seen, ndf)));
+    let delta_excess = delta_data.and_then(|d| verdict::excess_delta(d, noise2));
     let evidence = verdict::Evidence {
         n_params: p,
         n_samples: s.data.n,

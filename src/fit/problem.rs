@@ -159,14 +159,8 @@ fn jacobian_pass(data: &FitData, id: ModelId, x: &[f64], jac: &mut DMatrix<f64>,
     let np = x.len();
     let nb = data.bins.len();
     let js = jac.as_mut_slice();
-    // Each chunk of bins writes its rows of every column: the columns split at the same bins.
-    let mut parts: Vec<Vec<&mut [f64]>> = (0..nb.div_ceil(PAR_CHUNK)).map(|_| Vec::with_capacity(np)).collect();
-    for col in js.chunks_exact_mut(nb) {
-        for (part, rows) in parts.iter_mut().zip(col.chunks_mut(PAR_CHUNK)) {
-            part.push(rows);
-        }
-    }
-    parts.into_par_iter().enumerate().for_each(|(c, mut cols)| {
+    // Each chunk of bins writes its rows of every column.
+    chunk_rows(js, nb, np).into_par_iter().enumerate().for_each(|(c, mut cols)| {
         let k0 = c * PAR_CHUNK;
         let mut g = [0.0; 8];
         let mut gq = [0.0; 8];
@@ -198,13 +192,26 @@ fn jacobian_pass(data: &FitData, id: ModelId, x: &[f64], jac: &mut DMatrix<f64>,
             *gb += pk * js[j * nb + k];
         }
     }
-    for (col, gb) in js.chunks_exact_mut(nb).zip(&gbar[..np]) {
-        col.par_chunks_mut(PAR_CHUNK).zip(ws.dr.par_chunks(PAR_CHUNK)).for_each(|(col, dr)| {
+    // Every column's rows of a chunk in one task (one parallel pass, not one per column).
+    chunk_rows(js, nb, np).into_par_iter().zip(ws.dr.par_chunks(PAR_CHUNK)).for_each(|(mut cols, dr)| {
+        for (col, gb) in cols.iter_mut().zip(&gbar[..np]) {
             for (jk, dr) in col.iter_mut().zip(dr) {
                 *jk = dr * (*jk - gb);
             }
-        });
+        }
+    });
+}
+
+/// The rows of a column-major `nb x np` matrix `js` by chunks of [`PAR_CHUNK`] bins: per chunk, its rows
+/// of every column (the columns split at the same bins).
+fn chunk_rows(js: &mut [f64], nb: usize, np: usize) -> Vec<Vec<&mut [f64]>> {
+    let mut parts: Vec<Vec<&mut [f64]>> = (0..nb.div_ceil(PAR_CHUNK)).map(|_| Vec::with_capacity(np)).collect();
+    for col in js.chunks_exact_mut(nb) {
+        for (part, rows) in parts.iter_mut().zip(col.chunks_mut(PAR_CHUNK)) {
+            part.push(rows);
+        }
     }
+    parts
 }
 
 /// `ln sum_q exp(v_q)` of the rounding rule's terms `v_q = ln D(m_q) + ln w_q`
@@ -252,15 +259,17 @@ fn compress(ws: &mut Workspace, sum: f64, rc: &mut [f64]) {
     let mut g = nalgebra::DMatrix::<f64>::zeros(np, np);
     let mut b = nalgebra::DVector::<f64>::zeros(np);
     let col = |i: usize| &js[i * nb..(i + 1) * nb];
-    // Each dot product on its own thread, each in its fixed order: the same sums as one thread's.
-    let pairs: Vec<(usize, usize)> = (0..np).flat_map(|i| (0..=i).map(move |j| (i, j))).collect();
-    let dots: Vec<f64> = pairs.par_iter().map(|&(i, j)| dot(col(i), col(j))).collect();
+    // Each dot product (of two columns, or `None`: of a column and the residuals) on its own thread, each
+    // in its fixed order: the same sums as one thread's, in one parallel pass.
+    let pairs: Vec<(usize, Option<usize>)> =
+        (0..np).flat_map(|i| (0..=i).map(move |j| (i, Some(j)))).chain((0..np).map(|i| (i, None))).collect();
+    let dots: Vec<f64> = pairs.par_iter().map(|&(i, j)| dot(col(i), j.map_or(&ws.r[..], col))).collect();
     for (&(i, j), &v) in pairs.iter().zip(&dots) {
-        g[(i, j)] = v;
-        g[(j, i)] = v;
+        match j {
+            Some(j) => (g[(i, j)], g[(j, i)]) = (v, v),
+            None => b[i] = v,
+        }
     }
-    let rs: Vec<f64> = (0..np).into_par_iter().map(|i| dot(col(i), &ws.r)).collect();
-    b.as_mut_slice().copy_from_slice(&rs);
     rc.fill(0.0);
     // Guard: a non-finite Jacobian (an overflowing lobe) is reported to LM when it asks for the Jacobian
     // here; the residuals keep their norm so the step's acceptance test is still right.

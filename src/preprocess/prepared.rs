@@ -47,22 +47,29 @@ pub fn prepare<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Prepared<'a>> {
     if pre.subsample != 1 {
         hf = super::subsample(&hf, pre.subsample)?;
     }
-    if pre.form != FormRemoval::None && hf.meta.height_quantum.is_none() {
-        // The lattice is found on the heights as stored: a form removal shifts every height off `k q`.
-        let _p = crate::phases::phase("quantum");
-        hf.meta.height_quantum = crate::ndf::quantum::height_quantum(&hf);
-    }
+    // The lattice is found on the heights as stored (a form removal shifts every height off `k q`), so
+    // its serial search runs beside the form's fit (within its phase), which reads the same heights and
+    // not the quantum.
+    let quantum = || crate::ndf::quantum::height_quantum(&hf);
+    let find_quantum = pre.form != FormRemoval::None && hf.meta.height_quantum.is_none();
     let phase = crate::phases::phase("form");
-    let form = match pre.form {
-        FormRemoval::None => None,
-        FormRemoval::Plane => Some(super::form::fit_polynomial(&hf, 1)?),
-        FormRemoval::Polynomial(k) => Some(super::form::fit_polynomial(&hf, k)?),
+    let (q, form) = match pre.form {
+        FormRemoval::None => (None, None),
+        FormRemoval::Plane | FormRemoval::Polynomial(_) => {
+            let order = if let FormRemoval::Polynomial(k) = pre.form { k } else { 1 };
+            let (q, form) = rayon::join(|| find_quantum.then(quantum).flatten(), || super::form::fit_polynomial(&hf, order));
+            (q, Some(form?))
+        }
         FormRemoval::Cylinder => {
+            let q = find_quantum.then(quantum).flatten();
             hf.z = super::form::remove_cylinder(&hf)?.residual.into();
-            None
+            (q, None)
         }
     };
     drop(phase);
+    if find_quantum {
+        hf.meta.height_quantum = q;
+    }
     let _p = crate::phases::phase("despike");
     let mut p = Prepared { raw: hf, form, masked: Vec::new() };
     let raw = p.form.as_ref().map(|form| despike::RawPlane { raw: &p.raw, form });
