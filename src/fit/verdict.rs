@@ -247,8 +247,7 @@ mod tests {
 
     /// Each way the deviance test and the tolerance can fall, with its verdict and reason: both beyond
     /// (`misfit`), only the deviance (`ok`, invisible), only the NDF error (`ok`, not confirmed by the
-    /// data: an isotropic GGX on a 4:1 cap, 348% beyond noise, deviance 18.8 against a dispersion 41.6),
-    /// neither (`ok`, no reason).
+    /// data: the isotropic GGX on a 4:1 cap of objective.md, "The verdict"), neither (`ok`, no reason).
     #[test]
     fn every_disagreement_of_the_two_tests_is_ok_with_its_reason() {
         let ndf = EmpiricalNdf::from_bins(Vec::new(), 0);

@@ -50,22 +50,24 @@ pub fn prepare<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Prepared<'a>> {
     // The lattice is found on the heights as stored (a form removal shifts every height off `k q`), so
     // its serial search runs beside the form's fit (within its phase), which reads the same heights and
     // not the quantum.
-    let quantum = || crate::ndf::quantum::height_quantum(&hf);
     let find_quantum = pre.form != FormRemoval::None && hf.meta.height_quantum.is_none();
+    let quantum = || find_quantum.then(|| crate::ndf::quantum::height_quantum(&hf)).flatten();
+    let polynomial = |order| {
+        let (q, form) = rayon::join(quantum, || super::form::fit_polynomial(&hf, order));
+        (q, form.map(Some))
+    };
     let phase = crate::phases::phase("form");
     let (q, form) = match pre.form {
-        FormRemoval::None => (None, None),
-        FormRemoval::Plane | FormRemoval::Polynomial(_) => {
-            let order = if let FormRemoval::Polynomial(k) = pre.form { k } else { 1 };
-            let (q, form) = rayon::join(|| find_quantum.then(quantum).flatten(), || super::form::fit_polynomial(&hf, order));
-            (q, Some(form?))
-        }
+        FormRemoval::None => (None, Ok(None)),
+        FormRemoval::Plane => polynomial(1),
+        FormRemoval::Polynomial(k) => polynomial(k),
         FormRemoval::Cylinder => {
-            let q = find_quantum.then(quantum).flatten();
+            let q = quantum();
             hf.z = super::form::remove_cylinder(&hf)?.residual.into();
-            (q, None)
+            (q, Ok(None))
         }
     };
+    let form = form?;
     drop(phase);
     if find_quantum {
         hf.meta.height_quantum = q;
