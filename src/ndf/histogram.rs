@@ -126,6 +126,11 @@ const BLOCK: usize = 256;
 /// Slopes whose unresolved flags [`Block::flush`] tests at once.
 const UNRESOLVED_RUN: usize = 32;
 
+/// How far from a cell's edge an f32 cell coordinate of [`Block::cells_body`] must lie to be taken, per
+/// cell across the grid: 2^-19 n (16 f32 ulps of `n`), over five times the bound on its difference
+/// from the f64 coordinate (3 ulps of `n`: the conversion, the map's roundings, the offset and scale).
+const CELL_MARGIN: f32 = 1.0 / (1u32 << 19) as f32;
+
 /// Independent partial sums of the slope moments in a block (a multiple of the widest vector, 4 f64).
 const LANES: usize = 8;
 
@@ -136,6 +141,9 @@ pub(super) struct Block {
     px: [f64; BLOCK],
     py: [f64; BLOCK],
     cell: [i32; BLOCK],
+    /// The whitened slopes in f32 ([`Block::cells_body`]).
+    wx: [f32; BLOCK],
+    wy: [f32; BLOCK],
     /// Per slope: 1 when the resolution test found it unresolved and its row is binned (`nu` of them).
     u: [u8; BLOCK],
     nu: usize,
@@ -145,7 +153,18 @@ impl Block {
     pub(super) const LEN: usize = BLOCK;
 
     pub(super) fn new() -> Self {
-        Block { n: 0, sx: [0.0; BLOCK], sy: [0.0; BLOCK], px: [0.0; BLOCK], py: [0.0; BLOCK], cell: [0; BLOCK], u: [0; BLOCK], nu: 0 }
+        Block {
+            n: 0,
+            sx: [0.0; BLOCK],
+            sy: [0.0; BLOCK],
+            px: [0.0; BLOCK],
+            py: [0.0; BLOCK],
+            cell: [0; BLOCK],
+            wx: [0.0; BLOCK],
+            wy: [0.0; BLOCK],
+            u: [0; BLOCK],
+            nu: 0,
+        }
     }
 
     /// Add one slope (`unresolved`: also bin it among the unresolved); flush when the block is full.
@@ -202,10 +221,11 @@ impl Block {
         }
     }
 
-    /// Map the block's slopes to Lambert points (as [`SlopeFrame::to_lambert`]), count them, add the
-    /// moments, and empty the block. On x86-64 CPUs with AVX2 the same code is compiled for 4-wide
-    /// vectors (the default target has 2-wide SSE2); the results are bit-identical (IEEE square roots
-    /// and divisions, no contraction into FMA), see `blocked_mapping_matches_scalar`.
+    /// Find the cells of the block's slopes (as `grid.cell_of(frame.to_lambert(..))`, through
+    /// [`Block::cells_body`]), count them, add the moments, and empty the block. On x86-64 CPUs with AVX2
+    /// or AVX-512 the same code is compiled for wider vectors (the default target has SSE2); the
+    /// results are bit-identical (IEEE square roots and divisions, no contraction into FMA), see
+    /// `blocked_mapping_matches_scalar` and `f32_cells_match_f64_at_the_edges`.
     #[inline(never)]
     fn flush(&mut self, frame: &SlopeFrame, grid: &BinGrid, acc: &mut Acc) {
         #[cfg(target_arch = "x86_64")]
@@ -224,7 +244,7 @@ impl Block {
         self.flush_body(frame, grid, acc)
     }
 
-    /// [`Block::flush`] compiled for 8-wide vectors (the same IEEE arithmetic, bit for bit).
+    /// [`Block::flush`] compiled for 512-bit vectors (the same IEEE arithmetic, bit for bit).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512vl,avx512dq")]
     unsafe fn flush_avx512(&mut self, frame: &SlopeFrame, grid: &BinGrid, acc: &mut Acc) {
@@ -240,16 +260,26 @@ impl Block {
     /// Count the block's slopes into `counts` (one counter per cell, as
     /// `counts[grid.cell_of(frame.to_lambert(sx, sy))] += 1`) and empty the block.
     pub(super) fn count_into(&mut self, frame: &SlopeFrame, grid: &BinGrid, counts: &mut [u64]) {
-        self.map(frame, grid);
+        self.cells(frame, grid);
         for k in 0..self.n {
             counts[self.cell_at(k, frame, grid)] += 1;
         }
         self.n = 0;
     }
 
+    /// Hand the block's slopes to `f` in order as `(slope, cell)`, the cell that of
+    /// `grid.cell_of(frame.to_lambert(..))` (through [`Block::cells_body`]), then empty the block.
+    pub(super) fn cell_each(&mut self, frame: &SlopeFrame, grid: &BinGrid, mut f: impl FnMut([f64; 2], usize)) {
+        self.cells(frame, grid);
+        for k in 0..self.n {
+            f([self.sx[k], self.sy[k]], self.cell_at(k, frame, grid));
+        }
+        self.n = 0;
+    }
+
     /// Map the block's slopes and hand each to `f` in order as `(k, slope, Lambert point, cell)`, the point
-    /// and the cell those of `frame.to_lambert` and `grid.cell_of` slope by slope (the vectorized map of
-    /// [`Block::flush`], bit for bit where `1 + |s'|^2` stays below 1e300), then empty the block.
+    /// and the cell those of `frame.to_lambert` and `grid.cell_of` slope by slope (the vectorized f64 map,
+    /// [`Block::map_body`], bit for bit where `1 + |s'|^2` stays below 1e300), then empty the block.
     pub(super) fn map_each(&mut self, frame: &SlopeFrame, grid: &BinGrid, mut f: impl FnMut(usize, [f64; 2], [f64; 2], usize)) {
         self.map(frame, grid);
         for k in 0..self.n {
@@ -259,6 +289,34 @@ impl Block {
             f(k, s, p, self.cell_at(k, frame, grid));
         }
         self.n = 0;
+    }
+
+    /// [`Block::cells_body`] compiled for the widest vectors the CPU has (the same IEEE arithmetic).
+    fn cells(&mut self, frame: &SlopeFrame, grid: &BinGrid) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if avx512() {
+                // SAFETY: the CPU supports these AVX-512 subsets (checked just above); the body is safe Rust.
+                return unsafe { self.cells_avx512(frame, grid) };
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above); the body is safe Rust.
+                return unsafe { self.cells_avx2(frame, grid) };
+            }
+        }
+        self.cells_body(frame, grid)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq")]
+    unsafe fn cells_avx512(&mut self, frame: &SlopeFrame, grid: &BinGrid) {
+        self.cells_body(frame, grid)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn cells_avx2(&mut self, frame: &SlopeFrame, grid: &BinGrid) {
+        self.cells_body(frame, grid)
     }
 
     /// [`Block::map_body`] compiled for the widest vectors the CPU has (the same IEEE arithmetic).
@@ -317,8 +375,8 @@ impl Block {
         }
     }
 
-    /// The cell of slope `k` after [`Block::map_body`]: the vector result, or the exact map where the
-    /// guard marked it.
+    /// The cell of slope `k` after [`Block::map_body`] or [`Block::cells_body`]: the vector result, or the
+    /// exact map where either marked it.
     #[inline(always)]
     fn cell_at(&self, k: usize, frame: &SlopeFrame, grid: &BinGrid) -> usize {
         match self.cell[k] {
@@ -327,9 +385,45 @@ impl Block {
         }
     }
 
+    /// The cells of the block's slopes (into `cell`) as [`Block::map_body`] finds them, for less: the
+    /// whitened slope in f64 as there, the Lambert point and its cell coordinates in f32 (twice the
+    /// lanes, cheaper square roots and division). The f32 coordinates are within [`CELL_MARGIN`] of
+    /// the f64 ones; where one lies that close to a cell's edge, or the slope is too steep for f32
+    /// (`t >= 1e30`, or not finite), the cell is marked -1 for the exact map ([`Block::cell_at`]).
+    /// So every cell is the f64 map's, bit for bit (`f32_cells_match_f64_at_the_edges`).
+    #[inline(always)]
+    fn cells_body(&mut self, frame: &SlopeFrame, grid: &BinGrid) {
+        let (cx, cy) = (frame.center[0], frame.center[1]);
+        let w = frame.whiten;
+        let n = self.n;
+        let (sx, sy, cell) = (&self.sx[..n], &self.sy[..n], &mut self.cell[..n]);
+        let (wxs, wys) = (&mut self.wx[..n], &mut self.wy[..n]);
+        // Two loops: the f64 one fills half the vector's f32 lanes, the f32 one all of them.
+        for k in 0..n {
+            let (dx, dy) = (sx[k] - cx, sy[k] - cy);
+            (wxs[k], wys[k]) = ((w[0][0] * dx + w[0][1] * dy) as f32, (w[1][0] * dx + w[1][1] * dy) as f32);
+        }
+        let (r, inv_h, last, cols) = (LAMBERT_RADIUS as f32, grid.inv_h() as f32, (grid.n - 1) as f32, grid.n as i32);
+        let margin = CELL_MARGIN * grid.n as f32;
+        for k in 0..n {
+            let (wx, wy) = (wxs[k], wys[k]);
+            let t = 1.0 + wx * wx + wy * wy;
+            let f = (2.0 / (t + t.sqrt())).sqrt();
+            let ux = (wx * f + r) * inv_h;
+            let uy = (wy * f + r) * inv_h;
+            let (fx, fy) = (ux - ux.floor(), uy - uy.floor());
+            let clear = (t < 1e30) & (fx > margin) & (fx < 1.0 - margin) & (fy > margin) & (fy < 1.0 - margin);
+            let ix = ux.max(0.0).min(last);
+            let iy = uy.max(0.0).min(last);
+            // SAFETY: ix, iy are finite and in [0, n - 1] with n <= 1023 (clamped just above; `max` drops a NaN).
+            let c = unsafe { iy.to_int_unchecked::<i32>() * cols + ix.to_int_unchecked::<i32>() };
+            cell[k] = if clear { c } else { -1 };
+        }
+    }
+
     #[inline(always)]
     fn flush_body(&mut self, frame: &SlopeFrame, grid: &BinGrid, acc: &mut Acc) {
-        self.map_body(frame, grid);
+        self.cells_body(frame, grid);
         let n = self.n;
         let (sx, sy) = (&self.sx[..n], &self.sy[..n]);
         let (cx, cy) = (frame.center[0], frame.center[1]);
@@ -587,6 +681,66 @@ mod tests {
         }
         assert_eq!(ndf.n_samples, want.iter().sum::<u64>());
         assert!((ndf.total() - 1.0).abs() < 1e-12);
+    }
+
+    /// The f32 cells of [`Block::cells_body`] are the f64 map's, slope by slope, also for Lambert points
+    /// from 1e-12 to 1e-3 of a cell's width on either side of every inner edge (grids of 21, 255 and 1023
+    /// cells across), for slopes from 1e-9 to 1e200 whitened, and on the widest vectors the CPU has as on
+    /// the default target. The edge points closest to an edge are sent to the exact map: the margin is
+    /// what keeps them right (with a zero margin the test fails).
+    #[test]
+    fn f32_cells_match_f64_at_the_edges() {
+        use crate::ndf::frame::LAMBERT_RADIUS;
+        let frame = SlopeFrame::new([0.03, -0.02], [[0.04, 0.012], [0.012, 0.01]]);
+        let u = frame.unwhiten;
+        for n in [21, 255, 1023] {
+            let grid = BinGrid::new(n);
+            let h = 2.0 * LAMBERT_RADIUS / grid.n as f64;
+            let mut slopes = Vec::new();
+            for k in 1..grid.n {
+                for d in [0.0, 1e-12, 1e-9, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3].into_iter().flat_map(|d| [d, -d]) {
+                    let e = -LAMBERT_RADIUS + (k as f64 + d) * h;
+                    // The other coordinate anywhere along the edge's chord (a fixed irrational stride).
+                    let half = (1.99 - e * e).max(0.0).sqrt();
+                    let o = half * (2.0 * (k as f64 * 0.618_033_988_75 + d * 1e6).rem_euclid(1.0) - 1.0);
+                    for p in [[e, o], [o, e]] {
+                        slopes.push(SlopeFrame::slope_of(frame.normal_at(p)));
+                    }
+                }
+            }
+            let edges = slopes.len();
+            // Whitened slopes of every magnitude and direction, past f32's range and the f64 guard.
+            for m in -9..=200 {
+                for a in 0..7 {
+                    let (sn, cs) = (a as f64 * 0.9).sin_cos();
+                    let w = [10f64.powi(m) * cs, 10f64.powi(m) * sn];
+                    let c = frame.center;
+                    slopes.push([c[0] + u[0][0] * w[0] + u[0][1] * w[1], c[1] + u[1][0] * w[0] + u[1][1] * w[1]]);
+                }
+            }
+            for wide in [true, false] {
+                let (mut blk, mut exact) = (Block::new(), 0);
+                for (q, chunk) in slopes.chunks(BLOCK).enumerate() {
+                    blk.n = chunk.len();
+                    for (k, s) in chunk.iter().enumerate() {
+                        (blk.sx[k], blk.sy[k]) = (s[0], s[1]);
+                    }
+                    if wide {
+                        blk.cells(&frame, &grid);
+                    } else {
+                        blk.cells_body(&frame, &grid);
+                    }
+                    exact += (0..blk.n).filter(|&k| q * BLOCK + k < edges && blk.cell[k] < 0).count();
+                    for (k, s) in chunk.iter().enumerate() {
+                        assert_eq!(blk.cell_at(k, &frame, &grid), grid.cell_of(frame.to_lambert(s[0], s[1])), "n {n}, slope {s:?}");
+                    }
+                }
+                // The points within 1e-5 of a cell of an edge (3 in 4) are inside every grid's margin; those at
+                // 1e-3 are outside it up to 255 cells across.
+                let taken = exact * 4 >= edges * 3 && (grid.n > 255 || exact < edges);
+                assert!(taken, "n {n}: {exact} of {edges} edge points to the exact map");
+            }
+        }
     }
 
     /// A row fed in runs ([`Block::feed`]) fills the blocks with the same samples in the same order as

@@ -128,9 +128,10 @@ pub(crate) fn respect_lattice(
         .par_iter()
         .map(|&js| {
             let mut acc = vec![[0.0; 4]; picked.len()];
-            // Nodes are mapped a block at a time (the histogram's vectorized map), and so are the 2 x 2
-            // points of the picked ones, each point's sums added in node order: the same bits as node by
-            // node.
+            // The nodes' cells are found a block at a time (the histogram's f32 cells, the same cells as
+            // node by node), and the 2 x 2 points of the picked ones mapped a block at a time (the f64
+            // map: their Lambert points enter the sums), each point's sums added in node order: the same
+            // bits as node by node.
             let (mut nodes, mut points) = (Box::new(Block::new()), Box::new(Block::new()));
             let mut owner = [0u32; Block::LEN];
             let (ni, i0) = ((range[0].1 - range[0].0 + 1) as usize, range[0].0);
@@ -144,7 +145,7 @@ pub(crate) fn respect_lattice(
                         nodes.sy[k] = sy;
                     }
                     nodes.n = len;
-                    nodes.map_each(frame, grid, |_, [sx, sy], _, c| {
+                    nodes.cell_each(frame, grid, |[sx, sy], c| {
                         // The data at this node fall in the cell of the node itself.
                         let s = slot[c];
                         if s != u32::MAX {
