@@ -171,7 +171,8 @@ const _: () = assert!(MEAN_CHAINS == 4);
 
 /// The count, the sum and the largest magnitude of the non-NaN values of each slice, as a serial
 /// `filter` and `fold` gives them (each sum in its own order, bit for bit). A serial sum waits on each
-/// addition; the sums of [`MEAN_CHAINS`] slices are taken side by side so that their additions overlap.
+/// addition; the sums of [`MEAN_CHAINS`] slices are taken side by side so that their additions overlap
+/// (one slice per AVX2 lane where the CPU has it, [`chains_avx2`]).
 /// A NaN adds `+0.0`, which leaves a sum that starts at `+0.0` unchanged (it is never `-0.0`), and
 /// `max` skips it.
 fn counts_and_sums(vals: &[&[f64]]) -> Vec<(usize, f64, f64)> {
@@ -179,7 +180,13 @@ fn counts_and_sums(vals: &[&[f64]]) -> Vec<(usize, f64, f64)> {
     let n = if vals.len() == MEAN_CHAINS { vals.iter().map(|v| v.len()).min().unwrap_or(0) } else { 0 };
     if n > 0 {
         let (mut k, mut s, mut m) = ([0usize; MEAN_CHAINS], [0.0f64; MEAN_CHAINS], [0.0f64; MEAN_CHAINS]);
-        let (a, b, c, d) = (&vals[0][..n], &vals[1][..n], &vals[2][..n], &vals[3][..n]);
+        let mut first = 0;
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            (k, s, m, first) = unsafe { chains_avx2([&vals[0][..n], &vals[1][..n], &vals[2][..n], &vals[3][..n]]) };
+        }
+        let (a, b, c, d) = (&vals[0][first..n], &vals[1][first..n], &vals[2][first..n], &vals[3][first..n]);
         for (((&a, &b), &c), &d) in a.iter().zip(b).zip(c).zip(d) {
             for (q, v) in [a, b, c, d].into_iter().enumerate() {
                 let ok = !v.is_nan();
@@ -196,6 +203,48 @@ fn counts_and_sums(vals: &[&[f64]]) -> Vec<(usize, f64, f64)> {
         *o = v[n..].iter().filter(|h| !h.is_nan()).fold(*o, |(c, s, m), h| (c + 1, s + h, m.max(h.abs())));
     }
     out
+}
+
+/// The loop of [`counts_and_sums`] over the first `4 floor(n / 4)` values of four slices of length `n`,
+/// one slice per AVX2 lane: four values of each slice are loaded and transposed, then added in their
+/// order. A NaN's lane is masked to `+0.0` by its ordered-compare mask (the select of the scalar loop),
+/// `max` keeps the running value for a NaN, and nothing is contracted: each lane is the scalar loop's
+/// count, sum and largest magnitude, bit for bit. Returns them and the number of values taken.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn chains_avx2(v: [&[f64]; MEAN_CHAINS]) -> ([usize; MEAN_CHAINS], [f64; MEAN_CHAINS], [f64; MEAN_CHAINS], usize) {
+    use std::arch::x86_64::*;
+    let n = v[0].len() / 4 * 4;
+    let (mut s, mut m, mut k) = (_mm256_setzero_pd(), _mm256_setzero_pd(), _mm256_setzero_si256());
+    let abs = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
+    for i in (0..n).step_by(4) {
+        // SAFETY: i + 4 <= n <= each slice's length.
+        let r = v.map(|x| unsafe { _mm256_loadu_pd(x.as_ptr().add(i)) });
+        let (t0, t1) = (_mm256_unpacklo_pd(r[0], r[1]), _mm256_unpackhi_pd(r[0], r[1]));
+        let (t2, t3) = (_mm256_unpacklo_pd(r[2], r[3]), _mm256_unpackhi_pd(r[2], r[3]));
+        // Value q of every slice, q = 0..4, in slice order across the lanes.
+        let q = [
+            _mm256_permute2f128_pd::<0x20>(t0, t2),
+            _mm256_permute2f128_pd::<0x20>(t1, t3),
+            _mm256_permute2f128_pd::<0x31>(t0, t2),
+            _mm256_permute2f128_pd::<0x31>(t1, t3),
+        ];
+        for x in q {
+            let ok = _mm256_cmp_pd::<_CMP_ORD_Q>(x, x);
+            s = _mm256_add_pd(s, _mm256_and_pd(x, ok));
+            k = _mm256_sub_epi64(k, _mm256_castpd_si256(ok));
+            // maxpd gives its second operand when the first is NaN.
+            m = _mm256_max_pd(_mm256_and_pd(x, abs), m);
+        }
+    }
+    let (mut ks, mut ss, mut ms) = ([0i64; MEAN_CHAINS], [0.0; MEAN_CHAINS], [0.0; MEAN_CHAINS]);
+    // SAFETY: each array holds four lanes.
+    unsafe {
+        _mm256_storeu_si256(ks.as_mut_ptr().cast(), k);
+        _mm256_storeu_pd(ss.as_mut_ptr(), s);
+        _mm256_storeu_pd(ms.as_mut_ptr(), m);
+    }
+    (ks.map(|c| c as usize), ss, ms, n)
 }
 
 /// A plane's residual: the height less the mean, less the plane `base + c1 u` (`base = c0 + c2 v`).
@@ -626,8 +675,9 @@ mod tests {
             .collect()
     }
 
-    /// The mean's sums taken side by side are the serial filter-and-fold of each slice, bit for bit:
-    /// equal and unequal lengths, a group shorter than [`MEAN_CHAINS`], empty slices.
+    /// The mean's sums taken side by side (in AVX2 lanes where the CPU has them) are the serial
+    /// filter-and-fold of each slice, bit for bit: equal and unequal lengths, a group shorter than
+    /// [`MEAN_CHAINS`], empty slices.
     #[test]
     fn side_by_side_sums_equal_the_serial_ones() {
         let v = values(4000, 7);
