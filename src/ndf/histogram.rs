@@ -127,8 +127,9 @@ const BLOCK: usize = 256;
 const UNRESOLVED_RUN: usize = 32;
 
 /// How far from a cell's edge an f32 cell coordinate of [`Block::cells_body`] must lie to be taken, per
-/// cell across the grid: 2^-19 n (16 f32 ulps of `n`), over five times the bound on its difference
-/// from the f64 coordinate (3 ulps of `n`: the conversion, the map's roundings, the offset and scale).
+/// cell across the grid: 2^-19 n, i.e. 16 units of `2^-23 n` (f32's precision at the coordinate's
+/// largest value `n`), over five times the bound on its difference from the f64 coordinate (3 such
+/// units: the conversion, the map's roundings, the offset and scale).
 const CELL_MARGIN: f32 = 1.0 / (1u32 << 19) as f32;
 
 /// Independent partial sums of the slope moments in a block (a multiple of the widest vector, 4 f64).

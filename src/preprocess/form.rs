@@ -179,13 +179,7 @@ fn counts_and_sums(vals: &[&[f64]]) -> Vec<(usize, f64, f64)> {
     let mut out = vec![(0usize, 0.0f64, 0.0f64); vals.len()];
     let n = if vals.len() == MEAN_CHAINS { vals.iter().map(|v| v.len()).min().unwrap_or(0) } else { 0 };
     if n > 0 {
-        let (mut k, mut s, mut m) = ([0usize; MEAN_CHAINS], [0.0f64; MEAN_CHAINS], [0.0f64; MEAN_CHAINS]);
-        let mut first = 0;
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            (k, s, m, first) = unsafe { chains_avx2([&vals[0][..n], &vals[1][..n], &vals[2][..n], &vals[3][..n]]) };
-        }
+        let (mut k, mut s, mut m, first) = chains([&vals[0][..n], &vals[1][..n], &vals[2][..n], &vals[3][..n]]);
         let (a, b, c, d) = (&vals[0][first..n], &vals[1][first..n], &vals[2][first..n], &vals[3][first..n]);
         for (((&a, &b), &c), &d) in a.iter().zip(b).zip(c).zip(d) {
             for (q, v) in [a, b, c, d].into_iter().enumerate() {
@@ -203,6 +197,18 @@ fn counts_and_sums(vals: &[&[f64]]) -> Vec<(usize, f64, f64)> {
         *o = v[n..].iter().filter(|h| !h.is_nan()).fold(*o, |(c, s, m), h| (c + 1, s + h, m.max(h.abs())));
     }
     out
+}
+
+/// Counts, sums and largest magnitudes of the four slices `v` (of one length) as far as [`chains_avx2`]
+/// takes them where the CPU has AVX2, and the number of values taken (none elsewhere).
+fn chains(v: [&[f64]; MEAN_CHAINS]) -> ([usize; MEAN_CHAINS], [f64; MEAN_CHAINS], [f64; MEAN_CHAINS], usize) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { chains_avx2(v) };
+    }
+    let _ = v;
+    ([0; MEAN_CHAINS], [0.0; MEAN_CHAINS], [0.0; MEAN_CHAINS], 0)
 }
 
 /// The loop of [`counts_and_sums`] over the first `4 floor(n / 4)` values of four slices of length `n`,
