@@ -173,10 +173,10 @@ fn near_median(rows: [&[f64]; 3], j: usize, half: f64) -> bool {
 /// point's neighbours' median is within `limit / 2` of it and its departure below the threshold (at
 /// least `limit`). A plane adds opposite offsets to opposite neighbours, which cancel in each sum: the
 /// screen passes the points of a smooth surface of any slope, where [`near_median`] passes only the
-/// gentle ones. The rounding of the sums and of the median is relative to the point's height, so a
-/// point is passed only when its height is below `2^40 limit` (then the rounding stays far below
-/// `limit / 2`) and below `f64::MAX / 4`; non-finite values compare false and are left to the full test, as is every point of a
-/// scan whose `limit` is 0.
+/// gentle ones. The rounding of the sums, of their distances from `2 h(j)` and of the median is
+/// relative to the point's height, so a point is passed only when its height is below `2^40 limit`
+/// (then the rounding stays far below `limit / 2`) and below `f64::MAX / 4`; non-finite values compare
+/// false and are left to the full test, as is every point of a scan whose `limit` is 0.
 /// The loop is compiled for AVX2 and AVX-512 as well, selected at run time (the same IEEE operations: the binary
 /// stays portable and the decisions do not change).
 fn pair_screen(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
@@ -227,32 +227,57 @@ fn pair_screen_body(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
     for j in 0..m {
         let c = b1[j];
         let two = c + c;
-        let (lo, hi) = (two - limit, two + limit);
-        let s = [a0[j] + e2[j], a1[j] + e1[j], a2[j] + e0[j], b0[j] + b2[j]];
+        // Each sum's distance from twice the point: one comparison of its magnitude (a NaN compares
+        // false) instead of two against `two -+ limit`.
+        let near = |a: f64, b: f64| ((a + b) - two).abs() <= limit;
         // Non-short-circuit `&` so that the loop has no branches and vectorizes.
-        pass[j] = (s[0] >= lo)
-            & (s[0] <= hi)
-            & (s[1] >= lo)
-            & (s[1] <= hi)
-            & (s[2] >= lo)
-            & (s[2] <= hi)
-            & (s[3] >= lo)
-            & (s[3] <= hi)
-            & (c.abs() < cap);
+        pass[j] = near(a0[j], e2[j]) & near(a1[j], e1[j]) & near(a2[j], e0[j]) & near(b0[j], b2[j]) & (c.abs() < cap);
     }
 }
 
-/// The positions that `pass` marks false, in order. Most points pass: a run of [`PASS_RUN`] passed
-/// points is skipped after one branch-free test of the whole run.
+/// The positions that `pass` marks false, in order. Most points pass: each run of [`PASS_RUN`] points is
+/// packed into a word of failure bits, eight at a time ([`failed8`]), and only the set bits are visited.
 fn not_passed(pass: &[bool]) -> impl Iterator<Item = usize> + '_ {
-    pass.chunks(PASS_RUN)
-        .enumerate()
-        .filter(|(_, run)| !run.iter().fold(true, |all, &p| all & p))
-        .flat_map(|(k, run)| run.iter().enumerate().filter(|&(_, &p)| !p).map(move |(j, _)| k * PASS_RUN + j))
+    pass.chunks(PASS_RUN).enumerate().flat_map(|(k, run)| {
+        let eights = run.chunks_exact(8);
+        let tail = eights.remainder().iter().enumerate().fold(0u64, |w, (b, &p)| w | u64::from(!p) << b);
+        let n = run.len() - run.len() % 8;
+        let failed = eights.enumerate().fold(tail << n, |w, (q, e)| w | failed8(e) << (8 * q));
+        SetBits(failed).map(move |b| k * PASS_RUN + b)
+    })
 }
 
-/// Points [`not_passed`] tests at once.
+/// The failure bits of eight flags (bit `b` set when `e[b]` is false): the flags read as one word of
+/// bytes 0 and 1, flipped, and gathered into its top byte by one multiplication (each byte's bit lands
+/// in its own place of the top byte, and no two products overlap there or carry into it).
+#[inline(always)]
+fn failed8(e: &[bool]) -> u64 {
+    let mut b = [0u8; 8];
+    for (d, &p) in b.iter_mut().zip(e) {
+        *d = u8::from(!p);
+    }
+    u64::from_le_bytes(b).wrapping_mul(0x0102_0408_1020_4080) >> 56
+}
+
+/// The positions of the set bits of a word, lowest first.
+struct SetBits(u64);
+
+impl Iterator for SetBits {
+    type Item = usize;
+    #[inline]
+    fn next(&mut self) -> Option<usize> {
+        (self.0 != 0).then(|| {
+            let b = self.0.trailing_zeros() as usize;
+            // Clear the lowest set bit.
+            self.0 &= self.0 - 1;
+            b
+        })
+    }
+}
+
+/// Points [`not_passed`] packs into one word of failure bits (a `u64`: at most 64).
 const PASS_RUN: usize = 64;
+const _: () = assert!(PASS_RUN <= 64);
 
 /// Sort 8 finite values ascending with the optimal 19-comparator network (Knuth, TAOCP vol. 3, 5.3.4).
 #[inline(always)]
@@ -791,6 +816,14 @@ mod tests {
     #[test]
     fn not_passed_lists_every_failed_position() {
         let mut rnd = uniform(0x9e37_79b9_7f4a_7c15);
+        // Every pattern of eight flags: at a run's start, inside it, at its end and across two runs.
+        for pattern in 0..256u32 {
+            for shift in [0, 8, 56, 61] {
+                let pass: Vec<bool> = (0..70).map(|j| !(shift..shift + 8).contains(&j) || pattern >> (j - shift) & 1 == 0).collect();
+                let want: Vec<usize> = (0..70).filter(|&j| !pass[j]).collect();
+                assert_eq!(not_passed(&pass).collect::<Vec<_>>(), want, "pattern {pattern:08b} at {shift}");
+            }
+        }
         for n in [0, 1, 63, 64, 65, 127, 128, 129, 1000] {
             for share in [0.0, 0.002, 0.3, 1.0] {
                 let pass: Vec<bool> = (0..n).map(|_| rnd() + 0.5 >= share).collect();

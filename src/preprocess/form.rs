@@ -74,8 +74,9 @@ pub struct FormModel {
 
 #[derive(Debug, Clone, PartialEq)]
 enum FormKind {
-    /// `c0 + c1 u + c2 v` ([`plane_fit`]'s fit), `u` per column.
-    Plane { c: [f64; 3], u: Vec<f64>, ny: usize },
+    /// `c0 + c1 u + c2 v` ([`plane_fit`]'s fit): `u` per column, and per row `base = c0 + c2 v`, taken
+    /// once here so that a residual point by point ([`FormModel::residual_at`]) costs no division.
+    Plane { c: [f64; 3], u: Vec<f64>, base: Vec<f64> },
     /// `sum_k coef_k P_p(u) P_q(v)` over the terms `(p, q)`.
     Poly { coef: Vec<f64>, t: Vec<(usize, usize)>, lu: Vec<[f64; 4]>, lv: Vec<[f64; 4]> },
 }
@@ -265,8 +266,8 @@ impl FormModel {
     pub fn residual_row(&self, i: usize, h: &[f64], out: &mut Vec<f64>) {
         let mean = self.mean;
         match &self.kind {
-            FormKind::Plane { c, u, ny } => {
-                let base = c[0] + c[2] * scaled(i, *ny);
+            FormKind::Plane { c, u, base } => {
+                let base = base[i];
                 out.extend(h.iter().zip(u).map(|(&h, &x)| plane_residual(h, mean, base, c[1], x)));
             }
             FormKind::Poly { .. } => out.extend(h.iter().enumerate().map(|(j, &h)| (h - mean) - self.poly_at(i, j))),
@@ -278,7 +279,7 @@ impl FormModel {
     #[inline]
     pub fn residual_at(&self, i: usize, j: usize, h: f64) -> f64 {
         match &self.kind {
-            FormKind::Plane { c, u, ny } => plane_residual(h, self.mean, c[0] + c[2] * scaled(i, *ny), c[1], u[j]),
+            FormKind::Plane { c, u, base } => plane_residual(h, self.mean, base[i], c[1], u[j]),
             FormKind::Poly { .. } => (h - self.mean) - self.poly_at(i, j),
         }
     }
@@ -320,9 +321,9 @@ impl FormModel {
     pub fn plane_slope(&self, dx: f64, dy: f64) -> Option<[f64; 2]> {
         match &self.kind {
             // `u = 2 j / (nx - 1) - 1` per column and `v = 2 i / (ny - 1) - 1` per row ([`scaled`]).
-            FormKind::Plane { c, u, ny } => {
+            FormKind::Plane { c, u, base } => {
                 let per = |n: usize, d: f64| if n > 1 { 2.0 / ((n - 1) as f64 * d) } else { 0.0 };
-                Some([c[1] * per(u.len(), dx), c[2] * per(*ny, dy)])
+                Some([c[1] * per(u.len(), dx), c[2] * per(base.len(), dy)])
             }
             FormKind::Poly { .. } => None,
         }
@@ -484,7 +485,9 @@ fn plane_fit<S: BandSource<T = f64>>(src: &S, mean: f64, valid: usize, top: f64)
     let svd = ata.svd(true, true);
     let smax = svd.singular_values.max();
     let c = svd.solve(&atb, smax * 1e-12).map_err(|e| Error::new(ErrorKind::Numerical, format!("form fit failed: {e}")))?;
-    Ok(FormModel { mean, valid, top, kind: FormKind::Plane { c: [c[0], c[1], c[2]], u, ny } })
+    let c = [c[0], c[1], c[2]];
+    let base = (0..ny).map(|i| c[0] + c[2] * scaled(i, ny)).collect();
+    Ok(FormModel { mean, valid, top, kind: FormKind::Plane { c, u, base } })
 }
 
 /// A fitted cylinder and the residual heights.
