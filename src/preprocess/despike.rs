@@ -240,9 +240,10 @@ fn pair_screen_body(rows: [&[f64]; 3], limit: f64, pass: &mut Vec<bool>) {
 fn not_passed(pass: &[bool]) -> impl Iterator<Item = usize> + '_ {
     pass.chunks(PASS_RUN).enumerate().flat_map(|(k, run)| {
         let eights = run.chunks_exact(8);
-        let tail = eights.remainder().iter().enumerate().fold(0u64, |w, (b, &p)| w | u64::from(!p) << b);
+        // The flags after the last whole eight (none in a full run, whose whole eights fill the word).
         let n = run.len() - run.len() % 8;
-        let failed = eights.enumerate().fold(tail << n, |w, (q, e)| w | failed8(e) << (8 * q));
+        let tail = eights.remainder().iter().enumerate().fold(0u64, |w, (b, &p)| w | u64::from(!p) << (n + b));
+        let failed = eights.enumerate().fold(tail, |w, (q, e)| w | failed8(e) << (8 * q));
         SetBits(failed).map(move |b| k * PASS_RUN + b)
     })
 }
