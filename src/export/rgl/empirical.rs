@@ -1,8 +1,8 @@
 //! A scan's empirical NDF as the function the table samples: the bins where they are measured well, the
 //! fitted model where they are not.
 //!
-//! Inside the fit region (`theta <= max_theta`) the value at `m` is
-//! `w D_bin + (1 - w) D_fit(m)` with `w = 1 / (1 + (s / (REL_NOISE D_bin))^2)`, `D_bin` the bin holding `m` and
+//! Inside the fit region (`theta <= max_theta`) each bin's value at `m` is
+//! `w D_bin + (1 - w) D_fit(m)` (interpolated bilinearly between the bins' centres) with `w = 1 / (1 + (s / (REL_NOISE D_bin))^2)`, `D_bin` the bin holding `m` and
 //! `s` its standard error: a bin whose relative error is `REL_NOISE` keeps half its own value, an empty or
 //! unmeasured bin none. Beyond `max_theta` (the tail the fit left out: the scan does not resolve it) the
 //! fitted model stands alone. The writer then renormalizes the table.
@@ -10,7 +10,7 @@
 use nalgebra::Vector3;
 
 use crate::models::{Model, Ndf};
-use crate::ndf::EmpiricalNdf;
+use crate::ndf::{EmpiricalNdf, SlopeFrame};
 
 /// The relative standard error at which a bin and the fit weigh equally.
 pub const REL_NOISE: f64 = 0.2;
@@ -28,20 +28,43 @@ impl<'a> Regularized<'a> {
         Regularized { ndf, fit, cos_max: max_theta_deg.to_radians().cos() }
     }
 
-    /// `D(m)` (scan frame, `z` up).
+    /// `D(m)` (scan frame, `z` up): the blended values of the four bins around `m` interpolated bilinearly
+    /// between their centres on the binning grid (a table finer than the bins then reads a smooth NDF, not
+    /// the histogram's steps); a cell without a measured bin takes the fit.
     pub fn d(&self, m: Vector3<f64>) -> f64 {
         let fit = self.fit.d(m);
-        if m.z < self.cos_max {
+        let grid = &self.ndf.grid;
+        if m.z < self.cos_max || grid.n == 0 {
             return fit;
         }
-        match self.ndf.bin_of(m).map(|k| &self.ndf.bins[k]) {
-            Some(b) if b.count > 0 && b.d > 0.0 => {
-                let r = b.stderr / (REL_NOISE * b.d);
-                let w = 1.0 / (1.0 + r * r);
-                w * b.d + (1.0 - w) * fit
-            }
-            _ => fit,
+        let s = SlopeFrame::slope_of(m);
+        let p = self.ndf.frame.to_lambert(s[0], s[1]);
+        // Cell coordinates with the cell centres on whole numbers.
+        let [x0, x1, y0, _] = grid.bounds(0);
+        let h = x1 - x0;
+        let (fx, fy) = ((p[0] - x0) / h - 0.5, (p[1] - y0) / h - 0.5);
+        if !(fx.is_finite() && fy.is_finite()) {
+            return fit;
         }
+        let (ix, iy) = (fx.floor(), fy.floor());
+        let (tx, ty) = (fx - ix, fy - iy);
+        let value = |cx: f64, cy: f64| {
+            let n = grid.n as f64;
+            if !(0.0..n).contains(&cx) || !(0.0..n).contains(&cy) {
+                return fit;
+            }
+            let c = (cy as usize * grid.n + cx as usize) as u32;
+            match self.ndf.bin_cells.binary_search(&c).ok().map(|k| &self.ndf.bins[k]) {
+                Some(b) if b.count > 0 && b.d > 0.0 => {
+                    let r = b.stderr / (REL_NOISE * b.d);
+                    let w = 1.0 / (1.0 + r * r);
+                    w * b.d + (1.0 - w) * fit
+                }
+                _ => fit,
+            }
+        };
+        (1.0 - ty) * ((1.0 - tx) * value(ix, iy) + tx * value(ix + 1.0, iy))
+            + ty * ((1.0 - tx) * value(ix, iy + 1.0) + tx * value(ix + 1.0, iy + 1.0))
     }
 
     /// The sentence the file's `description` carries about how the NDF was made.

@@ -6,13 +6,20 @@
 //! `f(wi, wo) cos(theta_o) = R(u) D(m) / (4 sigma(wi))`, `m` the half vector, `u` the point of the sample
 //! space that the visible-NDF warp sends to `m`. The table holds:
 //! - `ndf`: `D(m)` on a grid of `(u_theta, u_phi) = (sqrt(2 theta / pi), (phi + pi) / (2 pi))`;
-//! - `sigma`: the projected area `sigma(w) = int D(m) <w.m> dm` on the same grid, by quadrature of the
+//! - `sigma`: the projected area `sigma(w) = int D(m) <w.m> dm` on a grid of its own, by quadrature of the
 //!   tabulated NDF (so `G1(w) = cos(theta) / sigma(w)` is Smith's masking of that NDF, Heitz 2014 eq. 22);
-//! - `vndf`: per incident node `D(m) <wi.m>` times the Jacobian `2 pi^2 u_theta sin(theta_m)` of the grid,
-//!   the density the warp follows;
+//! - `vndf`: per incident node the density the warp follows, a defensive mixture of the visible NDF
+//!   `D(m) <wi.m>` (times the Jacobian `2 pi^2 u_theta sin(theta_m)` of the grid) and its tempered power
+//!   ([`DEFENSIVE`]), so that the reflectance's nodes reach down the NDF's tail;
 //! - `rgb` or `spectra` at the sample-space nodes: `R = F(wi.m) G1(wo)` (separable Smith, as Mitsuba's
 //!   `roughconductor`), `F` the conductor of [`Material`];
-//! - `luminance`: the luminance of `R` on the same nodes, the second sampling warp.
+//! - `luminance`: the luminance of `R` times the visible NDF over the written `vndf` on the same nodes, the
+//!   second sampling warp: the two warps together sample the visible NDF times the luminance.
+//!
+//! The `ndf` grid is as fine as the NDF needs ([`ndf_resolution`]). Measured in Mitsuba 3
+//! (fits/tests/test_mitsuba_rgl.py, data_formats/rgl.md): a table reproduces its BRDF to a median well
+//! under 1% wherever the BRDF is at least `1e-3` of its peak; outgoing directions within ten degrees of
+//! the horizon are the limit, where the masking's fall to zero lies between reflectance nodes.
 //!
 //! `phi = 0` is the scan's `+x`: a renderer's tangent `u` along the scan's `+x` reproduces the scan's
 //! frame. Tables are anisotropic over the full incident azimuth range `[-pi, pi]` (pbrt-v4 reads no
@@ -59,8 +66,9 @@ pub struct RglOptions {
     pub theta_i: usize,
     /// Incident azimuths, evenly over `[-pi, pi]` both ends included (at least 3).
     pub phi_i: usize,
-    /// Nodes per axis of the `ndf` and `sigma` grids (at least 8).
-    pub ndf_res: usize,
+    /// Nodes per axis of the `ndf` grid (at least 8); `None` picks the smallest of 64, 128, 256 and 512 at
+    /// which the renderer's bilinear interpolation reproduces the NDF ([`ndf_resolution`]).
+    pub ndf_res: Option<usize>,
     /// Nodes per axis of the `vndf`, `luminance` and reflectance grids (at least 4).
     pub warp_res: usize,
     /// The conductor.
@@ -71,19 +79,26 @@ pub struct RglOptions {
 
 impl Default for RglOptions {
     fn default() -> Self {
-        RglOptions { theta_i: 16, phi_i: 17, ndf_res: 64, warp_res: 32, material: Material::None, flavour: Flavour::Rgb }
+        RglOptions { theta_i: 16, phi_i: 17, ndf_res: None, warp_res: 64, material: Material::None, flavour: Flavour::Rgb }
     }
 }
 
 /// Largest nodes per axis accepted (a 512 x 512 warp over 64 x 64 incident nodes is already 4 GiB).
 const MAX_RES: usize = 512;
 
+/// Nodes per axis of the `sigma` grid at most: the projected area is smooth in the direction, and every
+/// node costs one quadrature over the NDF.
+const SIGMA_RES: usize = 64;
+
 impl RglOptions {
     fn check(&self) -> Result<()> {
         let bad = |name: &str, v: usize, lo: usize| Error::invalid(format!("{name} must be in [{lo}, {MAX_RES}], got {v}"));
-        for (name, v, lo) in
-            [("theta_i", self.theta_i, 2), ("phi_i", self.phi_i, 3), ("ndf_res", self.ndf_res, 8), ("warp_res", self.warp_res, 4)]
-        {
+        for (name, v, lo) in [
+            ("theta_i", self.theta_i, 2),
+            ("phi_i", self.phi_i, 3),
+            ("ndf_res", self.ndf_res.unwrap_or(8), 8),
+            ("warp_res", self.warp_res, 4),
+        ] {
             if !(lo..=MAX_RES).contains(&v) {
                 return Err(bad(name, v, lo));
             }
@@ -99,10 +114,11 @@ impl RglOptions {
         }
     }
 
-    /// Bytes of the file these options write (header aside).
-    pub fn data_bytes(&self) -> usize {
+    /// Bytes of the file these options write with an `ndf` grid of `ndf_res` nodes per axis (header aside).
+    pub fn data_bytes(&self, ndf_res: usize) -> usize {
         let slices = self.theta_i * self.phi_i * self.warp_res * self.warp_res;
-        4 * (2 * self.ndf_res * self.ndf_res + slices * (2 + self.wavelengths().len()) + self.theta_i + self.phi_i)
+        let sigma = ndf_res.min(SIGMA_RES);
+        4 * (ndf_res * ndf_res + sigma * sigma + slices * (2 + self.wavelengths().len()) + self.theta_i + self.phi_i)
     }
 }
 
@@ -149,17 +165,111 @@ pub struct Table {
     pub tensor: TensorFile,
     /// `int D(m) (m.n) dm` of the source NDF over the grid before any rescaling (1 for a normalized NDF).
     pub normalization: f64,
+    /// Nodes per axis of the `ndf` grid written.
+    pub ndf_res: usize,
+    /// The largest relative error of the renderer's bilinear `ndf` against the guide NDF, where the guide is
+    /// at least [`SIGNIFICANT`] of its peak ([`ndf_interpolation_error`]).
+    pub ndf_error: f64,
 }
 
 /// Three-point Gauss-Legendre nodes and weights on `[0, 1]`.
 const GAUSS3: [(f64, f64); 3] = [(0.112_701_665_379_258_3, 5.0 / 18.0), (0.5, 8.0 / 18.0), (0.887_298_334_620_741_7, 5.0 / 18.0)];
 
+/// The NDF level, relative to its peak, down to which the `ndf` grid must reproduce it: a BRDF is
+/// checked to `1e-3` of its peak, and the Smith and cosine factors lower that peak's share by up to 10x.
+pub const SIGNIFICANT: f64 = 1e-4;
+
+/// The relative error of the bilinear `ndf` at which [`ndf_resolution`] stops refining.
+pub const NDF_TOLERANCE: f64 = 0.01;
+
+/// The share of the written `vndf` density that is the tempered VNDF `(D <wi.m>)^TEMPER` rather than the
+/// VNDF itself. The reflectance lives on the nodes of the sample space, which the `vndf` warp sends to
+/// half vectors (Dupuy & Jakob 2018, sec. 5): the VNDF alone leaves its fast-falling tail between two
+/// nodes, one of them at the horizon, where the reflectance interpolates across the masking's cliff. The
+/// tempered share, over the half vectors that reflect above the horizon, puts nodes down the tail; the
+/// `luminance` warp takes the ratio back, so sampling still follows the VNDF times the reflectance, and a
+/// renderer weighs by the true `ndf` either way.
+pub const DEFENSIVE: f64 = 0.75;
+
+/// The power of the tempered VNDF: eight decades of the VNDF become one.
+const TEMPER: f64 = 0.125;
+
+/// A quadrature point whose weight is below this share of the total is dropped from the projected area's
+/// sums (its whole contribution is below `1e-6` even on a 512-node grid).
+const PRUNE: f64 = 1e-12;
+
+/// The largest relative error of the bilinear interpolation of `guide` on an `n x n` grid (the renderer's
+/// reading of `ndf`) against `guide` itself, at every cell's centre and the midpoints of its lower and
+/// left edges, where `guide` is at least [`SIGNIFICANT`] of its largest node value.
+pub fn ndf_interpolation_error(guide: &(dyn Fn(Vector3<f64>) -> f64 + Sync), n: usize) -> f64 {
+    let n = n.max(2);
+    let step = 1.0 / (n - 1) as f64;
+    let nodes: Vec<f64> = (0..n * n).into_par_iter().map(|k| guide(u2dir([(k % n) as f64 * step, (k / n) as f64 * step]))).collect();
+    let peak = nodes.iter().copied().filter(|v| v.is_finite()).fold(0.0, f64::max);
+    if !(peak > 0.0) {
+        return 0.0;
+    }
+    let floor = SIGNIFICANT * peak;
+    (0..(n - 1) * (n - 1))
+        .into_par_iter()
+        .map(|c| {
+            let (i, j) = (c % (n - 1), c / (n - 1));
+            let v = |a: usize, b: usize| nodes[(j + b) * n + i + a];
+            let corners = [v(0, 0), v(1, 0), v(0, 1), v(1, 1)];
+            if corners.iter().all(|&x| x < floor) {
+                return 0.0;
+            }
+            let mut worst: f64 = 0.0;
+            for (fx, fy) in [(0.5, 0.5), (0.5, 0.0), (0.0, 0.5)] {
+                let truth = guide(u2dir([(i as f64 + fx) * step, (j as f64 + fy) * step]));
+                if !(truth >= floor) {
+                    continue;
+                }
+                let read = (1.0 - fy) * ((1.0 - fx) * corners[0] + fx * corners[1]) + fy * ((1.0 - fx) * corners[2] + fx * corners[3]);
+                worst = worst.max((read - truth).abs() / truth);
+            }
+            worst
+        })
+        .reduce(|| 0.0, f64::max)
+}
+
+/// The `ndf` grid for `guide`: the smallest of 64, 128, 256 and 512 nodes per axis at which
+/// [`ndf_interpolation_error`] is at most [`NDF_TOLERANCE`] (else 512), with that error. A lobe too narrow
+/// for 512 nodes (Beckmann below about `alpha = 0.01`) keeps the error reported.
+pub fn ndf_resolution(guide: &(dyn Fn(Vector3<f64>) -> f64 + Sync)) -> (usize, f64) {
+    let mut last = (MAX_RES, f64::INFINITY);
+    for n in [64, 128, 256, MAX_RES] {
+        let e = ndf_interpolation_error(guide, n);
+        if e <= NDF_TOLERANCE {
+            return (n, e);
+        }
+        last = (n, e);
+    }
+    last
+}
+
 /// Tabulate the NDF `d` (scan frame, `z` up; normalized or not) as an RGL tensor file. `renormalize`
 /// rescales `d` so that the table's `int D (m.n) dm` is 1 (for an empirical NDF; a model is already
-/// normalized and is written as it is). `description` becomes the file's `description` field.
+/// normalized and is written as it is). `description` becomes the file's `description` field. The `ndf`
+/// grid is chosen for `d` itself ([`tabulate_guided`] with `d` as the guide).
 pub fn tabulate(d: &(dyn Fn(Vector3<f64>) -> f64 + Sync), description: &str, opts: &RglOptions, renormalize: bool) -> Result<Table> {
+    tabulate_guided(d, d, description, opts, renormalize)
+}
+
+/// [`tabulate`] with the `ndf` grid chosen for the smooth `guide` instead of `d` (an empirical NDF is
+/// constant within its bins, so no grid reproduces it between them; its fitted model sets the resolution).
+pub fn tabulate_guided(
+    d: &(dyn Fn(Vector3<f64>) -> f64 + Sync),
+    guide: &(dyn Fn(Vector3<f64>) -> f64 + Sync),
+    description: &str,
+    opts: &RglOptions,
+    renormalize: bool,
+) -> Result<Table> {
     opts.check()?;
-    let n = opts.ndf_res;
+    let (n, ndf_error) = match opts.ndf_res {
+        Some(n) => (n, ndf_interpolation_error(guide, n)),
+        None => ndf_resolution(guide),
+    };
     let step = 1.0 / (n - 1) as f64;
     // The NDF on the grid nodes.
     let mut ndf: Vec<f64> = (0..n * n).into_par_iter().map(|k| d(u2dir([(k % n) as f64 * step, (k / n) as f64 * step]))).collect();
@@ -167,7 +277,7 @@ pub fn tabulate(d: &(dyn Fn(Vector3<f64>) -> f64 + Sync), description: &str, opt
         return Err(Error::invalid(format!("the NDF has a value {bad} (not finite and >= 0) on the table's grid")));
     }
     // Quadrature over the hemisphere in grid coordinates: dw = 2 pi^2 u_theta sin(theta) du_theta du_phi.
-    let quad: Vec<(Vector3<f64>, f64)> = (0..(n - 1) * (n - 1))
+    let mut quad: Vec<(Vector3<f64>, f64)> = (0..(n - 1) * (n - 1))
         .into_par_iter()
         .flat_map_iter(|c| {
             let (i, j) = (c % (n - 1), c / (n - 1));
@@ -185,13 +295,17 @@ pub fn tabulate(d: &(dyn Fn(Vector3<f64>) -> f64 + Sync), description: &str, opt
     if !(normalization.is_finite() && normalization > 0.0) {
         return Err(Error::invalid("the NDF has no weight on the hemisphere; nothing to tabulate"));
     }
+    let total: f64 = quad.iter().map(|(_, w)| w).sum();
+    quad.retain(|(_, w)| *w >= PRUNE * total);
     let scale = if renormalize { 1.0 / normalization } else { 1.0 };
     ndf.iter_mut().for_each(|v| *v *= scale);
-    // The projected area of the tabulated NDF, on the same grid.
-    let sigma: Vec<f64> = (0..n * n)
+    // The projected area of the tabulated NDF, on a grid of its own.
+    let ns = n.min(SIGMA_RES);
+    let sstep = 1.0 / (ns - 1) as f64;
+    let sigma: Vec<f64> = (0..ns * ns)
         .into_par_iter()
         .map(|k| {
-            let w = u2dir([(k % n) as f64 * step, (k / n) as f64 * step]);
+            let w = u2dir([(k % ns) as f64 * sstep, (k / ns) as f64 * sstep]);
             scale * quad.iter().map(|(m, q)| q * w.dot(m).max(0.0)).sum::<f64>()
         })
         .collect();
@@ -206,32 +320,49 @@ pub fn tabulate(d: &(dyn Fn(Vector3<f64>) -> f64 + Sync), description: &str, opt
         .par_iter()
         .map(|&(phi, theta)| {
             let wi = Vector3::new(phi.cos() * theta.sin(), phi.sin() * theta.sin(), theta.cos());
-            // The visible NDF in grid coordinates, rounded to f32 as the renderer stores it.
-            let vndf: Vec<f64> = (0..w * w)
-                .map(|k| {
-                    let u = [(k % w) as f64 * wstep, (k / w) as f64 * wstep];
-                    let m = u2dir(u);
-                    let v = scale * d(m) * wi.dot(&m).max(0.0) * 2.0 * PI * PI * u[0] * u2theta(u[0]).sin();
-                    v as f32 as f64
-                })
-                .collect();
+            // The visible NDF in grid coordinates, D(m) <wi.m> times the grid's Jacobian.
+            let visible = |u: [f64; 2]| {
+                let m = u2dir(u);
+                scale * d(m) * wi.dot(&m).max(0.0) * 2.0 * PI * PI * u[0] * u2theta(u[0]).sin()
+            };
+            let exact: Vec<f64> = (0..w * w).map(|k| visible([(k % w) as f64 * wstep, (k / w) as f64 * wstep])).collect();
+            // Only half vectors that reflect above the horizon carry reflectance worth a node.
+            let above = |k: usize| {
+                let m = u2dir([(k % w) as f64 * wstep, (k / w) as f64 * wstep]);
+                (2.0 * wi.dot(&m) * m - wi).z > 0.0
+            };
+            let tempered: Vec<f64> = exact.iter().enumerate().map(|(k, v)| if above(k) { v.powf(TEMPER) } else { 0.0 }).collect();
+            let (te, tt) = (warp::Bilinear::new(&exact, w, w).total(), warp::Bilinear::new(&tempered, w, w).total());
+            // The written density, rounded to f32 as the renderer stores it.
+            let vndf: Vec<f64> = if te > 0.0 && tt > 0.0 {
+                exact.iter().zip(&tempered).map(|(e, t)| ((1.0 - DEFENSIVE) * e / te + DEFENSIVE * t / tt) as f32 as f64).collect()
+            } else {
+                exact.iter().map(|&e| e as f32 as f64).collect()
+            };
             let warp = warp::Bilinear::new(&vndf, w, w);
+            let written = warp.total();
             let mut refl = vec![0.0; lambdas.len() * w * w];
             let mut lum = vec![0.0; w * w];
             for k in 0..w * w {
-                let m = u2dir(warp.sample([(k % w) as f64 * wstep, (k / w) as f64 * wstep]));
+                let u = warp.sample([(k % w) as f64 * wstep, (k / w) as f64 * wstep]);
+                let m = u2dir(u);
                 let c = wi.dot(&m);
                 let wo = 2.0 * c * m - wi;
                 // Smith masking of the outgoing direction from the tabulated projected area; none below the horizon.
-                let s = bilinear(&sigma, n, dir2u(wo));
+                let s = bilinear(&sigma, ns, dir2u(wo));
                 let g1 = if wo.z > 0.0 && s > 0.0 { (wo.z / s).min(1.0) } else { 0.0 };
                 for (l, &nm) in lambdas.iter().enumerate() {
                     refl[l * w * w + k] = opts.material.fresnel(c, nm) * g1;
                 }
-                lum[k] = match opts.flavour {
+                let luminance = match opts.flavour {
                     Flavour::Rgb => (0..3).map(|l| LUMA[l] * refl[l * w * w + k]).sum(),
                     Flavour::Spectral => (0..lambdas.len()).map(|l| refl[l * w * w + k]).sum::<f64>() / lambdas.len() as f64,
                 };
+                // The sampling density the luminance warp adds in front of the written one: the VNDF over
+                // the written density at this node's half vector, so that the two warps follow the VNDF.
+                let p_written = bilinear(&vndf, w, u) / written;
+                let ratio = if te > 0.0 && p_written > 0.0 { visible(u) / te / p_written } else { 1.0 };
+                lum[k] = (luminance * ratio).max(0.0);
             }
             // A slice that reflects nothing (grazing incidence on a very rough NDF) still needs a density to
             // normalize: a uniform one, whose samples all carry the zero reflectance.
@@ -252,7 +383,7 @@ pub fn tabulate(d: &(dyn Fn(Vector3<f64>) -> f64 + Sync), description: &str, opt
         Field::f32("theta_i", &[nt], &theta_i),
         Field::f32("phi_i", &[np], &phi_i),
         Field::f32("ndf", &[n, n], &ndf),
-        Field::f32("sigma", &[n, n], &sigma),
+        Field::f32("sigma", &[ns, ns], &sigma),
         Field::f32("vndf", &[np, nt, w, w], &vndf),
         Field::f32("luminance", &[np, nt, w, w], &luminance),
     ];
@@ -263,7 +394,7 @@ pub fn tabulate(d: &(dyn Fn(Vector3<f64>) -> f64 + Sync), description: &str, opt
             fields.push(Field::f32("spectra", &[np, nt, nl, w, w], &refl));
         }
     }
-    Ok(Table { tensor: TensorFile { fields }, normalization })
+    Ok(Table { tensor: TensorFile { fields }, normalization, ndf_res: n, ndf_error })
 }
 
 /// Check `t` field by field against what a reader of `flavour` requires (the conditions of Mitsuba 3's

@@ -437,7 +437,7 @@ pub fn binary_files() -> Vec<(&'static str, Vec<u8>)> {
 pub fn rgl_files() -> Vec<(&'static str, Vec<u8>)> {
     use ndfit::export::rgl::{tabulate, Flavour, Material, RglOptions};
     use ndfit::models::{Model, ModelId, Ndf};
-    let small = |material, flavour| RglOptions { theta_i: 3, phi_i: 3, ndf_res: 8, warp_res: 4, material, flavour };
+    let small = |material, flavour| RglOptions { theta_i: 3, phi_i: 3, ndf_res: Some(8), warp_res: 4, material, flavour };
     let iso = Model::from_params(ModelId::Ggx, &[0.2]).expect("ggx");
     let aniso = Model::from_params(ModelId::GgxAniso, &[0.3, 0.1, -1.043]).expect("ggx-aniso");
     let table = |m: &Model, opts| tabulate(&|w| m.d(w), "fuzz seed", &opts, false).expect("table").tensor.to_bytes();
