@@ -65,6 +65,9 @@ pub mod budget;
 pub mod error;
 pub mod export;
 pub mod fit;
+/// The FLIP image-difference evaluator (LDR-FLIP and HDR-FLIP), to score renders of fitted lobes
+/// against renders of a measured table.
+pub mod flip;
 pub mod io;
 pub mod models;
 pub mod ndf;

@@ -16,6 +16,7 @@ mod eval;
 mod export;
 mod fit;
 mod fit_args;
+mod flip;
 mod info;
 mod ndf;
 mod progress;
@@ -122,6 +123,8 @@ enum Command {
     Bench(bench::Args),
     /// The NDF at the footprints a renderer sees, and the simplest model for them.
     Scale(scale::Args),
+    /// The FLIP difference of two renders (HDR-FLIP, or LDR-FLIP with --ldr): the mean and a magma map.
+    Flip(flip::Args),
 }
 
 /// Parse, run, and turn any error into one line and a non-zero exit.
@@ -145,6 +148,7 @@ pub fn main() -> ExitCode {
         Command::Batch(a) => batch::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Scale(a) => scale::run(a),
+        Command::Flip(a) => flip::run(a),
     };
     progress::finish();
     print_phases();
