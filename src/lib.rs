@@ -80,6 +80,9 @@ pub mod scale;
 pub mod scan;
 pub mod stats;
 pub mod synth;
+/// Geometric optics on the scan's own microgeometry (two triangles per cell, specular bounces), and the
+/// microfacet model measured against it: does microfacet theory hold for this scan?
+pub mod trace;
 
 pub use error::{Error, ErrorKind, Result};
 pub use models::ModelChoice;

@@ -23,6 +23,7 @@ mod progress;
 mod scale;
 mod scan_args;
 mod synth;
+mod trace;
 
 /// Measured microgeometry to microfacet parameters: empirical NDFs of heightfield scans and fits of the
 /// Ellipsoid, GGX and Beckmann NDFs.
@@ -123,6 +124,8 @@ enum Command {
     Bench(bench::Args),
     /// The NDF at the footprints a renderer sees, and the simplest model for them.
     Scale(scale::Args),
+    /// Trace the scan's own microgeometry (geometric optics) and measure the microfacet model against it.
+    Trace(trace::Args),
     /// The FLIP difference of two renders (HDR-FLIP, or LDR-FLIP with --ldr): the mean and a magma map.
     Flip(flip::Args),
 }
@@ -148,6 +151,7 @@ pub fn main() -> ExitCode {
         Command::Batch(a) => batch::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Scale(a) => scale::run(a),
+        Command::Trace(a) => trace::run(a),
         Command::Flip(a) => flip::run(a),
     };
     progress::finish();

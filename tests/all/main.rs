@@ -24,4 +24,5 @@ mod scale;
 mod synth;
 mod tails;
 mod tiled_info;
+mod trace;
 mod zerocopy;
