@@ -76,6 +76,7 @@ pub mod pipeline;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod preprocess;
+pub mod render;
 pub mod scale;
 pub mod scan;
 pub mod stats;

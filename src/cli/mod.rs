@@ -20,6 +20,7 @@ mod flip;
 mod info;
 mod ndf;
 mod progress;
+mod render;
 mod scale;
 mod scan_args;
 mod synth;
@@ -126,6 +127,8 @@ enum Command {
     Scale(scale::Args),
     /// Trace the scan's own microgeometry (geometric optics) and measure the microfacet model against it.
     Trace(trace::Args),
+    /// Render a fit's lobe or an RGL table on a sphere (point or broad light) to EXR or .npy.
+    Render(render::Args),
     /// The FLIP difference of two renders (HDR-FLIP, or LDR-FLIP with --ldr): the mean and a magma map.
     Flip(flip::Args),
 }
@@ -152,6 +155,7 @@ pub fn main() -> ExitCode {
         Command::Bench(a) => bench::run(a),
         Command::Scale(a) => scale::run(a),
         Command::Trace(a) => trace::run(a),
+        Command::Render(a) => render::run(a),
         Command::Flip(a) => flip::run(a),
     };
     progress::finish();

@@ -35,6 +35,7 @@ use crate::fit::metric::RefNodes;
 use crate::models::{LobeAxes, Model, ModelId, Ndf};
 use crate::ndf::SlopeFrame;
 
+pub mod choice;
 pub(crate) mod mixture;
 pub mod rgl;
 pub(crate) mod snippet;

@@ -20,6 +20,7 @@ mod options;
 mod plane_fold;
 mod quantized;
 mod readers;
+mod render;
 mod scale;
 mod synth;
 mod tails;

@@ -28,6 +28,7 @@
 
 pub(crate) mod conductor;
 pub(crate) mod empirical;
+pub(crate) mod measured;
 pub(crate) mod tensor;
 mod warp;
 
@@ -38,6 +39,7 @@ use rayon::prelude::*;
 
 pub use conductor::Material;
 pub use empirical::Regularized;
+pub use measured::{AnalyticBrdf, Measured};
 pub use tensor::{Dtype, Field, TensorFile};
 
 use crate::error::{Error, Result};
@@ -248,6 +250,100 @@ pub fn ndf_resolution(guide: &(dyn Fn(Vector3<f64>) -> f64 + Sync)) -> (usize, f
     last
 }
 
+/// The `ndf` and `sigma` grids of a table: the NDF at the nodes of its grid, and its projected area
+/// `sigma(w) = int D(m) <w.m> dm` on a grid of its own, by quadrature of the NDF (3 x 3 Gauss points per
+/// cell of the `ndf` grid). `G1(w) = cos(theta) / sigma(w)` is then Smith's masking of the tabulated NDF
+/// (Heitz 2014 eq. 22), the masking a renderer applies.
+#[derive(Debug, Clone)]
+pub struct NdfGrids {
+    /// `D` at the `n x n` nodes (`u_theta` fastest), rescaled by `scale`.
+    pub ndf: Vec<f64>,
+    /// Nodes per axis of `ndf`.
+    pub n: usize,
+    /// `sigma` at the `ns x ns` nodes.
+    pub sigma: Vec<f64>,
+    /// Nodes per axis of `sigma`.
+    pub ns: usize,
+    /// `int D(m) (m.n) dm` of the NDF before rescaling.
+    pub normalization: f64,
+    /// The bilinear reading's largest relative error against the guide ([`ndf_interpolation_error`]).
+    pub ndf_error: f64,
+    /// The factor applied to the NDF: `1 / normalization` when renormalized, else 1.
+    pub scale: f64,
+}
+
+impl NdfGrids {
+    /// The grids of `d`, the `ndf` grid `ndf_res` nodes across or chosen for `guide` ([`ndf_resolution`]);
+    /// `renormalize` rescales `d` to `int D (m.n) dm = 1`.
+    pub fn new(
+        d: &(dyn Fn(Vector3<f64>) -> f64 + Sync),
+        guide: &(dyn Fn(Vector3<f64>) -> f64 + Sync),
+        ndf_res: Option<usize>,
+        renormalize: bool,
+    ) -> Result<NdfGrids> {
+        if let Some(n) = ndf_res.filter(|n| !(8..=MAX_RES).contains(n)) {
+            return Err(Error::invalid(format!("ndf_res must be in [8, {MAX_RES}], got {n}")));
+        }
+        let (n, ndf_error) = match ndf_res {
+            Some(n) => (n, ndf_interpolation_error(guide, n)),
+            None => ndf_resolution(guide),
+        };
+        let step = 1.0 / (n - 1) as f64;
+        let mut ndf: Vec<f64> = (0..n * n).into_par_iter().map(|k| d(u2dir([(k % n) as f64 * step, (k / n) as f64 * step]))).collect();
+        if let Some(bad) = ndf.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+            return Err(Error::invalid(format!("the NDF has a value {bad} (not finite and >= 0) on the table's grid")));
+        }
+        // Quadrature over the hemisphere in grid coordinates: dw = 2 pi^2 u_theta sin(theta) du_theta du_phi.
+        let mut quad: Vec<(Vector3<f64>, f64)> = (0..(n - 1) * (n - 1))
+            .into_par_iter()
+            .flat_map_iter(|c| {
+                let (i, j) = (c % (n - 1), c / (n - 1));
+                GAUSS3.iter().flat_map(move |&(gx, wx)| {
+                    GAUSS3.iter().map(move |&(gy, wy)| {
+                        let u = [(i as f64 + gx) * step, (j as f64 + gy) * step];
+                        let m = u2dir(u);
+                        let jac = 2.0 * PI * PI * u[0] * u2theta(u[0]).sin();
+                        (m, d(m) * jac * wx * wy * step * step)
+                    })
+                })
+            })
+            .collect();
+        let normalization: f64 = quad.iter().map(|(m, w)| w * m.z).sum();
+        if !(normalization.is_finite() && normalization > 0.0) {
+            return Err(Error::invalid("the NDF has no weight on the hemisphere; nothing to tabulate"));
+        }
+        let total: f64 = quad.iter().map(|(_, w)| w).sum();
+        quad.retain(|(_, w)| *w >= PRUNE * total);
+        let scale = if renormalize { 1.0 / normalization } else { 1.0 };
+        ndf.iter_mut().for_each(|v| *v *= scale);
+        let ns = n.min(SIGMA_RES);
+        let sstep = 1.0 / (ns - 1) as f64;
+        let sigma: Vec<f64> = (0..ns * ns)
+            .into_par_iter()
+            .map(|k| {
+                let w = u2dir([(k % ns) as f64 * sstep, (k / ns) as f64 * sstep]);
+                scale * quad.iter().map(|(m, q)| q * w.dot(m).max(0.0)).sum::<f64>()
+            })
+            .collect();
+        Ok(NdfGrids { ndf, n, sigma, ns, normalization, ndf_error, scale })
+    }
+
+    /// `D(m)` as a renderer reads it: bilinear on the `ndf` grid.
+    pub fn d(&self, m: Vector3<f64>) -> f64 {
+        bilinear(&self.ndf, self.n, dir2u(m))
+    }
+
+    /// Smith's `G1(w)` of the tabulated NDF, `min(1, cos(theta) / sigma(w))`; 0 at or below the horizon.
+    pub fn g1(&self, w: Vector3<f64>) -> f64 {
+        let s = bilinear(&self.sigma, self.ns, dir2u(w));
+        if w.z > 0.0 && s > 0.0 {
+            (w.z / s).min(1.0)
+        } else {
+            0.0
+        }
+    }
+}
+
 /// Tabulate the NDF `d` (scan frame, `z` up; normalized or not) as an RGL tensor file. `renormalize`
 /// rescales `d` so that the table's `int D (m.n) dm` is 1 (for an empirical NDF; a model is already
 /// normalized and is written as it is). `description` becomes the file's `description` field. The `ndf`
@@ -266,49 +362,8 @@ pub fn tabulate_guided(
     renormalize: bool,
 ) -> Result<Table> {
     opts.check()?;
-    let (n, ndf_error) = match opts.ndf_res {
-        Some(n) => (n, ndf_interpolation_error(guide, n)),
-        None => ndf_resolution(guide),
-    };
-    let step = 1.0 / (n - 1) as f64;
-    // The NDF on the grid nodes.
-    let mut ndf: Vec<f64> = (0..n * n).into_par_iter().map(|k| d(u2dir([(k % n) as f64 * step, (k / n) as f64 * step]))).collect();
-    if let Some(bad) = ndf.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
-        return Err(Error::invalid(format!("the NDF has a value {bad} (not finite and >= 0) on the table's grid")));
-    }
-    // Quadrature over the hemisphere in grid coordinates: dw = 2 pi^2 u_theta sin(theta) du_theta du_phi.
-    let mut quad: Vec<(Vector3<f64>, f64)> = (0..(n - 1) * (n - 1))
-        .into_par_iter()
-        .flat_map_iter(|c| {
-            let (i, j) = (c % (n - 1), c / (n - 1));
-            GAUSS3.iter().flat_map(move |&(gx, wx)| {
-                GAUSS3.iter().map(move |&(gy, wy)| {
-                    let u = [(i as f64 + gx) * step, (j as f64 + gy) * step];
-                    let m = u2dir(u);
-                    let jac = 2.0 * PI * PI * u[0] * u2theta(u[0]).sin();
-                    (m, d(m) * jac * wx * wy * step * step)
-                })
-            })
-        })
-        .collect();
-    let normalization: f64 = quad.iter().map(|(m, w)| w * m.z).sum();
-    if !(normalization.is_finite() && normalization > 0.0) {
-        return Err(Error::invalid("the NDF has no weight on the hemisphere; nothing to tabulate"));
-    }
-    let total: f64 = quad.iter().map(|(_, w)| w).sum();
-    quad.retain(|(_, w)| *w >= PRUNE * total);
-    let scale = if renormalize { 1.0 / normalization } else { 1.0 };
-    ndf.iter_mut().for_each(|v| *v *= scale);
-    // The projected area of the tabulated NDF, on a grid of its own.
-    let ns = n.min(SIGMA_RES);
-    let sstep = 1.0 / (ns - 1) as f64;
-    let sigma: Vec<f64> = (0..ns * ns)
-        .into_par_iter()
-        .map(|k| {
-            let w = u2dir([(k % ns) as f64 * sstep, (k / ns) as f64 * sstep]);
-            scale * quad.iter().map(|(m, q)| q * w.dot(m).max(0.0)).sum::<f64>()
-        })
-        .collect();
+    let grids = NdfGrids::new(d, guide, opts.ndf_res, renormalize)?;
+    let NdfGrids { ref ndf, n, ref sigma, ns, normalization, ndf_error, scale } = grids;
 
     let theta_i: Vec<f64> = (0..opts.theta_i).map(|k| k as f64 * FRAC_PI_2 / (opts.theta_i - 1) as f64).collect();
     let phi_i: Vec<f64> = (0..opts.phi_i).map(|k| -PI + k as f64 * 2.0 * PI / (opts.phi_i - 1) as f64).collect();
@@ -349,8 +404,7 @@ pub fn tabulate_guided(
                 let c = wi.dot(&m);
                 let wo = 2.0 * c * m - wi;
                 // Smith masking of the outgoing direction from the tabulated projected area; none below the horizon.
-                let s = bilinear(&sigma, ns, dir2u(wo));
-                let g1 = if wo.z > 0.0 && s > 0.0 { (wo.z / s).min(1.0) } else { 0.0 };
+                let g1 = grids.g1(wo);
                 for (l, &nm) in lambdas.iter().enumerate() {
                     refl[l * w * w + k] = opts.material.fresnel(c, nm) * g1;
                 }
@@ -382,8 +436,8 @@ pub fn tabulate_guided(
         Field::u8("jacobian", &[1]),
         Field::f32("theta_i", &[nt], &theta_i),
         Field::f32("phi_i", &[np], &phi_i),
-        Field::f32("ndf", &[n, n], &ndf),
-        Field::f32("sigma", &[ns, ns], &sigma),
+        Field::f32("ndf", &[n, n], ndf),
+        Field::f32("sigma", &[ns, ns], sigma),
         Field::f32("vndf", &[np, nt, w, w], &vndf),
         Field::f32("luminance", &[np, nt, w, w], &luminance),
     ];

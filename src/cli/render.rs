@@ -1,0 +1,122 @@
+//! `ndfit render INPUT [--scene point|broad] [--light THETA,PHI] [--view THETA,PHI] [--size N] -o OUT.exr|OUT.npy`:
+//! the sphere of `ndfit::render` with a fit's lobe (JSON) or an RGL table (`.bsdf`, evaluated as Mitsuba 3's
+//! `measured` does), written as OpenEXR or NumPy.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{anyhow, bail, Context};
+use ndfit::export::rgl::{AnalyticBrdf, Material, Measured, TensorFile};
+use ndfit::models::Model;
+use ndfit::render::{direction, Brdf, Light, Scene};
+
+/// Arguments of `ndfit render`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// A fit result (`ndfit fit -o`, or any JSON object with `model` and `params`) or an RGL tabulated BSDF
+    /// (`ndfit export --to rgl`).
+    pub input: PathBuf,
+    /// point (a directional light) or broad (a spherical-cap light of `--half-angle`).
+    #[arg(long, default_value = "point")]
+    pub scene: String,
+    /// Direction toward the light, `THETA,PHI` in degrees in the sphere's frame (`z` its pole)
+    /// [default: 60,-90, 30 degrees above the default view].
+    #[arg(long, value_name = "THETA,PHI")]
+    pub light: Option<String>,
+    /// Direction toward the camera, `THETA,PHI` in degrees in the sphere's frame [default: 90,-90, the
+    /// equator, pole up, the tangent s pointing right at the image's centre].
+    #[arg(long, value_name = "THETA,PHI")]
+    pub view: Option<String>,
+    /// Pixels per side [default: 128 for point, 64 for broad].
+    #[arg(long)]
+    pub size: Option<usize>,
+    /// `--scene broad`: the half-angle of the light's cone in degrees.
+    #[arg(long, default_value_t = 25.0)]
+    pub half_angle: f64,
+    /// For a fit: the conductor (none, Al, Ag, Au, Cu or Cr); a table carries its own.
+    #[arg(long)]
+    pub material: Option<String>,
+    /// The image to write (`.exr` or `.npy`, written atomically).
+    #[arg(short = 'o', long)]
+    pub output: PathBuf,
+}
+
+/// Run `ndfit render`.
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let path = args.input.display().to_string();
+    let out = &args.output;
+    let ext = out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let as_npy = match ext.as_deref() {
+        Some("npy") => true,
+        Some("exr") => false,
+        _ => bail!("{}: the output must end in .exr or .npy", out.display()),
+    };
+    let scene = scene(&args).map_err(|e| anyhow!("{path}: {e}"))?;
+    scene.validate().map_err(|e| anyhow!("{path}: {}", e.message()))?;
+    ndfit::io::protect_input(&args.input);
+    ndfit::io::check_output(out)?;
+    let bytes = std::fs::read(&args.input).with_context(|| format!("{path}: cannot read"))?;
+    let brdf: Box<dyn Brdf> = if bytes.starts_with(b"tensor_file\0") {
+        if args.material.is_some() {
+            bail!("{path}: --material is for a fit; a table carries its conductor");
+        }
+        let t = TensorFile::parse(&bytes).map_err(|e| anyhow!("{path}: {}", e.message()))?;
+        Box::new(Measured::new(&t).map_err(|e| anyhow!("{path}: {}", e.message()))?)
+    } else {
+        let text = std::str::from_utf8(&bytes).map_err(|_| anyhow!("{path}: neither an RGL table nor a JSON fit (not UTF-8)"))?;
+        let json: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| anyhow!("{path}: neither an RGL table nor valid JSON ({e})"))?;
+        let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
+        let material: Material =
+            args.material.as_deref().unwrap_or("none").parse().map_err(|e: ndfit::Error| anyhow!("{path}: --material: {}", e.message()))?;
+        Box::new(AnalyticBrdf { model, material })
+    };
+    let image = scene.render(brdf.as_ref()).map_err(|e| anyhow!("{path}: {}", e.message()))?;
+    let data = if as_npy { image.to_npy() } else { image.to_exr().map_err(|e| anyhow!("{}: {}", out.display(), e.message()))? };
+    ndfit::io::write_bytes_atomic(out, &data)?;
+    eprintln!("ndfit: {path}: wrote {} ({} x {})", out.display(), image.width, image.height);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The scene the flags describe.
+fn scene(args: &Args) -> Result<Scene, String> {
+    let mut scene = match args.scene.as_str() {
+        "point" => Scene::point(),
+        "broad" => Scene::broad(),
+        s => return Err(format!("--scene: unknown scene '{}' (expected point or broad)", super::one_line(s))),
+    };
+    if let Some(v) = &args.view {
+        scene.camera.view = angles("--view", v)?;
+    }
+    if let Some(n) = args.size {
+        scene.camera.size = n;
+    }
+    let light = args.light.as_deref().map(|l| angles("--light", l)).transpose()?;
+    scene.light = match scene.light {
+        Light::Point { dir, irradiance } => Light::Point { dir: light.unwrap_or(dir), irradiance },
+        Light::Cap { dir, .. } => {
+            let half_angle = args.half_angle.to_radians();
+            if !(args.half_angle > 0.0 && args.half_angle <= 90.0) {
+                return Err(format!("--half-angle {} must be in (0, 90] degrees", args.half_angle));
+            }
+            // The cap's radiance keeps a white Lambertian surface facing it at 1.
+            Light::Cap { dir: light.unwrap_or(dir), half_angle, radiance: 1.0 / half_angle.sin().powi(2) }
+        }
+    };
+    Ok(scene)
+}
+
+/// `THETA,PHI` in degrees as a unit vector.
+fn angles(flag: &str, s: &str) -> Result<Vector, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let nums: Vec<f64> = parts.iter().filter_map(|p| p.parse::<f64>().ok()).filter(|v| v.is_finite()).collect();
+    if parts.len() != 2 || nums.len() != 2 {
+        return Err(format!("{flag}: '{}' is not THETA,PHI in degrees (two numbers)", super::one_line(s)));
+    }
+    if !(0.0..=180.0).contains(&nums[0]) {
+        return Err(format!("{flag}: theta {} must be in [0, 180] degrees", nums[0]));
+    }
+    Ok(direction(nums[0].to_radians(), nums[1].to_radians()))
+}
+
+type Vector = nalgebra::Vector3<f64>;

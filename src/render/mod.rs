@@ -1,0 +1,54 @@
+//! A small deterministic renderer: a unit sphere with any BRDF under a distant point light or a broad
+//! spherical-cap light, seen by an orthographic camera, every pixel integrated by a fixed quadrature
+//! (no random numbers, so two renders of the same BRDF are the same bits). It is what ndfit's model
+//! choice compares: the render of a fitted lobe against the render of the scan's measured table.
+//!
+//! The world frame is the sphere's object frame (`z` its pole), as Mitsuba 3's `sphere` with the
+//! identity transform: at a point with normal `n` the shading frame is `s = normalize(-n_y, n_x, 0)`
+//! (`dp/du` with `u` the azimuth about `+z`, Gram-Schmidt against `n`), `t = n x s`, `z = n`. A BRDF is
+//! evaluated in that local frame. The scenes, their defaults and the quadrature's measured accuracy are
+//! in `data_formats/render.md`.
+
+mod image;
+mod integrate;
+mod quadrature;
+mod scene;
+
+use nalgebra::Vector3;
+
+pub use image::Image;
+pub use scene::{Camera, Light, Scene};
+
+/// What is rendered: a BRDF in the local shading frame (`z` the normal, `x` the tangent `s`).
+pub trait Brdf: Sync {
+    /// The RGB value `f(wi, wo)` (1/sr, not multiplied by a cosine) for the direction `wi` toward the
+    /// camera and `wo` toward the light, both unit vectors pointing away from the surface (Mitsuba's
+    /// `si.wi` and `wo`).
+    fn eval(&self, wi: Vector3<f64>, wo: Vector3<f64>) -> [f64; 3];
+}
+
+impl<F: Fn(Vector3<f64>, Vector3<f64>) -> [f64; 3] + Sync> Brdf for F {
+    fn eval(&self, wi: Vector3<f64>, wo: Vector3<f64>) -> [f64; 3] {
+        self(wi, wo)
+    }
+}
+
+/// The shading frame `(s, t, n)` of the unit sphere at the point with normal `n` (Mitsuba 3's `sphere`):
+/// `s` along `dp/du = (-y, x, 0)`; at a pole, where `dp/du` vanishes, `s = +x`.
+pub fn sphere_frame(n: Vector3<f64>) -> [Vector3<f64>; 3] {
+    let du = Vector3::new(-n.y, n.x, 0.0);
+    let s = if du.norm_squared() > 0.0 { du.normalize() } else { Vector3::x() };
+    [s, n.cross(&s), n]
+}
+
+/// `w` (world) in the local frame `(s, t, n)`.
+pub fn to_local(frame: &[Vector3<f64>; 3], w: Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(frame[0].dot(&w), frame[1].dot(&w), frame[2].dot(&w))
+}
+
+/// The unit vector at polar angle `theta` from `+z` and azimuth `phi` from `+x` (radians).
+pub fn direction(theta: f64, phi: f64) -> Vector3<f64> {
+    let (st, ct) = theta.sin_cos();
+    let (sp, cp) = phi.sin_cos();
+    Vector3::new(st * cp, st * sp, ct)
+}
