@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 
 mod batch;
 mod bench;
+mod compare;
 mod convert;
 mod demo;
 mod eval;
@@ -129,6 +130,9 @@ enum Command {
     Trace(trace::Args),
     /// Render a fit's lobe or an RGL table on a sphere (point or broad light) to EXR or .npy.
     Render(render::Args),
+    /// Will a renderer show the difference? Every lobe `auto` fitted rendered against the scan's own table,
+    /// scored by FLIP: the answer (a lobe or the table) and the pictures.
+    Compare(compare::Args),
     /// The FLIP difference of two renders (HDR-FLIP, or LDR-FLIP with --ldr): the mean and a magma map.
     Flip(flip::Args),
 }
@@ -157,6 +161,7 @@ pub fn main() -> ExitCode {
         Command::Trace(a) => trace::run(a),
         Command::Render(a) => render::run(a),
         Command::Flip(a) => flip::run(a),
+        Command::Compare(a) => compare::run(a),
     };
     progress::finish();
     print_phases();

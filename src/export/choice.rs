@@ -13,7 +13,7 @@ use nalgebra::Vector3;
 
 use super::rgl::{AnalyticBrdf, Material, NdfGrids, RGB_NM};
 use crate::error::Result;
-use crate::flip::{hdr, HdrOptions, RgbImage, DEFAULT_PPD};
+use crate::flip::{auto_exposures, hdr, HdrOptions, RgbImage, DEFAULT_PPD};
 use crate::models::Model;
 use crate::render::{Brdf, Image, Scene};
 
@@ -88,11 +88,24 @@ impl Choice {
     }
 }
 
-/// The mean HDR-FLIP of `test` against `reference` at FLIP's default viewing condition, the exposures
-/// chosen from the reference as FLIP chooses them.
+/// The darkest level, relative to the reference's brightest pixel, that the exposures reach: a highlight's
+/// skirt is judged down to `1e-3` of its peak, the level the tables are held to (data_formats/rgl.md).
+/// FLIP's own stop exposure maps the image's median to mid-grey, and on a sphere against black the median
+/// is 0: 23 stops up, where a lobe's tail a millionth of its peak dominates the score.
+pub const DYNAMIC_RANGE: f64 = 1e3;
+
+/// The HDR-FLIP exposures for `reference`: FLIP's start (its brightest pixel at 0.85 after the tone
+/// mapper), the stop FLIP's own or [`DYNAMIC_RANGE`] below the start, whichever is brighter.
+pub fn exposures(reference: &Image) -> Result<HdrOptions> {
+    let (start, stop) = auto_exposures(&RgbImage::new(reference.width, reference.height, reference.data.clone())?)?;
+    Ok(HdrOptions { start_exposure: Some(start), stop_exposure: Some(stop.min(start + DYNAMIC_RANGE.log2())), num_exposures: None })
+}
+
+/// The mean HDR-FLIP of `test` against `reference` at FLIP's default viewing condition, over the
+/// [`exposures`] of the reference.
 pub fn flip_mean(reference: &Image, test: &Image) -> Result<f64> {
     let to_rgb = |i: &Image| RgbImage::new(i.width, i.height, i.data.clone());
-    Ok(hdr(&to_rgb(reference)?, &to_rgb(test)?, DEFAULT_PPD, &HdrOptions::default())?.mean())
+    Ok(hdr(&to_rgb(reference)?, &to_rgb(test)?, DEFAULT_PPD, &exposures(reference)?)?.mean())
 }
 
 /// Render the table and every candidate (simplest first) in `scenes`, score each candidate by FLIP
@@ -114,6 +127,55 @@ pub fn decide(table: &dyn Brdf, candidates: &[Model], material: Material, scenes
     let answer = scores.iter().position(|s| s.worst <= tolerance);
     let closest = (0..scores.len()).fold(0, |best, k| if scores[k].worst < scores[best].worst { k } else { best });
     Ok(Choice { scenes: scenes.iter().map(|s| s.name).collect(), scores, answer, closest, tolerance })
+}
+
+/// The picture of one scene: the table's render, the lobe's render and the FLIP map side by side (each
+/// panel scaled up to at least 256 pixels), the renders tone-mapped by FLIP's ACES curve at exposure 0
+/// and sRGB-encoded, the map in FLIP's magma colours, under a title with the score. PNG bytes.
+#[cfg(feature = "plot")]
+pub fn picture(table: &Image, lobe: &Image, title: &str) -> Result<Vec<u8>> {
+    use plotters::prelude::*;
+    let err = |e: String| crate::Error::new(crate::ErrorKind::Io, format!("picture: {e}"));
+    let to_rgb = |i: &Image| RgbImage::new(i.width, i.height, i.data.clone());
+    let map = hdr(&to_rgb(table)?, &to_rgb(lobe)?, DEFAULT_PPD, &exposures(table)?)?;
+    let (iw, ih) = (table.width, table.height);
+    let k = 256usize.div_ceil(iw.max(1)).max(1);
+    let (pw, ph) = (iw * k, ih * k);
+    let (gap, head) = (12usize, 64usize);
+    let (w, h) = (3 * pw + 4 * gap, ph + head + gap);
+    let mut buf = vec![255u8; w * h * 3];
+    let srgb = |v: f64| {
+        let v = crate::flip::aces(v.max(0.0)).clamp(0.0, 1.0);
+        let e = if v <= 0.003_130_8 { 12.92 * v } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+        (e * 255.0).round() as u8
+    };
+    let magma = map.magma_rgb8();
+    for y in 0..ph {
+        for x in 0..pw {
+            let (sx, sy) = (x / k, y / k);
+            let at = |panel: usize| ((head + y) * w + gap + panel * (pw + gap) + x) * 3;
+            let (a, b) = (table.get(sx, sy), lobe.get(sx, sy));
+            buf[at(0)..at(0) + 3].copy_from_slice(&a.map(|v| srgb(v as f64)));
+            buf[at(1)..at(1) + 3].copy_from_slice(&b.map(|v| srgb(v as f64)));
+            let m = (sy * iw + sx) * 3;
+            buf[at(2)..at(2) + 3].copy_from_slice(&magma[m..m + 3]);
+        }
+    }
+    crate::plot::ensure_font();
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
+        let font = (crate::plot::FONT, 18);
+        root.draw(&Text::new(title.to_string(), (gap as i32, 8), font)).map_err(|e| err(e.to_string()))?;
+        for (panel, label) in ["the scan's table", "the lobe", &format!("FLIP map, mean {:.4}", map.mean())].iter().enumerate() {
+            let x = (gap + panel * (pw + gap)) as i32;
+            root.draw(&Text::new(label.to_string(), (x, 38), font)).map_err(|e| err(e.to_string()))?;
+        }
+        root.present().map_err(|e| err(e.to_string()))?;
+    }
+    let mut out = std::io::Cursor::new(Vec::new());
+    image::write_buffer_with_format(&mut out, &buf, w as u32, h as u32, image::ExtendedColorType::Rgb8, image::ImageFormat::Png)
+        .map_err(|e| err(format!("PNG encoding failed: {e}")))?;
+    Ok(out.into_inner())
 }
 
 #[cfg(test)]

@@ -179,3 +179,45 @@ fn export_of_a_scan_takes_the_reading_options() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success() && err.contains("with the reading and fit options given here"), "{err}");
 }
+
+/// `ndfit compare`: on a Gaussian surface (Beckmann truth) the lobes that render closest to the scan's
+/// table are Beckmann lobes, and the GGX lobes, whose tails glow where the scan has none, score far worse;
+/// the answer line names the answer, and the picture is a PNG of three panels under a title.
+#[test]
+fn compare_ranks_the_lobes_by_their_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("g.x3p");
+    let o = Command::new(ndfit_bin())
+        .args(["synth", "--surface", "gaussian", "--sigma-x", "0.25", "--sigma-y", "0.15", "--nx", "256", "--ny", "256", "--seed", "8"])
+        .arg(&scan)
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let prefix = dir.path().join("pic");
+    let o = Command::new(ndfit_bin())
+        .arg("compare")
+        .arg(&scan)
+        .args(["--scene", "point", "--json", "--png"])
+        .arg(&prefix)
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let mut scores: Vec<(String, f64)> = doc["candidates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| (c["model"].as_str().unwrap().to_string(), c["worst"].as_f64().unwrap()))
+        .collect();
+    scores.sort_by(|a, b| a.1.total_cmp(&b.1));
+    assert!(scores[0].0.starts_with("beckmann") || scores[0].0.starts_with("student"), "{doc}");
+    let ggx = scores.iter().find(|s| s.0 == "ggx-aniso").unwrap().1;
+    assert!(ggx > 3.0 * scores[0].1, "{doc}");
+    let answer = doc["answer"].as_str().unwrap();
+    assert!(err.contains(&format!("answer {answer}")), "{err}");
+    assert_eq!(doc["lobe"].as_str().unwrap(), if answer == "measured" { scores[0].0.as_str() } else { answer }, "{doc}");
+    let png = image::open(dir.path().join("pic.point.png")).expect("a PNG").to_rgb8();
+    assert!(png.width() > 3 * 256 && png.height() >= 256, "{}x{}", png.width(), png.height());
+    assert!(!dir.path().join("pic.broad.png").exists());
+}
