@@ -99,6 +99,26 @@ class Fit:
     def d(self, m: _Directions) -> Union[float, npt.NDArray[np.float64]]: ...
     def g1(self, u: _Directions, m: _Directions) -> Union[float, npt.NDArray[np.float64]]: ...
 
+class Trace:
+    """A trace of a scan's microgeometry: the ``ndfit.trace/1`` document of ``ndfit trace`` and its binned
+    outgoing energies."""
+
+    @property
+    def incidences(self) -> List[Dict[str, Any]]: ...
+    @property
+    def verdict(self) -> Dict[str, Any]: ...
+    @property
+    def bins(self) -> Tuple[int, int]:
+        """``(n_theta, n_phi)``: uniform in ``sqrt(2 theta / pi)`` and in ``phi`` over ``[-pi, pi)``."""
+    def proj_solid_angle(self) -> npt.NDArray[np.float64]:
+        """Projected solid angle per outgoing bin, ``(n_theta, n_phi)``."""
+    def tables(self, k: int) -> Dict[str, npt.NDArray[np.float64]]:
+        """Incidence ``k``'s energies per bin: ``single``, ``multi``, ``model`` ``(n_theta, n_phi, 3)``;
+        ``var_total`` ``(n_theta, n_phi)``."""
+    def to_dict(self) -> Dict[str, Any]: ...
+    def to_json(self) -> str: ...
+    def __len__(self) -> int: ...
+
 def read(
     path: _Path, *, dx: Optional[float] = None, dy: Optional[float] = None, z_scale: Optional[float] = None, format: Optional[str] = None
 ) -> Scan: ...
@@ -143,3 +163,25 @@ def fit(
     tolerance: Optional[float] = None,
     threads: Optional[int] = None,
 ) -> Fit: ...
+def trace(
+    source: _Source,
+    incidence: Union[float, List[float], None] = None,
+    azimuth: float = 0.0,
+    material: Literal["none", "Al", "Ag", "Au", "Cu", "Cr"] = "none",
+    bounces: int = 16,
+    seed: int = 1,
+    *,
+    rays: int = 1 << 20,
+    border: Literal["periodic", "open"] = "periodic",
+    bins: str = "32x64",
+    tolerance: float = 0.05,
+    form: _Form = "plane",
+    dx: Optional[float] = None,
+    dy: Optional[float] = None,
+    z_scale: Optional[float] = None,
+    format: Optional[str] = None,
+    crop: Optional[str] = None,
+    subsample: int = 1,
+    despike: Literal["median", "none"] = "median",
+    threads: Optional[int] = None,
+) -> Trace: ...

@@ -678,6 +678,153 @@ fn fit(
     Fit::from_report(outcome.fit)
 }
 
+/// A trace of a scan's microgeometry: the `ndfit.trace/1` document of `ndfit trace`, and the binned
+/// outgoing energies it does not serialize.
+#[pyclass(module = "ndfit", name = "Trace", frozen)]
+pub struct Trace {
+    report: ndfit::trace::TraceReport,
+}
+
+#[pymethods]
+impl Trace {
+    /// One dict per incidence, in the order given (`theta_deg`, `albedo`, `albedo_by_bounce`, `g1`, ...).
+    #[getter]
+    fn incidences<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.to_dict(py)?.get_item("incidences")
+    }
+    /// The verdict on the microfacet model (`verdict`, `line`, `worst_*`).
+    #[getter]
+    fn verdict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.to_dict(py)?.get_item("verdict")
+    }
+    /// The outgoing bins `(n_theta, n_phi)`: uniform in `sqrt(2 theta / pi)` and in `phi` over `[-pi, pi)`.
+    #[getter]
+    fn bins(&self) -> (usize, usize) {
+        (self.report.table.n_theta, self.report.table.n_phi)
+    }
+    /// Projected solid angle of each outgoing bin, shape `(n_theta, n_phi)`: the BRDF averaged over a bin
+    /// is its energy over this.
+    fn proj_solid_angle<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let t = self.report.table;
+        (0..t.len()).map(|k| t.proj_solid_angle(k)).collect::<Vec<f64>>().into_pyarray(py).reshape([t.n_theta, t.n_phi])
+    }
+    /// The energies of incidence `k` per outgoing bin and channel (per unit incident energy), shape
+    /// `(n_theta, n_phi, 3)`: `single` (first bounce), `multi` (later bounces), `model` (the microfacet
+    /// model's single scattering); and `var_total`, `(n_theta, n_phi)`, the Monte Carlo variance of the
+    /// luminance of `single + multi`.
+    fn tables<'py>(&self, py: Python<'py>, k: usize) -> PyResult<Bound<'py, PyDict>> {
+        let n = self.report.tables.len();
+        let tab = self.report.tables.get(k).ok_or_else(|| invalid(format!("incidence {k} is out of range (the trace has {n})")))?;
+        let t = self.report.table;
+        let rgb = |v: &[[f64; 3]]| v.iter().flatten().copied().collect::<Vec<f64>>().into_pyarray(py).reshape([t.n_theta, t.n_phi, 3]);
+        let d = PyDict::new(py);
+        d.set_item("single", rgb(&tab.single)?)?;
+        d.set_item("multi", rgb(&tab.multi)?)?;
+        d.set_item("model", rgb(&tab.model)?)?;
+        d.set_item("var_total", tab.var_total.clone().into_pyarray(py).reshape([t.n_theta, t.n_phi])?)?;
+        Ok(d)
+    }
+    /// The whole `ndfit.trace/1` document as a dict.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.to_json()?)
+    }
+    /// The `ndfit.trace/1` JSON text, byte for byte what `ndfit trace -o` writes for the same scan and
+    /// options.
+    fn to_json(&self) -> PyResult<String> {
+        let mut s = serde_json::to_string_pretty(&self.report).map_err(|e| invalid(format!("cannot serialize the trace ({e})")))?;
+        s.push('\n');
+        Ok(s)
+    }
+    fn __len__(&self) -> usize {
+        self.report.incidences.len()
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "<ndfit.Trace {} incidences, {}x{} grid: {}>",
+            self.report.incidences.len(),
+            self.report.surface.nx,
+            self.report.surface.ny,
+            self.report.verdict.verdict
+        )
+    }
+}
+
+/// `ndfit.trace(scan_or_path, incidence=[0, 40, 70], azimuth=0.0, material="none", bounces=16, seed=1, *,
+/// ...) -> Trace`: trace the scan's microgeometry with geometric optics and measure the microfacet model
+/// against it, as `ndfit trace` does with the same options (`Trace.to_json()` is the document it writes).
+///
+/// - `incidence`: elevations in degrees (a number or a sequence, each in [0, 89.9]); `azimuth` (degrees,
+///   0 = the scan's +x); `material` (none|Al|Ag|Au|Cu|Cr); `bounces`; `seed` (the same seed gives the same
+///   trace on any number of threads); `rays` (paths per incidence, default 2^20); `border`
+///   (periodic|open); `bins` ("THETAxPHI", default "32x64"); `tolerance` (default 0.05).
+/// - reading (files only): `dx`, `dy` (m), `z_scale` (m per stored unit), `format`.
+/// - preprocessing: `form` (none|plane|poly2|poly3|cylinder, default plane), `crop`, `subsample`,
+///   `despike` (median|none).
+/// - `threads`: threads for this call (default: all cores, as the CLI).
+#[pyfunction]
+#[pyo3(signature = (source, incidence=None, azimuth=0.0, material="none", bounces=16, seed=1, *, rays=1<<20,
+    border="periodic", bins="32x64", tolerance=0.05, form="plane", dx=None, dy=None, z_scale=None, format=None, crop=None,
+    subsample=1, despike="median", threads=None))]
+#[allow(clippy::too_many_arguments)]
+fn trace(
+    py: Python<'_>,
+    source: &Bound<'_, PyAny>,
+    incidence: Option<&Bound<'_, PyAny>>,
+    azimuth: f64,
+    material: &str,
+    bounces: usize,
+    seed: u64,
+    rays: usize,
+    border: &str,
+    bins: &str,
+    tolerance: f64,
+    form: &str,
+    dx: Option<f64>,
+    dy: Option<f64>,
+    z_scale: Option<f64>,
+    format: Option<String>,
+    crop: Option<&str>,
+    subsample: usize,
+    despike: &str,
+    threads: Option<usize>,
+) -> PyResult<Trace> {
+    let src = Source::from_py(source)?;
+    let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample, despike)?;
+    let incidences_deg = match incidence {
+        None => ndfit::trace::TraceOptions::default().incidences_deg,
+        Some(v) => match v.extract::<f64>() {
+            Ok(x) => vec![x],
+            Err(_) => v.extract::<Vec<f64>>().map_err(|_| invalid("incidence must be a number or a sequence of numbers (degrees)"))?,
+        },
+    };
+    let opts = ndfit::trace::TraceOptions {
+        incidences_deg,
+        azimuth_deg: azimuth,
+        material: material.parse().map_err(to_py)?,
+        bounces,
+        seed,
+        rays,
+        border: border.parse().map_err(to_py)?,
+        table: bins.parse().map_err(to_py)?,
+        tolerance,
+        spread_over_bin: false,
+    };
+    opts.validate().map_err(to_py)?;
+    let report = src.run(
+        py,
+        threads,
+        |p| {
+            let scan = ndfit::pipeline::read_preprocessed(p, &so.read, &so.pre)?;
+            ndfit::trace::trace(&scan, &opts, None).map_err(|e| e.with_path(p))
+        },
+        |scan, label| {
+            let scan = ndfit::preprocess::apply(scan, &so.pre).map_err(|e| e.with_path(label))?;
+            ndfit::trace::trace(&scan, &opts, None).map_err(|e| e.with_path(label))
+        },
+    )?;
+    Ok(Trace { report })
+}
+
 /// The compiled part of `ndfit`; import `ndfit`, not this.
 #[pymodule]
 fn _ndfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -685,9 +832,11 @@ fn _ndfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Scan>()?;
     m.add_class::<Ndf>()?;
     m.add_class::<Fit>()?;
+    m.add_class::<Trace>()?;
     m.add_function(wrap_pyfunction!(read, m)?)?;
     m.add_function(wrap_pyfunction!(ndf, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(trace, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

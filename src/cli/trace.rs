@@ -1,7 +1,7 @@
 //! `ndfit trace SCAN --incidence 0,40,70 [-o OUT.json]`: trace the scan's own microgeometry with
 //! geometric optics and measure the microfacet model against it (docs/TRACE.md). The scan is read and
 //! preprocessed as `ndfit fit` reads it (plane removed by default); the verdict line goes to standard
-//! error.
+//! error; `--plot OUT.png` draws the first bounce's BRDF and the masking against the model.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -48,6 +48,10 @@ pub struct Args {
     /// Output JSON (`ndfit.trace/1`); without it the JSON goes to standard output.
     #[arg(short = 'o', long)]
     pub out: Option<PathBuf>,
+    /// Also write a PNG: the first bounce's BRDF in the plane of incidence, traced against the
+    /// microfacet model, and the traced masking G1 against Smith's over the incidences.
+    #[arg(long, value_name = "OUT.png")]
+    pub plot: Option<PathBuf>,
     /// No verdict line on standard error.
     #[arg(long)]
     pub quiet: bool,
@@ -55,9 +59,7 @@ pub struct Args {
 
 /// `THETAxPHI` bins.
 fn parse_bins(s: &str) -> Result<DirTable, String> {
-    let bad = || format!("{s:?} is not THETAxPHI bins (for example 32x64)");
-    let (a, b) = s.split_once('x').ok_or_else(bad)?;
-    Ok(DirTable { n_theta: a.trim().parse().map_err(|_| bad())?, n_phi: b.trim().parse().map_err(|_| bad())? })
+    s.parse::<DirTable>().map_err(|e| e.message().to_string())
 }
 
 /// Run `ndfit trace`.
@@ -76,7 +78,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     };
     // Every option is checked before the scan is read, and the output before any work.
     opts.validate()?;
-    a.scan.check_outputs(a.out.as_deref())?;
+    a.scan.check_outputs(a.out.as_deref().into_iter().chain(a.plot.as_deref()))?;
     let scan = a.scan.load()?;
     let bar = (std::io::stderr().is_terminal() && !a.quiet).then(|| {
         let b = indicatif::ProgressBar::new((opts.rays * opts.incidences_deg.len()) as u64);
@@ -98,6 +100,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     match &a.out {
         Some(path) => ndfit::io::write_atomic(path, |w| w.write_all(json.as_bytes()).map_err(ndfit::Error::io))?,
         None => super::write_stdout(json.as_bytes())?,
+    }
+    if let Some(p) = &a.plot {
+        ndfit::trace::write_plot(p, &report)?;
     }
     if !a.quiet {
         eprintln!("ndfit: trace: {}", report.verdict.line);

@@ -32,6 +32,8 @@
 
 mod compare;
 mod hierarchy;
+#[cfg(feature = "plot")]
+mod plot;
 mod surface;
 mod tally;
 mod tracer;
@@ -39,6 +41,8 @@ mod tracer;
 use rayon::prelude::*;
 
 pub use compare::SingleComparison;
+#[cfg(feature = "plot")]
+pub use plot::{plane_of_incidence, write_plot, PLOT_HEIGHT, PLOT_WIDTH};
 pub use surface::Border;
 pub use tally::{DirTable, LUMA};
 

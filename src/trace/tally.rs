@@ -72,6 +72,17 @@ impl DirTable {
     }
 }
 
+impl std::str::FromStr for DirTable {
+    type Err = crate::Error;
+    /// `THETAxPHI` bins (for example `32x64`), as `--bins` spells them; the ranges are checked by
+    /// [`TraceOptions::validate`](crate::trace::TraceOptions::validate).
+    fn from_str(s: &str) -> crate::Result<Self> {
+        let bad = || crate::Error::invalid(format!("{s:?} is not THETAxPHI bins (for example 32x64)"));
+        let (a, b) = s.split_once('x').ok_or_else(bad)?;
+        Ok(DirTable { n_theta: a.trim().parse().map_err(|_| bad())?, n_phi: b.trim().parse().map_err(|_| bad())? })
+    }
+}
+
 /// Sums per bin: three channels and the square of the luminance (for the noise).
 pub type Bin = [f64; 4];
 

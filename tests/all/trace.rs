@@ -361,3 +361,50 @@ fn the_command_writes_the_named_fields_and_clobbers_nothing_on_error() {
         assert_eq!(std::fs::read(&out).unwrap(), before, "{bad:?} clobbered the output");
     }
 }
+
+/// `--plot`: a PNG of the plotted size with ink in both panels; the plane-of-incidence slice it draws
+/// peaks near the mirror direction (traced and model alike); a directory as the plot is refused before
+/// any work, leaving the JSON untouched.
+#[test]
+fn the_plot_is_written_and_decodes_at_its_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("g.x3p");
+    let synth = std::process::Command::new(crate::common::ndfit_bin())
+        .args(["synth", scan.to_str().unwrap(), "--surface", "gaussian", "--nx", "128", "--ny", "128", "--sigma-x", "0.15"])
+        .output()
+        .unwrap();
+    assert!(synth.status.success(), "{}", String::from_utf8_lossy(&synth.stderr));
+    let (out, png) = (dir.path().join("t.json"), dir.path().join("t.png"));
+    let cli = |plot: &std::path::Path| {
+        std::process::Command::new(crate::common::ndfit_bin())
+            .args(["trace", scan.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "20000", "--incidence", "0,45,75"])
+            .args(["--plot", plot.to_str().unwrap(), "--quiet"])
+            .output()
+            .unwrap()
+    };
+    let ok = cli(&png);
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let img = image::open(&png).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (ndfit::trace::PLOT_WIDTH, ndfit::trace::PLOT_HEIGHT));
+    let split = ndfit::trace::PLOT_WIDTH * 3 / 5;
+    for (x0, x1) in [(0, split), (split, ndfit::trace::PLOT_WIDTH)] {
+        let coloured = (x0..x1).flat_map(|x| (0..img.height()).map(move |y| (x, y))).filter(|&(x, y)| {
+            let p = img.get_pixel(x, y).0;
+            p.iter().max().unwrap() - p.iter().min().unwrap() > 60
+        });
+        assert!(coloured.count() > 200, "panel {x0}..{x1} has no coloured series");
+    }
+    // The slice drawn, from the library on the same scan: its peak lies on the specular side near 45 deg.
+    let hf = ndfit::pipeline::read_preprocessed(&scan, &Default::default(), &Default::default()).unwrap();
+    let r = run(&hf, &[45.0], |o| o.rays = 1 << 16);
+    let slice = ndfit::trace::plane_of_incidence(&r, 0);
+    assert_eq!(slice.len(), 2 * r.table.n_theta);
+    for pick in [|p: &(f64, f64, f64)| p.1, |p: &(f64, f64, f64)| p.2] {
+        let peak = slice.iter().max_by(|a, b| pick(a).total_cmp(&pick(b))).unwrap();
+        assert!((peak.0 - 45.0).abs() < 8.0, "peak at {} deg", peak.0);
+    }
+    let before = std::fs::read(&out).unwrap();
+    let e = cli(dir.path());
+    assert!(!e.status.success());
+    assert_eq!(std::fs::read(&out).unwrap(), before);
+}
