@@ -92,6 +92,10 @@ const MAX_RES: usize = 512;
 /// node costs one quadrature over the NDF.
 const SIGMA_RES: usize = 64;
 
+/// Nodes per axis of the quadrature grid of `sigma` and the normalization at most: every `sigma` node
+/// sums over all its points.
+const QUAD_RES: usize = 128;
+
 impl RglOptions {
     fn check(&self) -> Result<()> {
         let bad = |name: &str, v: usize, lo: usize| Error::invalid(format!("{name} must be in [{lo}, {MAX_RES}], got {v}"));
@@ -252,8 +256,8 @@ pub fn ndf_resolution(guide: &(dyn Fn(Vector3<f64>) -> f64 + Sync)) -> (usize, f
 
 /// The `ndf` and `sigma` grids of a table: the NDF at the nodes of its grid, and its projected area
 /// `sigma(w) = int D(m) <w.m> dm` on a grid of its own, by quadrature of the NDF (3 x 3 Gauss points per
-/// cell of the `ndf` grid). `G1(w) = cos(theta) / sigma(w)` is then Smith's masking of the tabulated NDF
-/// (Heitz 2014 eq. 22), the masking a renderer applies.
+/// cell of a grid of at most 128 nodes across). `G1(w) = cos(theta) / sigma(w)` is then Smith's masking
+/// of the tabulated NDF (Heitz 2014 eq. 22), the masking a renderer applies.
 #[derive(Debug, Clone)]
 pub struct NdfGrids {
     /// `D` at the `n x n` nodes (`u_theta` fastest), rescaled by `scale`.
@@ -293,11 +297,14 @@ impl NdfGrids {
         if let Some(bad) = ndf.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
             return Err(Error::invalid(format!("the NDF has a value {bad} (not finite and >= 0) on the table's grid")));
         }
-        // Quadrature over the hemisphere in grid coordinates: dw = 2 pi^2 u_theta sin(theta) du_theta du_phi.
-        let mut quad: Vec<(Vector3<f64>, f64)> = (0..(n - 1) * (n - 1))
+        // Quadrature over the hemisphere in grid coordinates: dw = 2 pi^2 u_theta sin(theta) du_theta du_phi,
+        // on cells of at most QUAD_RES nodes across (a Gauss rule is exact far beyond the bilinear reading).
+        let nq = n.min(QUAD_RES);
+        let step = 1.0 / (nq - 1) as f64;
+        let mut quad: Vec<(Vector3<f64>, f64)> = (0..(nq - 1) * (nq - 1))
             .into_par_iter()
             .flat_map_iter(|c| {
-                let (i, j) = (c % (n - 1), c / (n - 1));
+                let (i, j) = (c % (nq - 1), c / (nq - 1));
                 GAUSS3.iter().flat_map(move |&(gx, wx)| {
                     GAUSS3.iter().map(move |&(gy, wy)| {
                         let u = [(i as f64 + gx) * step, (j as f64 + gy) * step];
