@@ -50,6 +50,28 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         bail!("{path}: --render-tolerance must be a positive number, got {}", args.render_tolerance);
     }
     let material: Material = args.material.parse().map_err(|e: ndfit::Error| anyhow!("{path}: --material: {}", e.message()))?;
+    let mut scenes = Vec::new();
+    for name in &args.scene {
+        match default_scenes().into_iter().find(|s| s.name == name.trim()) {
+            Some(s) if !scenes.contains(&s) => scenes.push(s),
+            Some(_) => {}
+            None => bail!("{path}: --scene: unknown scene '{name}' (point or broad)"),
+        }
+    }
+    let pngs: Vec<PathBuf> = match &args.png {
+        Some(prefix) => scenes
+            .iter()
+            .map(|s| {
+                let mut out = prefix.clone().into_os_string();
+                out.push(format!(".{}.png", s.name));
+                PathBuf::from(out)
+            })
+            .collect(),
+        None => Vec::new(),
+    };
+    for p in &pngs {
+        ndfit::io::check_output(p)?;
+    }
     let options = args.how.options(&args.read, ndfit::ModelChoice::Auto, &args.scan)?;
     let outcome = ndfit::Pipeline::new(options).run_path(&args.scan)?;
     let fit = outcome.fit.to_model().map_err(fail)?;
@@ -69,14 +91,6 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let reg = rgl::Regularized::new(&outcome.ndf, &fit, outcome.fit.quality.max_theta_deg);
     let grids = NdfGrids::new(&|m| reg.d(m), &|m| fit.d(m), None, true).map_err(fail)?;
     let table = TableBrdf { grids: &grids, material };
-    let mut scenes = Vec::new();
-    for name in &args.scene {
-        match default_scenes().into_iter().find(|s| s.name == name.trim()) {
-            Some(s) if !scenes.contains(&s) => scenes.push(s),
-            Some(_) => {}
-            None => bail!("{path}: --scene: unknown scene '{name}' (point or broad)"),
-        }
-    }
     let choice = decide(&table, &candidates, material, &scenes, args.render_tolerance).map_err(fail)?;
     let reported = candidates[choice.reported()];
     let answer = choice.answer.map_or("measured".to_string(), |k| candidates[k].id().as_str().to_string());
@@ -86,16 +100,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     render_error.insert("worst".into(), choice.scores[choice.reported()].worst);
 
-    if let Some(prefix) = &args.png {
-        for s in &scenes {
-            let a = s.scene.render(&table).map_err(fail)?;
-            let b = s.scene.render(&AnalyticBrdf { model: reported, material }).map_err(fail)?;
-            let title = format!("{}: the scan's table against {} ({} scene)", args.scan.display(), reported.id(), s.name);
-            let bytes = picture(&a, &b, &title).map_err(fail)?;
-            let mut out = prefix.clone().into_os_string();
-            out.push(format!(".{}.png", s.name));
-            ndfit::io::write_bytes_atomic(&PathBuf::from(out), &bytes)?;
-        }
+    for (s, out) in scenes.iter().zip(&pngs) {
+        let a = s.scene.render(&table).map_err(fail)?;
+        let b = s.scene.render(&AnalyticBrdf { model: reported, material }).map_err(fail)?;
+        let title = format!("{}: the scan's table against {} ({} scene)", args.scan.display(), reported.id(), s.name);
+        let bytes = picture(&a, &b, &title).map_err(fail)?;
+        ndfit::io::write_bytes_atomic(out, &bytes)?;
     }
     let line = match choice.answer {
         Some(_) => format!("a renderer cannot tell {answer} from the scan (worst FLIP {:.4} <= {})", render_error["worst"], choice.tolerance),
