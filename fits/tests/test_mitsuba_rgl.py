@@ -402,9 +402,9 @@ def test_table_tails(tmp_path, model, params, dist):
     assert p90 <= 0.06, p90
 
 
-def test_table_tails_fail_without_the_tempered_nodes(tmp_path):
-    """The check above can fail: the same Beckmann table with too few reflectance nodes (the warp's
-    resolution of the earlier default's half) misses the tails."""
+def test_table_tails_fail_with_a_coarse_table(tmp_path):
+    """The check above can fail: the same Beckmann table with too few reflectance and NDF nodes
+    (`--warp-res 8 --ndf-res 16`) misses the tails by more than its bound."""
     model, params, dist = TAIL_LOBES[1]
     fit = tmp_path / "fit.json"
     fit.write_text(json.dumps({"model": model, "params": params}))
