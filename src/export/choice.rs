@@ -11,7 +11,7 @@
 
 use nalgebra::Vector3;
 
-use super::rgl::{AnalyticBrdf, Material, NdfGrids, RGB_NM};
+use super::rgl::{AnalyticBrdf, Material, NdfGrids};
 use crate::error::Result;
 use crate::flip::{auto_exposures, hdr, HdrOptions, RgbImage, DEFAULT_PPD};
 use crate::models::Model;
@@ -19,7 +19,7 @@ use crate::render::{Brdf, Image, Scene};
 
 /// The scan's table as a renderer shows it: `D` read bilinearly from the table's `ndf` grid, Smith's `G1`
 /// from its `sigma` grid, both directions' masking separable (as Mitsuba's `measured` with `jacobian`),
-/// and the conductor's Fresnel term at the [`RGB_NM`] wavelengths.
+/// and the conductor's Fresnel term at the [`RGB_NM`](super::rgl::RGB_NM) wavelengths.
 #[derive(Debug, Clone, Copy)]
 pub struct TableBrdf<'a> {
     /// The table's NDF and projected-area grids.
@@ -37,7 +37,7 @@ impl Brdf for TableBrdf<'_> {
         let h = (wi + wo).normalize();
         let bare = self.grids.d(h) * self.grids.g1(wi) * self.grids.g1(wo) / (4.0 * wi.z * wo.z);
         let c = wi.dot(&h);
-        RGB_NM.map(|nm| bare * self.material.fresnel(c, nm))
+        self.material.fresnel_rgb(c).map(|f| bare * f)
     }
 }
 

@@ -15,26 +15,65 @@ pub fn checked_eta(n: f64, k: f64) -> Result<Complex<f64>> {
 }
 
 /// Unpolarized Fresnel reflectance of a conductor for the cosine `cos_theta_i` of the angle between the
-/// incident direction and the facet normal, `eta = n + i k` (the exact equations with a complex Snell law,
-/// as pbrt-v4's `FrComplex`):
-/// `sin^2 t = sin^2 i / eta^2`, `cos t = sqrt(1 - sin^2 t)`, `r_par = (eta cos i - cos t)/(eta cos i + cos t)`,
-/// `r_perp = (cos i - eta cos t)/(cos i + eta cos t)`, `F = (|r_par|^2 + |r_perp|^2) / 2`.
+/// incident direction and the facet normal, `eta = n + i k`: the exact equations with a complex Snell law
+/// (`r_par`, `r_perp` as pbrt-v4's `FrComplex`) in the real form of pbrt-v3's `FrConductor`, where
+/// `a^2 + b^2 = |eta^2 - sin^2 i|` and `a = Re sqrt(eta^2 - sin^2 i)`:
+/// `R_s = (a^2 + b^2 + cos^2 i - 2 a cos i) / (a^2 + b^2 + cos^2 i + 2 a cos i)`,
+/// `R_p = R_s (cos^2 i (a^2 + b^2) + sin^4 i - 2 a cos i sin^2 i) / (... + 2 a cos i sin^2 i)`,
+/// `F = (R_s + R_p) / 2`. Square roots only: no complex polar form on the renderer's inner loop.
 /// `cos_theta_i` is clamped into `[0, 1]`. The result is in `[0, 1]`.
 pub fn fresnel_conductor(cos_theta_i: f64, eta: Complex<f64>) -> f64 {
     // Directions past grazing (or rounding just above 1) are clamped to the valid range of a cosine.
     let ci = if cos_theta_i.is_nan() { 0.0 } else { cos_theta_i.clamp(0.0, 1.0) };
-    let sin2_i = 1.0 - ci * ci;
-    let sin2_t = Complex::new(sin2_i, 0.0) / (eta * eta);
-    let cos_t = (Complex::new(1.0, 0.0) - sin2_t).sqrt();
-    let ci_c = Complex::new(ci, 0.0);
-    let den_par = eta * ci_c + cos_t;
-    let den_perp = ci_c + eta * cos_t;
+    let (cos2, sin2) = (ci * ci, 1.0 - ci * ci);
+    let (n2, k2) = (eta.re * eta.re, eta.im * eta.im);
+    let t0 = n2 - k2 - sin2;
+    let a2b2 = (t0 * t0 + 4.0 * n2 * k2).sqrt();
+    let a = (0.5 * (a2b2 + t0)).max(0.0).sqrt();
+    let (t1, t2) = (a2b2 + cos2, 2.0 * ci * a);
+    let (t3, t4) = (cos2 * a2b2 + sin2 * sin2, t2 * sin2);
     // Both denominators vanish only at grazing incidence with eta = 1, where the grazing limit F = 1 holds.
-    if den_par.norm_sqr() == 0.0 || den_perp.norm_sqr() == 0.0 {
+    if t1 + t2 <= 0.0 || t3 + t4 <= 0.0 {
         return 1.0;
     }
-    let r_par = (eta * ci_c - cos_t) / den_par;
-    let r_perp = (ci_c - eta * cos_t) / den_perp;
+    let rs = (t1 - t2) / (t1 + t2);
+    let rp = rs * (t3 - t4) / (t3 + t4);
     // |r|^2 <= 1 exactly; rounding near grazing incidence can exceed it by an ulp.
-    (0.5 * (r_par.norm_sqr() + r_perp.norm_sqr())).clamp(0.0, 1.0)
+    (0.5 * (rs + rp)).clamp(0.0, 1.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The complex form, term by term (pbrt-v4's `FrComplex`): the second algorithm the real form is
+    /// checked against.
+    fn complex_form(ci: f64, eta: Complex<f64>) -> f64 {
+        let sin2_t = Complex::new(1.0 - ci * ci, 0.0) / (eta * eta);
+        let cos_t = (Complex::new(1.0, 0.0) - sin2_t).sqrt();
+        let ci_c = Complex::new(ci, 0.0);
+        let r_par = (eta * ci_c - cos_t) / (eta * ci_c + cos_t);
+        let r_perp = (ci_c - eta * cos_t) / (ci_c + eta * cos_t);
+        0.5 * (r_par.norm_sqr() + r_perp.norm_sqr())
+    }
+
+    /// The real form equals the complex one for metals, weak absorbers and dielectrics, from normal to
+    /// near-grazing incidence; normal incidence is `|eta - 1|^2 / |eta + 1|^2`, grazing is 1.
+    #[test]
+    fn real_form_matches_the_complex_equations() {
+        let etas = [(1.1, 6.8), (0.05, 3.9), (0.27, 2.9), (3.2, 3.3), (1.5, 0.0), (2.4, 0.01), (0.9, 0.2)];
+        for (n, k) in etas {
+            let eta = Complex::new(n, k);
+            for i in 0..=200 {
+                let ci = (i as f64 / 200.0).max(1e-6);
+                let (fast, slow) = (fresnel_conductor(ci, eta), complex_form(ci, eta));
+                assert!((fast - slow).abs() < 1e-12, "eta {n}+{k}i cos {ci}: {fast} vs {slow}");
+            }
+            let normal = ((eta - 1.0) / (eta + 1.0)).norm_sqr();
+            assert!((fresnel_conductor(1.0, eta) - normal).abs() < 1e-14);
+            assert_eq!(fresnel_conductor(0.0, eta), 1.0);
+        }
+        assert_eq!(fresnel_conductor(0.0, Complex::new(1.0, 0.0)), 1.0);
+        assert_eq!(fresnel_conductor(f64::NAN, Complex::new(1.1, 6.8)), 1.0);
+    }
 }

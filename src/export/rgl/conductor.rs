@@ -9,6 +9,8 @@
 //! 0.1 to 5 eV): `eps(w) = 1 - f0 wp^2 / (w (w + i G0)) + sum_j f_j wp^2 / (w_j^2 - w^2 - i w G_j)`,
 //! `n + i k = sqrt(eps)`, photon energies in eV.
 
+use std::sync::OnceLock;
+
 use nalgebra::Complex;
 
 /// `hc` in eV nm: a wavelength in nm is `HC / E`.
@@ -181,6 +183,26 @@ impl Material {
     /// normal, at `lambda_nm` (1 for the perfect mirror).
     pub fn fresnel(self, cos_i: f64, lambda_nm: f64) -> f64 {
         self.eta(lambda_nm).map_or(1.0, |eta| crate::models::fresnel::fresnel_conductor(cos_i, eta))
+    }
+
+    /// The complex index at the [`super::RGB_NM`] wavelengths (`None` for the mirror), computed once per
+    /// material: the renderer and the tracer ask for it per shading point.
+    pub fn eta_rgb(self) -> Option<[Complex<f64>; 3]> {
+        static CACHE: [OnceLock<Option<[Complex<f64>; 3]>>; Material::ALL.len()] = [const { OnceLock::new() }; Material::ALL.len()];
+        let k = Material::ALL.iter().position(|&m| m == self).unwrap_or(0);
+        *CACHE[k].get_or_init(|| match self {
+            Material::None => None,
+            _ => Some(super::RGB_NM.map(|nm| self.eta(nm).unwrap_or(Complex::new(1.0, 0.0)))),
+        })
+    }
+
+    /// The Fresnel reflectance at the cosine `cos_i` at the [`super::RGB_NM`] wavelengths (1 for the mirror).
+    #[inline]
+    pub fn fresnel_rgb(self, cos_i: f64) -> [f64; 3] {
+        match self.eta_rgb() {
+            None => [1.0; 3],
+            Some(eta) => eta.map(|e| crate::models::fresnel::fresnel_conductor(cos_i, e)),
+        }
     }
 }
 

@@ -306,6 +306,6 @@ impl Brdf for AnalyticBrdf {
             return [0.0; 3];
         }
         let c = wi.dot(&(wi + wo).normalize());
-        RGB_NM.map(|nm| bare * self.material.fresnel(c, nm))
+        self.material.fresnel_rgb(c).map(|f| bare * f)
     }
 }
