@@ -1,7 +1,10 @@
 #!/usr/bin/env python3
 """Fit the shared real scans with `ndfit fit --model auto` and write docs/REAL_SCANS.md: per scan the
-chosen model, its verdict and NDF error beyond counting noise (`quality.delta_excess`), and the effect of
-each rung of the ladder (`selection.candidates`: the parent's `delta_excess` minus the candidate's).
+render choice's answer (`selection.answer`: a lobe, or `measured` for the scan's table), the lobe the report
+holds, the verdict, the render error of that lobe against the table per scene (`selection.render_error`),
+its NDF error beyond counting noise (`quality.delta_excess`), what the NDF error alone would have chosen
+(`--scene none`), and the effect of each rung of the ladder (`selection.candidates`: the parent's
+`delta_excess` minus the candidate's, and each rendered lobe's worst FLIP).
 
     python3 fits/real_scans_table.py [--ndfit target/release/ndfit] [--before OLD_NDFIT] [--out docs/REAL_SCANS.md]
 
@@ -21,8 +24,8 @@ SCANS = ROOT.parent / "shared" / "data" / "scans"
 EXTS = {".x3p", ".al3d", ".dat", ".opd", ".plu", ".sur", ".tmd"}
 
 
-def fit(ndfit, scan, out):
-    r = subprocess.run([ndfit, "fit", str(scan), "--model", "auto", "-o", str(out)], capture_output=True, text=True)
+def fit(ndfit, scan, out, *extra):
+    r = subprocess.run([ndfit, "fit", str(scan), "--model", "auto", "-o", str(out), *extra], capture_output=True, text=True)
     if r.returncode != 0:
         return None, r.returncode, r.stderr.strip().splitlines()[-1:] or [""]
     return json.loads(out.read_text()), 0, None
@@ -33,7 +36,14 @@ def rung(c):
     e = c.get("effect")
     change = "-" if e is None else f"{-100 * e:+.1f}%"
     guard = "" if c.get("supported", True) else " (guard)"
-    return f"{c['model']} {change}{guard}"
+    r = (c.get("render_error") or {}).get("worst")
+    flip = "" if r is None else f" [FLIP {r:.3f}]"
+    return f"{c['model']} {change}{flip}{guard}"
+
+
+def flip(sel, key):
+    v = (sel.get("render_error") or {}).get(key)
+    return "-" if v is None else f"{v:.4f}"
 
 
 def pct(v):
@@ -49,7 +59,7 @@ def main():
     scans = sorted(p for p in SCANS.iterdir() if p.suffix.lower() in EXTS)
     if not scans:
         sys.exit(f"{SCANS}: no scans")
-    rows, now, then, failed = [], [], [], []
+    rows, now, then, failed, flips = [], [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for s in scans:
             rep, rc, err = fit(a.ndfit, s, Path(tmp) / "fit.json")
@@ -57,38 +67,50 @@ def main():
                 failed.append(f"{s.name}: exit {rc}: {err[0]}")
                 continue
             q, sel = rep["quality"], rep.get("selection") or {}
+            by_ndf, _, _ = fit(a.ndfit, s, Path(tmp) / "ndf.json", "--scene", "none")
             old = None
             if a.before:
                 old, _, _ = fit(a.before, s, Path(tmp) / "before.json")
             de = q.get("delta_excess")
             if de is not None:
                 now.append(de)
+            worst = (sel.get("render_error") or {}).get("worst")
+            if worst is not None:
+                flips.append(worst)
             old_de = old["quality"].get("delta_excess") if old else None
             if old_de is not None:
                 then.append(old_de)
             effects = ", ".join(rung(c) for c in sel.get("candidates", []) if c.get("parent") is not None)
             rows.append(
-                f"| {s.name} | {rep['model']} | {q['verdict']} | {pct(de)} | "
+                f"| {s.name} | {sel.get('answer', '-')} | {rep['model']} | {q['verdict']} | {flip(sel, 'point')} | "
+                f"{flip(sel, 'broad')} | {flip(sel, 'worst')} | {pct(de)} | {by_ndf['model'] if by_ndf else '-'} | "
                 + (f"{old['model']} | {pct(old_de)} | " if a.before else "")
                 + f"{effects or '-'} | {', '.join(sel.get('not_fitted', [])) or '-'} |"
             )
             print(rows[-1], file=sys.stderr)
-    tol = None
-    head = "| scan | chosen | verdict | delta_excess | " + ("before: chosen | before: delta_excess | " if a.before else "")
-    head += "effect of each rung (change of delta_excess over its parent) | not fitted |\n"
+    head = "| scan | answer | lobe | verdict | FLIP point | FLIP broad | FLIP worst | delta_excess | NDF alone chose | "
+    head += "before: chosen | before: delta_excess | " if a.before else ""
+    head += "effect of each rung (change of delta_excess over its parent) [worst FLIP] | not fitted |\n"
     head += "|" + " --- |" * (head.count("|") - 1) + "\n"
     med = f"{statistics.median(now):.3f}" if now else "-"
     lines = [
         "# The shared real scans under `--model auto`",
         "",
-        "Made by `python3 fits/real_scans_table.py" + (" --before OLD_NDFIT" if a.before else "") + "` (default options, the",
-        "default tolerance; data_formats/objective.md, \"The tolerance\" and \"Mixtures and the ladder\"). A rung's",
-        "effect is the change of the NDF error beyond counting noise over its parent (negative: it lowers the",
-        "error); `(guard)` marks a candidate the likelihood does not support.",
+        "Made by `python3 fits/real_scans_table.py" + (" --before OLD_NDFIT" if a.before else "") + "` (default options: the",
+        "render choice in the default scenes with its default tolerance, data_formats/render.md, \"The choice\"; the NDF",
+        "tolerance of data_formats/objective.md, \"The tolerance\" and \"Mixtures and the ladder\"). `answer` is what a",
+        "renderer should use (`measured`: the scan's own table, `ndfit export SCAN --to rgl`); `lobe` is the report's",
+        "`model` (the answer, or the closest lobe); the FLIP columns are that lobe's mean HDR-FLIP against the table's",
+        "render; `NDF alone chose` is `--scene none` (the ladder's choice by the NDF error beyond counting noise). A",
+        "rung's effect is the change of that NDF error over its parent (negative: it lowers the error), with the",
+        "rung's worst FLIP where it was rendered in every scene (the choice stops at its answer, and a lobe already",
+        "out in the first scene is not rendered in the second); `(guard)` marks a candidate the likelihood does not",
+        "support.",
         "",
         head + "\n".join(rows),
         "",
-        f"Median `delta_excess` of the chosen model: {med}" + (f" (before: {statistics.median(then):.3f})" if then else "") + ".",
+        f"Median `delta_excess` of the reported lobe: {med}" + (f" (before: {statistics.median(then):.3f})" if then else "")
+        + (f"; median worst FLIP {statistics.median(flips):.3f}" if flips else "") + ".",
     ]
     if then:
         lines += ["", "The `before` columns are the other build's own report: a build that removes another noise "

@@ -908,6 +908,31 @@ over the lit pixels is several times the seed-to-seed noise (the ratio printed a
 pixels and 256 samples per pixel the two materials are told apart by the image, not by the noise.
 """
 
+MEASURED_CHOICE_INTRO = r"""
+## The render decides
+
+`ndfit fit --model auto` above already answered this question with its own renderer: it rendered the scan's
+table and the ladder's lobes, simplest first, on a sphere under a point light and under a broad light, and
+scored each lobe by HDR-FLIP against the table (data_formats/render.md, "The choice"). `selection.answer` is
+the lobe a renderer cannot tell from the scan (within FLIP 0.02, what a 64-spp render differs from a
+converged one), or `measured` when no lobe is, and then the table written above is the material.
+`ndfit compare SCAN --png PREFIX` writes the picture of each scene: the table's render, the lobe's, and the
+FLIP map, with the score. It shows where the lobe and the scan differ.
+"""
+
+MEASURED_CHOICE = r"""
+sel = fit["selection"]
+print("answer:", sel["answer"], "| lobe:", fit["model"], "| render error:", {k: round(v, 4) for k, v in sel["render_error"].items()})
+print("each rendered lobe's worst FLIP:", {c["model"]: round(c["render_error"]["worst"], 3) for c in sel["candidates"] if "worst" in (c.get("render_error") or {})})
+prefix = os.path.join(OUT, "choice")
+_, err = ndfit("compare", SCAN, "--png", prefix)
+print(err.strip())
+fig, ax = plt.subplots(2, 1, figsize=(12, 9))
+for a, name in zip(ax, ["point", "broad"]):
+    a.imshow(plt.imread(prefix + "." + name + ".png")); a.axis("off")
+plt.tight_layout(); plt.show()
+"""
+
 
 def measured():
     cells = [
@@ -917,6 +942,8 @@ def measured():
         new_code_cell(MEASURED_RENDER.strip()),
         new_code_cell(MEASURED_COMPARE.strip()),
         new_markdown_cell(MEASURED_READING.strip()),
+        new_markdown_cell(MEASURED_CHOICE_INTRO.strip()),
+        new_code_cell(MEASURED_CHOICE.strip()),
     ]
     return cells
 

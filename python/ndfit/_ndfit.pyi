@@ -161,6 +161,9 @@ def fit(
     na: Optional[float] = None,
     tail: Literal["rim", "core", "unresolved", "all"] = "rim",
     tolerance: Optional[float] = None,
+    scene: str = "point,broad",
+    render_tolerance: float = 0.02,
+    material: Literal["none", "Al", "Ag", "Au", "Cu", "Cr"] = "Al",
     threads: Optional[int] = None,
 ) -> Fit: ...
 def trace(

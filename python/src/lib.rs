@@ -623,11 +623,15 @@ fn finish<'py>(py: Python<'py>, out: Vec<f64>, single: bool) -> PyResult<Bound<'
 ///   `max_theta` (degrees, (0, 90], default 70) or `na` (numerical aperture: max_theta = asin(NA)),
 ///   `tail` (rim|core|unresolved|all, as `--tail`), `tolerance` (the NDF error beyond counting noise a
 ///   renderer cannot show, default 0.05, as `--tolerance`), `preset` (fast|balanced|accurate, as `--preset`).
+/// - `auto`'s render choice (as `--scene`, `--render-tolerance`, `--material`): `scene` ("point,broad" by
+///   default, stated scenes such as "point:light=30/0", or "none"), `render_tolerance` (mean FLIP, 0.02),
+///   `material` (the conductor of the renders, "Al").
 /// - `threads`: threads for this call (default: all cores, as the CLI).
 #[pyfunction]
 #[pyo3(signature = (source, model="auto", form="plane", preset=None, *, dx=None, dy=None, z_scale=None, format=None, crop=None,
     subsample=1, despike="median", normals="central", ndf_cells=None, target_count=64.0, objective="poisson", solver="lm",
-    extra_starts=0, max_theta=None, na=None, tail="rim", tolerance=None, threads=None))]
+    extra_starts=0, max_theta=None, na=None, tail="rim", tolerance=None, scene="point,broad", render_tolerance=0.02, material="Al",
+    threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -652,6 +656,9 @@ fn fit(
     na: Option<f64>,
     tail: &str,
     tolerance: Option<f64>,
+    scene: &str,
+    render_tolerance: f64,
+    material: &str,
     threads: Option<usize>,
 ) -> PyResult<Fit> {
     let src = Source::from_py(source)?;
@@ -672,7 +679,8 @@ fn fit(
     };
     let model = model.parse::<ModelChoice>().map_err(|e| invalid(format!("model: {}", e.message())))?;
     let preset = parse_preset(preset)?;
-    let pipeline = Pipeline::new(Options { read: so.read, preprocess: so.pre, preset, ndf, model, fit });
+    let render = check::render(scene, render_tolerance, material, Spelling::Keyword).map_err(to_py)?;
+    let pipeline = Pipeline::new(Options { read: so.read, preprocess: so.pre, preset, ndf, model, fit, render });
     pipeline.options().validate().map_err(to_py)?;
     let outcome = src.run(py, threads, |p| pipeline.run_path(p), |scan, label| pipeline.run(scan, label))?;
     Fit::from_report(outcome.fit)

@@ -67,6 +67,9 @@ pub struct Report {
     /// `ndfit fit --model auto` over one single-lobe fit, `ndfit fit --model ggx-aniso`, on the same
     /// single-lobe scan (target at most 3).
     pub auto_over_single: Option<f64>,
+    /// The render choice's cost, `auto` less `auto --scene none`, over one single-lobe fit (target at most
+    /// 1.5).
+    pub render_over_single: Option<f64>,
 }
 
 /// Write the scans of `plan` into `work` (once: existing files are kept) and return the single scan
@@ -177,16 +180,19 @@ pub fn run(plan: &Plan, work: &Path, mut log: impl FnMut(&str)) -> Result<Report
             out_json.as_os_str(),
         ],
     ));
-    // `auto` against one single-lobe fit, whole processes: the scan is one ellipsoid cap.
-    for model in ["ggx-aniso", "auto"] {
+    // `auto` against one single-lobe fit, whole processes: the scan is one ellipsoid cap. `auto` with and
+    // without its render choice (`--scene none`): their difference is the render scoring's cost.
+    for (label, model, scene) in [("ggx-aniso", "ggx-aniso", "point,broad"), ("auto", "auto", "point,broad"), ("auto --scene none", "auto", "none")] {
         cmds.push(Cmd::new(
-            &format!("ndfit fit --model {model}"),
+            &format!("ndfit fit --model {label}"),
             [
                 plan.ndfit.as_os_str(),
                 "fit".as_ref(),
                 scan.as_os_str(),
                 "--model".as_ref(),
                 model.as_ref(),
+                "--scene".as_ref(),
+                scene.as_ref(),
                 "-o".as_ref(),
                 out_json.as_os_str(),
             ],
@@ -252,6 +258,10 @@ pub fn run(plan: &Plan, work: &Path, mut log: impl FnMut(&str)) -> Result<Report
         batch_over_floor: ratio(find(&batch, "ndfit batch"), find(&batch, "unzip")),
         numpy_pool_over_batch: ratio(find(&batch, "numpy"), find(&batch, "ndfit batch")),
         auto_over_single: ratio(find(&single, "ndfit fit --model auto"), find(&single, "ndfit fit --model ggx-aniso")),
+        render_over_single: ratio(
+            find(&single, "ndfit fit --model auto").zip(find(&single, "ndfit fit --model auto --scene none")).map(|(a, b)| a - b),
+            find(&single, "ndfit fit --model ggx-aniso"),
+        ),
         single,
         batch,
     })
@@ -291,8 +301,9 @@ pub fn markdown(r: &Report) -> String {
     }
     let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}x"));
     s += &format!(
-        "\n`ndfit fit --model auto` / `ndfit fit --model ggx-aniso` (one single-lobe scan) {} (target <= 3x).\n",
-        f(r.auto_over_single)
+        "\n`ndfit fit --model auto` / `ndfit fit --model ggx-aniso` (one single-lobe scan) {} (target <= 3x); the render choice (`auto` less `auto --scene none`) / `ggx-aniso` {} (target <= 1.5x).\n",
+        f(r.auto_over_single),
+        f(r.render_over_single)
     );
     s += &format!(
         "\nRatios of medians: `ndfit fit` / `unzip -p` {} (target <= 1.2x); `ndfit batch` / paired `unzip -p` over {} scans {} (target <= 1.3x); numpy pool / `ndfit batch` {}; numpy / `ndfit fit` (one scan) {}.\n",

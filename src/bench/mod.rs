@@ -7,7 +7,8 @@
 //! against the truth ([`accuracy`]: the NDF difference metric of `data_formats/objective.md` and the
 //! parameter errors). [`analysis`] extracts the Pareto front of time against error and the cost model
 //! (log-log exponents), [`plot`] draws the front, `presets` holds the presets picked from it, and
-//! [`numpy`] runs the reference numpy + nlopt pipeline in the same run for the speed-up ratios; [`report`] renders the tables of `docs/PERFORMANCE.md` from a run.
+//! [`numpy`] runs the reference numpy + nlopt pipeline in the same run for the speed-up ratios; [`report`] renders the tables of `docs/PERFORMANCE.md` from a run; [`trace`](mod@trace) measures the
+//! tracer's throughput (`ndfit bench --trace`).
 
 pub mod accuracy;
 pub mod analysis;
@@ -22,6 +23,7 @@ pub mod process;
 pub mod report;
 pub mod scene;
 pub mod sweep;
+pub mod trace;
 
 pub use knobs::{Binning, Knobs, Storage};
 pub use presets::Preset;

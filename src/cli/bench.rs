@@ -73,6 +73,11 @@ pub struct Args {
     /// With --process: scans in the batch set (default 64, quick 8).
     #[arg(long)]
     pub process_scans: Option<usize>,
+    /// The tracer's throughput instead of the sweep (`ndfit::bench::trace`): one-bounce paths per second
+    /// per core on a 2048^2 Gaussian scan (one thread, then every thread), and a 4096^2 scan at 16
+    /// incidences with `ndfit trace`'s defaults; writes trace.json and trace.md (--quick: small scans).
+    #[arg(long)]
+    pub trace: bool,
     /// Internal: measure one point (JSON) and print its row as JSON (how the isolated sweep runs).
     #[arg(long, hide = true)]
     pub child_point: Option<String>,
@@ -144,6 +149,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     if args.process {
         return process(&args);
+    }
+    if args.trace {
+        return trace(&args);
     }
     let started = std::time::Instant::now();
     let load0 = loadavg();
@@ -388,5 +396,19 @@ fn process(args: &Args) -> anyhow::Result<ExitCode> {
     ndfit::io::write_bytes_atomic(&args.out.join("process.md"), md.as_bytes())?;
     eprint!("{md}");
     eprintln!("wrote {} and {}", args.out.join("process.json").display(), args.out.join("process.md").display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--trace`: the tracer's throughput (`ndfit::bench::trace`).
+fn trace(args: &Args) -> anyhow::Result<ExitCode> {
+    use ndfit::bench::trace as tb;
+    let plan = if args.quick { tb::TracePlan::quick() } else { tb::TracePlan::full() };
+    std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create the output folder", args.out.display()))?;
+    let b = tb::run(&plan, |l| eprintln!("{l}"))?;
+    let md = tb::markdown(&b);
+    ndfit::io::write_bytes_atomic(&args.out.join("trace.json"), serde_json::to_string_pretty(&b).context("JSON")?.as_bytes())?;
+    ndfit::io::write_bytes_atomic(&args.out.join("trace.md"), md.as_bytes())?;
+    eprint!("{md}");
+    eprintln!("wrote {} and {}", args.out.join("trace.json").display(), args.out.join("trace.md").display());
     Ok(ExitCode::SUCCESS)
 }

@@ -123,9 +123,11 @@ fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
         let description = format!("ndfit tabulated {} model of {name} {}; {tail}", model.id(), params_text(&model));
         rgl::tabulate(&|m| model.d(m), &description, &opts, false).map_err(fail)?
     } else {
-        let options = args.how.options(&args.read, ndfit::ModelChoice::Auto, &args.fit)?;
+        // The table is the scan's NDF filled by the ladder's closest lobe whatever the render answers, so
+        // the render choice need not run here.
+        let options = ndfit::Options { render: None, ..args.how.options(&args.read, ndfit::ModelChoice::Auto, &args.fit)? };
         let outcome = ndfit::Pipeline::new(options).run_path(&args.fit)?;
-        let fit = outcome.fit.to_model()?;
+        let fit = outcome.fit.table_model()?;
         let max_theta = outcome.fit.quality.max_theta_deg;
         let reg = rgl::Regularized::new(&outcome.ndf, &fit, max_theta);
         let description = format!(

@@ -66,6 +66,10 @@ fn measured_hint(report: &ndfit::fit::FitReport, path: &str) -> Option<String> {
     if report.quality.verdict != ndfit::fit::Verdict::Misfit {
         return None;
     }
+    // The render choice says it in its own reason (with the command).
+    if let Some(r) = report.selection.as_ref().filter(|s| s.answer.is_some()).and_then(|_| report.quality.reasons.first()) {
+        return Some(r.clone());
+    }
     let lead = match report.selection {
         Some(_) => "no model of `auto`'s ladder is within the tolerance".to_string(),
         None => format!("{} is not within the tolerance (`--model auto` tries the others)", report.model),
@@ -84,5 +88,10 @@ pub fn summary_line(report: &ndfit::fit::FitReport) -> String {
     let disp = q.dispersion.map_or(String::new(), |d| format!(" (data's own dispersion {d:.3})"));
     // Walter et al. eq. 2-3: A = S Rz(theta_z) puts the alpha_x axis along (cos theta_z, -sin theta_z).
     let axis = report.params.get("theta_z").map_or(String::new(), |t| format!(" (alpha_x axis at azimuth {:.4} rad from +x)", -t));
-    format!("{} {}{axis}{chi}{disp}: verdict {}", report.model, params.join(" "), q.verdict)
+    // auto's render choice: the answer (a lobe, or the table) and the lobe's worst FLIP against the table.
+    let answer = report.selection.as_ref().and_then(|s| {
+        let worst = s.render_error.as_ref()?.get("worst")?;
+        Some(format!(": answer {} (worst FLIP {worst:.4} against the scan's table)", s.answer.as_deref()?))
+    });
+    format!("{} {}{axis}{chi}{disp}{}: verdict {}", report.model, params.join(" "), answer.unwrap_or_default(), q.verdict)
 }

@@ -16,6 +16,33 @@ pub struct FitArgs {
     pub scan: ScanArgs,
     #[command(flatten)]
     pub how: FitHow,
+    #[command(flatten, next_help_heading = "The render choice of --model auto")]
+    pub render: RenderArgs,
+}
+
+/// How `auto`'s answer is decided by rendering (data_formats/render.md, "The choice").
+#[derive(Debug, Clone, clap::Args)]
+pub struct RenderArgs {
+    /// The scenes a lobe must pass, comma-separated: point (the sphere under a point light), broad (under
+    /// a 25-degree cap light), each optionally changed by :light=THETA/PHI, :view=THETA/PHI (degrees, the
+    /// sphere's frame, z its pole), :cap=DEG or :size=N (e.g. `point:light=30/0,broad:cap=40`); `none`
+    /// leaves the choice to the NDF error alone (no selection.answer).
+    #[arg(long, default_value = "point,broad")]
+    pub scene: String,
+    /// The largest mean FLIP, in every scene, at which a lobe is the answer (data_formats/render.md,
+    /// "The tolerance").
+    #[arg(long = "render-tolerance", default_value_t = ndfit::export::choice::DEFAULT_RENDER_TOLERANCE)]
+    pub render_tolerance: f64,
+    /// The conductor of the renders: none (F = 1), Al, Ag, Au, Cu or Cr.
+    #[arg(long, default_value = "Al")]
+    pub material: String,
+}
+
+impl RenderArgs {
+    /// The render choice these flags ask for (`None` for `--scene none`), refused naming the flag.
+    pub fn options(&self) -> ndfit::Result<Option<ndfit::export::choice::RenderOptions>> {
+        check::render(&self.scene, self.render_tolerance, &self.material, Spelling::Flag)
+    }
 }
 
 /// How a scan's NDF is binned and fitted (the flags after reading and preprocessing).
@@ -66,7 +93,8 @@ impl FitArgs {
     /// The pipeline options these flags ask for, fitting `model`; out-of-range values are refused here,
     /// naming the flag, and the result passes [`Options::validate`].
     pub fn options(&self, model: ModelChoice) -> ndfit::Result<Options> {
-        self.how.options(&self.scan.how, model, &self.scan.scan)
+        let render = self.render.options().map_err(|e| e.with_path(&self.scan.scan))?;
+        Ok(Options { render, ..self.how.options(&self.scan.how, model, &self.scan.scan)? })
     }
 }
 
@@ -84,7 +112,7 @@ impl FitHow {
         let tolerance = check::tolerance(self.tolerance, Spelling::Flag)?;
         let fit =
             FitOptions { objective, solver, extra_starts, max_theta: max_theta.to_radians(), tail, tolerance, ..FitOptions::default() };
-        let options = Options { read: read.read_options(), preprocess: read.preprocess(), preset: self.preset, ndf, model, fit };
+        let options = Options { read: read.read_options(), preprocess: read.preprocess(), preset: self.preset, ndf, model, fit, ..Options::default() };
         // What the flags' own checks leave (a --subsample of 0) is refused naming the scan.
         options.validate().map_err(|e| e.with_path(path))?;
         Ok(options)

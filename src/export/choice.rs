@@ -7,19 +7,25 @@
 //! first such lobe in the candidates' order (simplest first) wins. When none is, the answer is the table,
 //! and the closest lobe (the smallest worst score) is still reported for renderers that cannot load one.
 //! Both sides use the same Smith masking (from their own NDF) and the same conductor, so the renders
-//! differ only by the NDF.
+//! differ only by the NDF. [`RenderJudge`] is that rule as `auto`'s judge ([`crate::fit::Decide`]):
+//! lobes are rendered only until one is within the tolerance.
+
+use std::collections::BTreeMap;
+use std::sync::Mutex;
 
 use nalgebra::Vector3;
 
-use super::rgl::{AnalyticBrdf, Material, NdfGrids};
-use crate::error::Result;
+use super::rgl::{AnalyticBrdf, Material, NdfGrids, ProjectedArea, Regularized};
+use crate::error::{Error, Result};
+use crate::fit::{Decide, Decision, Offered};
 use crate::flip::{auto_exposures, hdr, HdrOptions, RgbImage, DEFAULT_PPD};
 use crate::models::Model;
-use crate::render::{Brdf, Image, Scene};
+use crate::ndf::EmpiricalNdf;
+use crate::render::{direction, Brdf, Image, Light, Scene};
 
-/// The scan's table as a renderer shows it: `D` read bilinearly from the table's `ndf` grid, Smith's `G1`
-/// from its `sigma` grid, both directions' masking separable (as Mitsuba's `measured` with `jacobian`),
-/// and the conductor's Fresnel term at the [`RGB_NM`](super::rgl::RGB_NM) wavelengths.
+/// An exported table as a renderer shows it: `D` read bilinearly from the table's `ndf` grid, Smith's
+/// `G1` from its `sigma` grid, both directions' masking separable (as Mitsuba's `measured` with
+/// `jacobian`), and the conductor's Fresnel term at the [`RGB_NM`](super::rgl::RGB_NM) wavelengths.
 #[derive(Debug, Clone, Copy)]
 pub struct TableBrdf<'a> {
     /// The table's NDF and projected-area grids.
@@ -36,16 +42,46 @@ impl Brdf for TableBrdf<'_> {
         }
         let h = (wi + wo).normalize();
         let bare = self.grids.d(h) * self.grids.g1(wi) * self.grids.g1(wo) / (4.0 * wi.z * wo.z);
-        let c = wi.dot(&h);
-        self.material.fresnel_rgb(c).map(|f| bare * f)
+        self.material.fresnel_rgb(wi.dot(&h)).map(|f| bare * f)
+    }
+}
+
+/// The quadrature nodes across the hemisphere of the scan table's projected area ([`ProjectedArea`]).
+const AREA_QUAD: usize = 64;
+/// The nodes across of its `sigma` grid: Smith's `G1` is smooth, and 32 nodes read it within a fraction
+/// of a percent everywhere but the last degrees above the horizon.
+const AREA_RES: usize = 32;
+
+/// The scan's table as the choice renders it: `D` the regularized empirical NDF ([`Regularized`], the
+/// function `ndfit export SCAN --to rgl` tabulates, read without that table's resampling), Smith's `G1`
+/// from its projected area, the conductor's Fresnel term.
+#[derive(Clone, Copy)]
+pub struct ScanBrdf<'a> {
+    /// The scan's NDF, regularized.
+    pub reg: &'a Regularized<'a>,
+    /// Its projected area and normalization.
+    pub area: &'a ProjectedArea,
+    /// The conductor.
+    pub material: Material,
+}
+
+impl Brdf for ScanBrdf<'_> {
+    fn eval(&self, wi: Vector3<f64>, wo: Vector3<f64>) -> [f64; 3] {
+        // Reflection only; on the horizon the cosines' quotient has the limit 0.
+        if !(wi.z > 0.0 && wo.z > 0.0) {
+            return [0.0; 3];
+        }
+        let h = (wi + wo).normalize();
+        let bare = self.area.scale * self.reg.d(h) * self.area.g1(wi) * self.area.g1(wo) / (4.0 * wi.z * wo.z);
+        self.material.fresnel_rgb(wi.dot(&h)).map(|f| bare * f)
     }
 }
 
 /// A scene of the choice with the name the report gives it.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct NamedScene {
-    /// `point` or `broad` for the defaults.
-    pub name: &'static str,
+    /// `point` or `broad` for the defaults; a stated scene is named by its spec.
+    pub name: String,
     /// The scene.
     pub scene: Scene,
 }
@@ -53,23 +89,104 @@ pub struct NamedScene {
 /// The default scenes: the sphere under a point light (every half vector in one image) and under a broad
 /// light (the NDF blurred, as a room lights an object); `data_formats/render.md` states them.
 pub fn default_scenes() -> Vec<NamedScene> {
-    vec![NamedScene { name: "point", scene: Scene::point() }, NamedScene { name: "broad", scene: Scene::broad() }]
+    vec![NamedScene { name: "point".into(), scene: Scene::point() }, NamedScene { name: "broad".into(), scene: Scene::broad() }]
+}
+
+/// The scenes a spec names, comma-separated: `point` or `broad`, each optionally followed by
+/// `:KEY=VALUE` changes, `light=THETA/PHI` and `view=THETA/PHI` (degrees, the sphere's frame, `z` its
+/// pole), `cap=DEG` (a cap light of that half-angle instead) and `size=N` (pixels). An unknown name or
+/// key, a bad number or a scene that cannot be rendered is an error naming it.
+pub fn parse_scenes(spec: &str) -> Result<Vec<NamedScene>> {
+    let mut out: Vec<NamedScene> = Vec::new();
+    for item in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let mut parts = item.split(':');
+        let base = parts.next().unwrap_or("");
+        let mut scene = match base {
+            "point" => Scene::point(),
+            "broad" => Scene::broad(),
+            _ => return Err(Error::invalid(format!("scene '{item}': unknown scene '{base}' (point or broad)"))),
+        };
+        for kv in parts {
+            let bad = |why: &str| Error::invalid(format!("scene '{item}': '{kv}': {why}"));
+            let (key, value) = kv.split_once('=').ok_or_else(|| bad("expected KEY=VALUE"))?;
+            let number = |v: &str| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| bad("not a finite number"));
+            let angles = |v: &str| -> Result<Vector3<f64>> {
+                let (t, p) = v.split_once('/').ok_or_else(|| bad("expected THETA/PHI in degrees"))?;
+                Ok(direction(number(t)?.to_radians(), number(p)?.to_radians()))
+            };
+            match key.trim() {
+                "light" => {
+                    let d = angles(value)?;
+                    scene.light = match scene.light {
+                        Light::Point { irradiance, .. } => Light::Point { dir: d, irradiance },
+                        Light::Cap { half_angle, radiance, .. } => Light::Cap { dir: d, half_angle, radiance },
+                    };
+                }
+                "view" => scene.camera.view = angles(value)?,
+                "cap" => {
+                    let deg = number(value)?;
+                    if !(deg > 0.0 && deg <= 90.0) {
+                        return Err(bad("the half-angle must be in (0, 90] degrees"));
+                    }
+                    let (dir, half_angle) = (light_dir(&scene.light), deg.to_radians());
+                    scene.light = Light::Cap { dir, half_angle, radiance: 1.0 / half_angle.sin().powi(2) };
+                }
+                "size" => scene.camera.size = value.trim().parse().map_err(|_| bad("not a pixel count"))?,
+                _ => return Err(bad("unknown key (light, view, cap or size)")),
+            }
+        }
+        scene.validate().map_err(|e| Error::invalid(format!("scene '{item}': {}", e.message())))?;
+        if !out.iter().any(|s| s.name == item) {
+            out.push(NamedScene { name: item.to_string(), scene });
+        }
+    }
+    if out.is_empty() {
+        return Err(Error::invalid(format!("no scene in '{spec}' (point, broad, or one with :KEY=VALUE changes)")));
+    }
+    Ok(out)
+}
+
+fn light_dir(light: &Light) -> Vector3<f64> {
+    match *light {
+        Light::Point { dir, .. } | Light::Cap { dir, .. } => dir,
+    }
 }
 
 /// One candidate's scores: the mean HDR-FLIP of its render against the table's, per scene, and the worst.
+/// A score can stop short (NaN for the scenes not rendered) once its worst already rules the lobe out.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Score {
-    /// The mean FLIP per scene, in the scenes' order.
+    /// The mean FLIP per scene, in the scenes' order (NaN: not rendered).
     pub per_scene: Vec<f64>,
-    /// The largest of `per_scene`.
+    /// The largest of `per_scene` rendered: the worst, or a lower bound of it when not complete.
     pub worst: f64,
+    /// The largest FLIP beyond the table's own noise floor over the scenes rendered
+    /// (`per_scene - floor`; `worst` where there is no floor): what the tolerance is held to.
+    pub excess: f64,
+}
+
+impl Score {
+    /// Whether every scene was rendered.
+    pub fn complete(&self) -> bool {
+        self.per_scene.iter().all(|v| !v.is_nan())
+    }
+
+    /// The score as the fit report writes it: per scene rendered by name, and `worst` when complete.
+    pub fn by_name(&self, scenes: &[NamedScene]) -> BTreeMap<String, f64> {
+        let mut m: BTreeMap<String, f64> =
+            scenes.iter().map(|s| s.name.clone()).zip(self.per_scene.iter().copied()).filter(|(_, v)| !v.is_nan()).collect();
+        if self.complete() {
+            m.insert("worst".into(), self.worst);
+        }
+        m
+    }
 }
 
 /// What the renders decided.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Choice {
     /// The scenes' names, in the scores' order.
-    pub scenes: Vec<&'static str>,
+    pub scenes: Vec<String>,
     /// Each candidate's scores, in the candidates' order.
     pub scores: Vec<Score>,
     /// The index of the answer among the candidates, or `None` for the table itself.
@@ -94,6 +211,14 @@ impl Choice {
 /// is 0: 23 stops up, where a lobe's tail a millionth of its peak dominates the score.
 pub const DYNAMIC_RANGE: f64 = 1e3;
 
+/// The default render tolerance: the largest worst-scene mean FLIP at which a lobe is the answer
+/// (data_formats/render.md, "The tolerance").
+pub const DEFAULT_RENDER_TOLERANCE: f64 = 0.02;
+
+/// The conductor of the choice's renders unless told otherwise: aluminium, the metal most scanned samples
+/// are, and a neutral one (its colour does not weigh one channel's error over another's).
+pub const DEFAULT_MATERIAL: Material = Material::Al;
+
 /// The HDR-FLIP exposures for `reference`: FLIP's start (its brightest pixel at 0.85 after the tone
 /// mapper), the stop FLIP's own or [`DYNAMIC_RANGE`] below the start, whichever is brighter.
 pub fn exposures(reference: &Image) -> Result<HdrOptions> {
@@ -108,25 +233,316 @@ pub fn flip_mean(reference: &Image, test: &Image) -> Result<f64> {
     Ok(hdr(&to_rgb(reference)?, &to_rgb(test)?, DEFAULT_PPD, &exposures(reference)?)?.mean())
 }
 
+/// A score with no scene rendered yet.
+fn unscored(scenes: usize) -> Score {
+    Score { per_scene: vec![f64::NAN; scenes], worst: 0.0, excess: f64::NEG_INFINITY }
+}
+
+/// The scores of `lobe` against the `references` (the table's renders in `scenes`, in order).
+fn score(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[Image]) -> Result<Score> {
+    extend(lobe, scenes, references, &vec![0.0; scenes.len()], unscored(scenes.len()), f64::INFINITY)
+}
+
+/// `so_far` with the scenes it lacks rendered in order, stopping once its excess over the `floors`
+/// exceeds `stop_above` (the lobe can then be neither the answer nor the closest).
+fn extend(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[Image], floors: &[f64], mut so_far: Score, stop_above: f64) -> Result<Score> {
+    for (k, (s, r)) in scenes.iter().zip(references).enumerate() {
+        if so_far.excess > stop_above {
+            break;
+        }
+        if so_far.per_scene[k].is_nan() {
+            let v = flip_mean(r, &s.scene.render(lobe)?)?;
+            so_far.per_scene[k] = v;
+            so_far.worst = so_far.worst.max(v);
+            so_far.excess = so_far.excess.max(v - floors[k]);
+        }
+    }
+    Ok(so_far)
+}
+
 /// Render the table and every candidate (simplest first) in `scenes`, score each candidate by FLIP
 /// against the table, and choose: the first candidate whose worst score is at most `tolerance`, else the
 /// table. An empty candidate list is an error (there is no closest lobe to report).
 pub fn decide(table: &dyn Brdf, candidates: &[Model], material: Material, scenes: &[NamedScene], tolerance: f64) -> Result<Choice> {
     if candidates.is_empty() || scenes.is_empty() {
-        return Err(crate::Error::invalid("the render choice needs at least one candidate lobe and one scene"));
+        return Err(Error::invalid("the render choice needs at least one candidate lobe and one scene"));
     }
     let references: Vec<Image> = scenes.iter().map(|s| s.scene.render(table)).collect::<Result<_>>()?;
-    let mut scores = Vec::with_capacity(candidates.len());
-    for &model in candidates {
-        let lobe = AnalyticBrdf { model, material };
-        let per_scene: Vec<f64> =
-            scenes.iter().zip(&references).map(|(s, r)| flip_mean(r, &s.scene.render(&lobe)?)).collect::<Result<_>>()?;
-        let worst = per_scene.iter().copied().fold(0.0, f64::max);
-        scores.push(Score { per_scene, worst });
-    }
-    let answer = scores.iter().position(|s| s.worst <= tolerance);
+    let scores: Vec<Score> =
+        candidates.iter().map(|&model| score(&AnalyticBrdf { model, material }, scenes, &references)).collect::<Result<_>>()?;
+    let answer = scores.iter().position(|s| s.excess <= tolerance);
     let closest = (0..scores.len()).fold(0, |best, k| if scores[k].worst < scores[best].worst { k } else { best });
-    Ok(Choice { scenes: scenes.iter().map(|s| s.name).collect(), scores, answer, closest, tolerance })
+    Ok(Choice { scenes: scenes.iter().map(|s| s.name.clone()).collect(), scores, answer, closest, tolerance })
+}
+
+/// How the render choice runs: its scenes, tolerance and conductor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderOptions {
+    /// The scenes a lobe must pass in every one ([`default_scenes`], or [`parse_scenes`]).
+    pub scenes: Vec<NamedScene>,
+    /// The largest worst-scene mean FLIP at which a lobe is the answer.
+    pub tolerance: f64,
+    /// The conductor of both renders.
+    pub material: Material,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions { scenes: default_scenes(), tolerance: DEFAULT_RENDER_TOLERANCE, material: DEFAULT_MATERIAL }
+    }
+}
+
+impl RenderOptions {
+    /// Refuse a tolerance that is not a positive number, or no scene.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
+            return Err(Error::invalid(format!("render_tolerance must be a positive number, got {}", self.tolerance)));
+        }
+        if self.scenes.is_empty() {
+            return Err(Error::invalid("the render choice needs at least one scene"));
+        }
+        self.scenes.iter().try_for_each(|s| s.scene.validate())
+    }
+}
+
+/// The table the judge renders against, for one filling lobe.
+struct Reference {
+    lobe: Model,
+    max_theta_deg: f64,
+    images: Vec<Image>,
+    /// Per scene, the FLIP the table's own counting noise shows ([`RenderJudge::noise_floors`]).
+    floors: Vec<f64>,
+}
+
+/// One half of `ndf`'s dispersion split (the odd row blocks, or the even), scaled to the whole: each bin's
+/// `D` from its half's count, its standard error Poisson on that count. `None` without a split.
+fn half(ndf: &EmpiricalNdf, odd: bool) -> Option<EmpiricalNdf> {
+    if ndf.counts_odd.len() != ndf.bins.len() || ndf.n_samples == 0 {
+        return None;
+    }
+    let f_odd = ndf.counts_odd.iter().sum::<u64>() as f64 / ndf.n_samples as f64;
+    let share = if odd { f_odd } else { 1.0 - f_odd };
+    // A split with (almost) nothing on one side says nothing about the noise.
+    if !(share > 0.05) {
+        return None;
+    }
+    let mut h = ndf.clone();
+    for (b, &a) in h.bins.iter_mut().zip(&ndf.counts_odd) {
+        let c = if odd { a } else { b.count.saturating_sub(a) };
+        b.d = if b.count > 0 { b.d * (c as f64 / b.count as f64) / share } else { 0.0 };
+        b.stderr = if c > 0 { b.d / (c as f64).sqrt() } else { 0.0 };
+        b.count = c;
+    }
+    h.n_samples = (ndf.n_samples as f64 * share).round() as u64;
+    Some(h)
+}
+
+/// The render choice as `auto`'s judge: the scan's table ([`ScanBrdf`], filled by the offered lobe with
+/// the smallest NDF error, [`crate::fit::table_lobe`]) rendered once, the lobes simplest first until one is
+/// within the tolerance, each lobe rendered at most once however often it is offered.
+pub struct RenderJudge<'a> {
+    ndf: &'a EmpiricalNdf,
+    options: RenderOptions,
+    state: Mutex<(Option<Reference>, Vec<(Model, Score)>)>,
+}
+
+impl<'a> RenderJudge<'a> {
+    /// A judge for the scan whose NDF is `ndf`.
+    pub fn new(ndf: &'a EmpiricalNdf, options: RenderOptions) -> RenderJudge<'a> {
+        RenderJudge { ndf, options, state: Mutex::new((None, Vec::new())) }
+    }
+
+    /// The options it runs with.
+    pub fn options(&self) -> &RenderOptions {
+        &self.options
+    }
+
+    /// The table's renders in each scene, filled by `lobe`, the bins trusted up to `max_theta_deg`.
+    pub fn table_images(&self, lobe: &Model, max_theta_deg: f64) -> Result<Vec<Image>> {
+        self.images_of(self.ndf, lobe, max_theta_deg)
+    }
+
+    fn images_of(&self, ndf: &EmpiricalNdf, lobe: &Model, max_theta_deg: f64) -> Result<Vec<Image>> {
+        let reg = Regularized::new(ndf, lobe, max_theta_deg);
+        let area = ProjectedArea::new(&|m| reg.d(m), AREA_QUAD, AREA_RES, true)?;
+        let table = ScanBrdf { reg: &reg, area: &area, material: self.options.material };
+        self.options.scenes.iter().map(|s| s.scene.render(&table)).collect()
+    }
+
+    /// Per scene, the FLIP the table's own counting noise shows: half the FLIP between the tables of the
+    /// two halves of the scan's dispersion split (each half's noise is `sqrt 2` times the whole's, and
+    /// their difference `sqrt 2` times a half's: twice the whole table's noise against its truth). Even a
+    /// lobe equal to the scan's true NDF scores about this against the table. Zeros without a split.
+    pub fn noise_floors(&self, lobe: &Model, max_theta_deg: f64) -> Result<Vec<f64>> {
+        let (Some(a), Some(b)) = (half(self.ndf, true), half(self.ndf, false)) else {
+            return Ok(vec![0.0; self.options.scenes.len()]);
+        };
+        let (ia, ib) = (self.images_of(&a, lobe, max_theta_deg)?, self.images_of(&b, lobe, max_theta_deg)?);
+        ia.iter().zip(&ib).map(|(x, y)| Ok(0.5 * flip_mean(x, y)?)).collect()
+    }
+
+    /// The noise floors of the last decision's table (`None` before any decision).
+    pub fn floors(&self) -> Option<Vec<f64>> {
+        let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        state.0.as_ref().map(|r| r.floors.clone())
+    }
+
+    /// The table's renders the last decision scored against (`None` before any decision).
+    pub fn table_renders(&self) -> Option<Vec<Image>> {
+        let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        state.0.as_ref().map(|r| r.images.clone())
+    }
+
+    /// The scores of every lobe of `lobes` against the last decision's table, rendering those not yet
+    /// rendered (a report of every candidate, not only those the decision needed). An error before any
+    /// decision.
+    pub fn scores(&self, lobes: &[Model]) -> Result<Vec<Score>> {
+        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let Some((images, floors)) = state.0.as_ref().map(|r| (r.images.clone(), r.floors.clone())) else {
+            return Err(Error::invalid("no table rendered yet: the judge has not decided"));
+        };
+        let mut out = Vec::with_capacity(lobes.len());
+        for &model in lobes {
+            let at = state.1.iter().position(|(m, _)| *m == model);
+            let so_far = at.map_or(unscored(self.options.scenes.len()), |i| state.1[i].1.clone());
+            let lobe = AnalyticBrdf { model, material: self.options.material };
+            let s = extend(&lobe, &self.options.scenes, &images, &floors, so_far, f64::INFINITY)?;
+            match at {
+                Some(i) => state.1[i].1 = s.clone(),
+                None => state.1.push((model, s.clone())),
+            }
+            out.push(s);
+        }
+        Ok(out)
+    }
+
+    /// The scores of `lobe` so far (`None`: not rendered).
+    pub fn score_of(&self, lobe: &Model) -> Option<Score> {
+        let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        state.1.iter().find(|(m, _)| m == lobe).map(|(_, s)| s.clone())
+    }
+}
+
+impl RenderJudge<'_> {
+    /// Write the choice into `report` (an `auto` fit decided by this judge): `selection.answer`,
+    /// `render_error` (of `model`, the answer's lobe or the closest), the scores of the lobes rendered,
+    /// and the verdict: `ok` when a renderer cannot tell the lobe from the scan's table, `misfit` with
+    /// the command that writes the table when no lobe is close enough, `unresolved` as the data said. The
+    /// NDF's own reasons stay, marked as the NDF's. `scan` names the scan in the command.
+    pub fn apply(&self, report: &mut crate::fit::FitReport, scan: &str) -> Result<()> {
+        use crate::fit::Verdict;
+        let opts = &self.options;
+        let model = report.to_model()?;
+        let Some(sel) = report.selection.as_mut() else {
+            return Err(Error::invalid("the render choice applies to an `auto` fit (no selection in the report)"));
+        };
+        for c in sel.candidates.iter_mut() {
+            let p: Vec<f64> = c.model.param_names().iter().map(|n| c.params.get(*n).copied().unwrap_or(f64::NAN)).collect();
+            c.render_error = Model::from_params(c.model, &p).ok().and_then(|m| self.score_of(&m)).map(|s| s.by_name(&opts.scenes));
+        }
+        let score = self.score_of(&model);
+        let worst = score.as_ref().map_or(f64::INFINITY, |s| s.worst);
+        let excess = score.as_ref().map_or(f64::INFINITY, |s| s.excess);
+        let supported = sel.candidates.iter().find(|c| c.model == model.id()).and_then(|c| c.supported).unwrap_or(true);
+        let is_answer = supported && excess <= opts.tolerance;
+        let floors = self.floors().unwrap_or_default();
+        let worst_floor = floors.iter().copied().fold(0.0, f64::max);
+        let names: Vec<&str> = opts.scenes.iter().map(|s| s.name.as_str()).collect();
+        sel.answer = Some(if is_answer { model.id().as_str().to_string() } else { "measured".to_string() });
+        sel.render_error = score.as_ref().map(|s| s.by_name(&opts.scenes));
+        sel.render_tolerance = Some(opts.tolerance);
+        sel.render_noise = (!floors.is_empty()).then(|| opts.scenes.iter().map(|s| s.name.clone()).zip(floors.iter().copied()).collect());
+        sel.scenes = names.iter().map(|n| n.to_string()).collect();
+        let sentence = if is_answer {
+            format!(
+                "a renderer cannot tell {} from the scan's table: worst mean FLIP {worst:.4}, beyond the table's own noise ({worst_floor:.4} at most) {excess:.4} <= {} over the scenes {} ({})",
+                model.id(),
+                opts.tolerance,
+                names.join(", "),
+                opts.material.as_str()
+            )
+        } else {
+            format!(
+                "no lobe renders within mean FLIP {} of the scan's table beyond its own noise in every scene ({}); the closest, {}, is at {worst:.4} ({excess:.4} beyond the noise): the material is the table, `ndfit export {scan} --to rgl -o OUT.bsdf` (with the reading and fit options given here)",
+                opts.tolerance,
+                names.join(", "),
+                model.id()
+            )
+        };
+        let q = &mut report.quality;
+        let ndf_reasons: Vec<String> = q.reasons.iter().map(|r| format!("by the NDF alone: {r}")).collect();
+        // The NDF's misfit lines in the warnings are the render's call now.
+        let before = q.verdict;
+        if before != Verdict::Unresolved {
+            q.verdict = if is_answer { Verdict::Ok } else { Verdict::Misfit };
+            if before == Verdict::Misfit {
+                report.warnings.retain(|w| !w.starts_with("misfit: "));
+            }
+            if !is_answer {
+                report.warnings.push(format!("misfit: {sentence}"));
+            }
+        }
+        q.reasons = if before == Verdict::Unresolved {
+            // The data's reasons stay the verdict's; the render's sentence follows them.
+            q.reasons.iter().cloned().chain(std::iter::once(sentence)).collect()
+        } else {
+            std::iter::once(sentence).chain(ndf_reasons).collect()
+        };
+        // A verdict other than ok says every reason in the warnings too (and so on standard error).
+        if q.verdict != Verdict::Ok {
+            for r in &q.reasons {
+                if !report.warnings.iter().any(|w| w.contains(r.as_str())) {
+                    report.warnings.push(format!("{}: {r}", q.verdict));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Decide for RenderJudge<'_> {
+    fn decide(&self, offered: &[Offered], max_theta_deg: f64) -> Result<Decision> {
+        if offered.is_empty() {
+            return Err(Error::invalid("the render choice needs at least one candidate lobe"));
+        }
+        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let filler = offered[crate::fit::table_lobe(&offered.iter().map(|o| o.delta_data).collect::<Vec<_>>())].model;
+        // A new filling lobe (the whole ladder fitted after all) makes a new table: the old scores go.
+        if state.0.as_ref().is_none_or(|r| r.lobe != filler || r.max_theta_deg != max_theta_deg) {
+            let images = self.table_images(&filler, max_theta_deg)?;
+            let floors = self.noise_floors(&filler, max_theta_deg)?;
+            *state = (Some(Reference { lobe: filler, max_theta_deg, images, floors }), Vec::new());
+        }
+        let opts = &self.options;
+        let mut answer = None;
+        let mut closest: Option<(usize, f64)> = None;
+        for (k, o) in offered.iter().enumerate().filter(|(_, o)| o.supported) {
+            // A lobe whose excess so far exceeds both the tolerance and the closest complete one is out.
+            let stop_above = opts.tolerance.max(closest.map_or(f64::INFINITY, |(_, w)| w));
+            let at = state.1.iter().position(|(m, _)| *m == o.model);
+            let so_far = at.map_or(unscored(opts.scenes.len()), |i| state.1[i].1.clone());
+            let reference = state.0.as_ref().expect("the table was rendered above");
+            let lobe = AnalyticBrdf { model: o.model, material: opts.material };
+            let s = extend(&lobe, &opts.scenes, &reference.images, &reference.floors, so_far, stop_above)?;
+            match at {
+                Some(i) => state.1[i].1 = s.clone(),
+                None => state.1.push((o.model, s.clone())),
+            }
+            if !s.complete() {
+                continue;
+            }
+            if closest.is_none_or(|(_, w)| s.excess < w) {
+                closest = Some((k, s.excess));
+            }
+            if s.excess <= opts.tolerance {
+                answer = Some(k);
+                break;
+            }
+        }
+        // No lobe the guard supports: the simplest lobe is reported (and the table answers).
+        let reported = answer.or(closest.map(|(k, _)| k)).unwrap_or(0);
+        Ok(Decision { answer, reported })
+    }
 }
 
 /// The picture of one scene: the table's render, the lobe's render and the FLIP map side by side (each
@@ -201,6 +617,37 @@ mod tests {
         assert!(worst[2] < 0.01, "{worst:?}");
         assert!(worst[0] > 0.1, "{worst:?}");
         assert_eq!((c.answer, c.closest, c.reported()), (Some(2), 2, 2));
+    }
+
+    /// Stated scenes change what they name and nothing else; a bad name, key or value is refused naming it.
+    #[test]
+    fn scene_specs_state_their_changes() {
+        let s = parse_scenes("point, broad:cap=40:light=30/0:size=48,point").unwrap();
+        assert_eq!(s.len(), 2, "the repeated point is one scene");
+        assert_eq!((s[0].name.as_str(), &s[0].scene), ("point", &Scene::point()));
+        let b = &s[1].scene;
+        assert_eq!(b.camera.size, 48);
+        assert_eq!(b.camera.view, Scene::broad().camera.view);
+        let Light::Cap { dir, half_angle, radiance } = b.light else { panic!("a cap") };
+        assert!((dir - direction(30f64.to_radians(), 0.0)).norm() < 1e-12);
+        assert!((half_angle - 40f64.to_radians()).abs() < 1e-12);
+        // A white Lambertian surface facing the cap still shows 1.
+        assert!((radiance * half_angle.sin().powi(2) - 1.0).abs() < 1e-12);
+        let p = parse_scenes("point:view=0/0:cap=10").unwrap();
+        assert!(matches!(p[0].scene.light, Light::Cap { .. }));
+        assert!((p[0].scene.camera.view - Vector3::z()).norm() < 1e-12);
+        for (bad, says) in [
+            ("spot", "unknown scene 'spot'"),
+            ("point:light=30", "THETA/PHI"),
+            ("point:glow=1", "unknown key"),
+            ("broad:cap=0", "(0, 90]"),
+            ("point:size=0", "image size"),
+            ("point:light=a/3", "not a finite number"),
+            ("", "no scene"),
+        ] {
+            let e = parse_scenes(bad).unwrap_err().to_string();
+            assert!(e.contains(says), "{bad}: {e}");
+        }
     }
 
     /// A two-lobe surface that no single lobe renders like: the answer is the table, and the closest lobe

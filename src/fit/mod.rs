@@ -576,7 +576,51 @@ pub fn fit_model(ndf: &EmpiricalNdf, id: ModelId, opts: &FitOptions) -> Result<F
 /// decider: a model enters the choice only when its quasi-likelihood BIC (`qbic`, `F / c_data + p ln N`
 /// with the data's own overdispersion) is below its parent's, so the data support its added parameters.
 pub fn fit_auto(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
-    fit_auto_pruned(ndf, opts, true)
+    ladder(ndf, opts, true, None)
+}
+
+/// [`fit_auto`] with the answer decided above the fit by `judge` (the pipeline's render choice): the
+/// report holds the lobe it answers with, or its closest lobe when it answers with none. When it answers
+/// with none and the ladder stopped early (a model within the NDF tolerance), the whole ladder is fitted
+/// and offered again.
+pub fn fit_auto_with(ndf: &EmpiricalNdf, opts: &FitOptions, judge: &dyn Decide) -> Result<FitReport> {
+    ladder(ndf, opts, true, Some(judge))
+}
+
+/// One lobe `auto` fitted, as a [`Decide`] judge sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Offered {
+    /// The fitted lobe.
+    pub model: Model,
+    /// Whether the likelihood guard supports its parameters (an unsupported lobe is not an answer).
+    pub supported: bool,
+    /// Its NDF error against the data (`quality.delta_data`).
+    pub delta_data: Option<f64>,
+}
+
+/// A judge's answer: `answer` indexes the offered lobe a renderer should use (`None`: no lobe, the scan's
+/// own table), `reported` the lobe the fit report holds (the answer, else the closest).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Decision {
+    /// The answer's index among the offered lobes, or `None` for the table.
+    pub answer: Option<usize>,
+    /// The index of the lobe the report holds.
+    pub reported: usize,
+}
+
+/// What decides `auto`'s answer among the fitted lobes (the render choice, `export::choice`): called with
+/// the ladder's lobes simplest first (rung, parameters, NDF error).
+pub trait Decide: Sync {
+    /// The answer among `offered` (never empty), for an NDF whose bins the fit trusted up to
+    /// `max_theta_deg`.
+    fn decide(&self, offered: &[Offered], max_theta_deg: f64) -> Result<Decision>;
+}
+
+/// The lobe that fills a scan's table beyond its trusted bins and under its noisy ones: of `deltas` (the
+/// lobes' NDF errors, simplest first), the smallest, the first on a tie; the first when none is known.
+pub fn table_lobe(deltas: &[Option<f64>]) -> usize {
+    let key = |k: usize| deltas[k].filter(|d| d.is_finite()).unwrap_or(f64::INFINITY);
+    (0..deltas.len()).fold(0, |best, k| if key(k) < key(best) { k } else { best })
 }
 
 /// A fitted candidate of `auto`, or why it is left out: parameters outside the model's domain, or no fit.
@@ -610,6 +654,11 @@ fn fit_on_rung(s: &Session, id: ModelId, parent: Option<&Fitted>, opts: &FitOpti
 /// or fitting every step; the choice is the same (the steps after the first model within the tolerance
 /// come after it in the order of the choice). Public so a test can hold the two to the same choice.
 pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Result<FitReport> {
+    ladder(ndf, opts, lazy, None)
+}
+
+/// The ladder of [`fit_auto_pruned`], its answer decided by `judge` when there is one.
+fn ladder(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool, judge: Option<&dyn Decide>) -> Result<FitReport> {
     let t0 = Instant::now();
     let phase = crate::phases::phase("fit.session");
     let s = Session::new(ndf, opts)?;
@@ -701,11 +750,29 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Res
             .then(fits[a].id.cmp(&fits[b].id))
     });
     let priced: Vec<f64> = order.iter().map(|&i| if supported[i] { key(i) } else { f64::INFINITY }).collect();
-    let (chosen, within) = match verdict::select(&priced, opts.tolerance) {
+    let (by_ndf, within) = match verdict::select(&priced, opts.tolerance) {
         Some((j, w)) => (order[j], w),
         // No error is known (a delta NDF, or no bin with a count): the simplest supported model.
         None => (order.iter().copied().find(|&i| supported[i]).unwrap_or(order[0]), false),
     };
+    let chosen = match judge {
+        None => by_ndf,
+        Some(judge) => {
+            let offered: Vec<Offered> = order
+                .iter()
+                .map(|&i| Ok(Offered { model: Model::from_params(fits[i].id, &public(&fits[i]))?, supported: supported[i], delta_data: deltas[i] }))
+                .collect::<Result<_>>()?;
+            let decision = judge.decide(&offered, s.data.max_theta.to_degrees())?;
+            // No lobe fitted so far renders close enough, and the ladder stopped early: fit it whole.
+            if decision.answer.is_none() && lazy && !not_fitted.is_empty() && !delta {
+                drop(_p);
+                return ladder(ndf, opts, false, Some(judge));
+            }
+            order[decision.reported.min(order.len() - 1)]
+        }
+    };
+    let table = order[table_lobe(&order.iter().map(|&i| deltas[i]).collect::<Vec<_>>())];
+    let table_id = fits[table].id;
     let c = qbic::overdispersion(fits.iter().filter_map(|f| reduced(f, k)));
     let crit: Vec<f64> = fits.iter().map(|f| qbic::qbic(f.f, c, f.id.n_params(), n)).collect();
     let crit_data: Vec<f64> = fits.iter().map(|f| qbic::qbic(f.f, c_data, f.id.n_params(), n)).collect();
@@ -737,10 +804,11 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Res
                 delta_excess: errors[i],
                 effect: pi.and_then(|j| Some(errors[j]? - errors[i]?)),
                 supported: Some(supported[i]),
+                render_error: None,
             }
         })
         .collect();
-    let summary = ladder_summary(&fits, &errors, &supported, chosen, within, opts.tolerance, &not_fitted);
+    let summary = ladder_summary(&fits, &errors, &supported, by_ndf, within, opts.tolerance, &not_fitted);
     let best = fits.into_iter().nth(chosen).expect("chosen indexes the fits");
     let mut rep = build_report(ndf, &s, best, opts, 0.0)?;
     rep.warnings.extend(warnings);
@@ -752,6 +820,12 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Res
         ladder: Some(summary),
         tolerance: Some(opts.tolerance),
         not_fitted,
+        answer: None,
+        render_error: None,
+        render_tolerance: None,
+        render_noise: None,
+        scenes: Vec::new(),
+        table_lobe: Some(table_id),
     });
     rep.timings.fit_ms = t0.elapsed().as_secs_f64() * 1e3;
     Ok(rep)

@@ -147,6 +147,10 @@ pub struct Candidate {
     /// candidate without it is not chosen.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub supported: Option<bool>,
+    /// The render choice's score of this lobe: mean HDR-FLIP against the scan's table per scene, and
+    /// `worst`; absent for a lobe not rendered (the choice stops at the first lobe within its tolerance).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub render_error: Option<BTreeMap<String, f64>>,
 }
 
 /// Model selection of `--model auto`: the ladder of the model table priced in the NDF error beyond
@@ -172,6 +176,29 @@ pub struct Selection {
     /// The models of the ladder not fitted, as a model on a rung below them was within the tolerance.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub not_fitted: Vec<ModelId>,
+    /// The model a renderer should use (the render choice): a model id, or `measured` when no lobe renders
+    /// within `render_tolerance` of the scan's own table (then `ndfit export SCAN --to rgl` is the
+    /// material, and `model` holds the closest lobe).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub answer: Option<String>,
+    /// The render difference of `model` (the answer's lobe, or the closest) against the scan's table: mean
+    /// HDR-FLIP per scene, and `worst`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub render_error: Option<BTreeMap<String, f64>>,
+    /// The largest FLIP beyond the table's own noise, in every scene, at which a lobe is the answer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub render_tolerance: Option<f64>,
+    /// Per scene, the FLIP the scan table's own counting noise shows (half the FLIP between the tables of
+    /// the scan's two halves): a lobe is held to `render_tolerance` beyond it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub render_noise: Option<BTreeMap<String, f64>>,
+    /// The render choice's scenes (`point`, `broad`, or a stated scene; data_formats/render.md).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub scenes: Vec<String>,
+    /// The lobe that fills the scan's table beyond its trusted bins (the candidate with the smallest NDF
+    /// error against the data; [`crate::fit::table_lobe`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table_lobe: Option<ModelId>,
 }
 
 /// A fit result (`ndfit.fit/1`).
@@ -238,6 +265,19 @@ impl FitReport {
     /// The fitted model as a [`crate::models::Model`].
     pub fn to_model(&self) -> crate::Result<crate::models::Model> {
         crate::models::Model::from_params(self.model, &self.param_vec())
+    }
+
+    /// The lobe that fills the scan's table beyond its trusted bins (`selection.table_lobe`'s candidate
+    /// for `auto`), else the fitted model: the scan's table is the same whichever lobe the render chose.
+    pub fn table_model(&self) -> crate::Result<crate::models::Model> {
+        let sel = self.selection.as_ref();
+        match sel.and_then(|s| s.candidates.iter().find(|c| Some(c.model) == s.table_lobe)) {
+            Some(c) => {
+                let p: Vec<f64> = c.model.param_names().iter().map(|n| c.params.get(*n).copied().unwrap_or(f64::NAN)).collect();
+                crate::models::Model::from_params(c.model, &p)
+            }
+            None => self.to_model(),
+        }
     }
 }
 

@@ -227,7 +227,8 @@ pub fn ldr(reference: &RgbImage, test: &RgbImage, ppd: f64) -> Result<FlipMap> {
         img.pixels.par_iter().map(|p| narrow(color::linear_rgb_to_ycxcz(p.map(|v| (v as f64).clamp(0.0, 1.0))))).collect()
     };
     let kernels = Kernels::new(ppd);
-    let values = ldr_core(&to_ycc(reference), &to_ycc(test), reference.width, reference.height, &kernels);
+    let (w, h) = (reference.width, reference.height);
+    let values = errors(&filter(&to_ycc(reference), w, h, &kernels), &filter(&to_ycc(test), w, h, &kernels));
     Ok(FlipMap { width: reference.width, height: reference.height, values, mode: Mode::Ldr, ppd, exposures: None, exposure_map: None })
 }
 
@@ -236,27 +237,85 @@ pub fn ldr(reference: &RgbImage, test: &RgbImage, ppd: f64) -> Result<FlipMap> {
 /// with the ACES fit and clamped to `[0, 1]`; each pixel keeps its largest LDR-FLIP over the exposures.
 pub fn hdr(reference: &RgbImage, test: &RgbImage, ppd: f64, options: &HdrOptions) -> Result<FlipMap> {
     check_pair(reference, test, ppd)?;
-    let exposures = resolve_exposures(reference, options)?;
-    let (w, h) = (reference.width, reference.height);
-    let kernels = Kernels::new(ppd);
-    let mut values = vec![0.0f32; w * h];
-    let mut exposure_map = vec![exposures.exposure(0) as f32; w * h];
-    for i in 0..exposures.count {
-        let c = exposures.exposure(i);
-        let scale = 2f64.powf(c);
-        let to_ycc = |img: &RgbImage| -> Vec<[f32; 3]> {
-            img.pixels.par_iter().map(|p| narrow(color::linear_rgb_to_ycxcz(p.map(|v| aces(v as f64 * scale).clamp(0.0, 1.0))))).collect()
-        };
-        let map = ldr_core(&to_ycc(reference), &to_ycc(test), w, h, &kernels);
-        // Strictly larger, as the reference: ties keep the earlier exposure.
-        for ((v, e), m) in values.iter_mut().zip(exposure_map.iter_mut()).zip(map) {
-            if m > *v {
-                *v = m;
-                *e = c as f32;
+    HdrReference::new(reference, ppd, options)?.map(test)
+}
+
+/// HDR-FLIP against one reference, prepared once for many test images: per exposure, the reference's
+/// filtered colours (as Hunt-adjusted L*a*b*) and its edge and point magnitudes, which is everything
+/// of the reference that a test's error depends on. [`HdrReference::map`] equals [`hdr`] with the same
+/// reference, `ppd` and options, and costs about half as much.
+#[derive(Debug, Clone)]
+pub struct HdrReference {
+    width: usize,
+    height: usize,
+    ppd: f64,
+    exposures: Exposures,
+    kernels: Kernels,
+    /// Per exposure, the reference's filtered pixels.
+    filtered: Vec<Vec<Filtered>>,
+}
+
+impl HdrReference {
+    /// Prepare `reference` (linear RGB radiances) at `ppd` pixels per degree, its exposures resolved from
+    /// `options` as [`hdr`] resolves them.
+    pub fn new(reference: &RgbImage, ppd: f64, options: &HdrOptions) -> Result<Self> {
+        check_ppd(ppd)?;
+        let exposures = resolve_exposures(reference, options)?;
+        let kernels = Kernels::new(ppd);
+        let (w, h) = (reference.width, reference.height);
+        let filtered = (0..exposures.count).map(|i| filter(&tone_mapped(reference, exposures.exposure(i)), w, h, &kernels)).collect();
+        Ok(HdrReference { width: w, height: h, ppd, exposures, kernels, filtered })
+    }
+
+    /// The exposures evaluated.
+    pub fn exposures(&self) -> Exposures {
+        self.exposures
+    }
+
+    /// HDR-FLIP's map of `test` against the reference; an error if `test` is not the reference's size.
+    pub fn map(&self, test: &RgbImage) -> Result<FlipMap> {
+        if (self.width, self.height) != (test.width, test.height) {
+            return Err(Error::invalid(format!(
+                "the reference is {} x {} pixels and the test {} x {}: FLIP compares images of one size",
+                self.width, self.height, test.width, test.height
+            )));
+        }
+        let (w, h, exposures) = (self.width, self.height, self.exposures);
+        let mut values = vec![0.0f32; w * h];
+        let mut exposure_map = vec![exposures.exposure(0) as f32; w * h];
+        for (i, reference) in self.filtered.iter().enumerate() {
+            let c = exposures.exposure(i);
+            let map = errors(reference, &filter(&tone_mapped(test, c), w, h, &self.kernels));
+            // Strictly larger, as the reference: ties keep the earlier exposure.
+            for ((v, e), m) in values.iter_mut().zip(exposure_map.iter_mut()).zip(map) {
+                if m > *v {
+                    *v = m;
+                    *e = c as f32;
+                }
             }
         }
+        Ok(FlipMap {
+            width: w,
+            height: h,
+            values,
+            mode: Mode::Hdr,
+            ppd: self.ppd,
+            exposures: Some(exposures),
+            exposure_map: Some(exposure_map),
+        })
     }
-    Ok(FlipMap { width: w, height: h, values, mode: Mode::Hdr, ppd, exposures: Some(exposures), exposure_map: Some(exposure_map) })
+
+    /// The mean of [`HdrReference::map`] (FLIP's single-number summary).
+    pub fn mean(&self, test: &RgbImage) -> Result<f64> {
+        Ok(self.map(test)?.mean())
+    }
+}
+
+/// `img` exposed by `2^c`, tone-mapped by [`aces`], clamped to `[0, 1]`, in YCxCz (f32, as the reference
+/// stores it).
+fn tone_mapped(img: &RgbImage, c: f64) -> Vec<[f32; 3]> {
+    let scale = 2f64.powf(c);
+    img.pixels.par_iter().map(|p| narrow(color::linear_rgb_to_ycxcz(p.map(|v| aces(v as f64 * scale).clamp(0.0, 1.0))))).collect()
 }
 
 /// The ACES filmic tone-mapping fit (Narkowicz 2016) HDR-FLIP uses (EG 2021, section 3), with the 0.6
@@ -329,6 +388,11 @@ fn check_pair(reference: &RgbImage, test: &RgbImage, ppd: f64) -> Result<()> {
             reference.width, reference.height, test.width, test.height
         )));
     }
+    check_ppd(ppd)
+}
+
+fn check_ppd(ppd: f64) -> Result<()> {
+    // The filters' radii grow with ppd: beyond 1e4 they would dwarf any image.
     if !(ppd.is_finite() && ppd > 0.0 && ppd <= 1e4) {
         return Err(Error::invalid(format!("pixels per degree must be in (0, 10000], got {ppd}")));
     }
@@ -340,6 +404,7 @@ fn narrow(c: [f64; 3]) -> [f32; 3] {
 }
 
 /// The separated filters of one viewing condition.
+#[derive(Debug, Clone)]
 struct Kernels {
     /// Per tap: the achromatic and red-green CSF weights, and the two Gaussians of the blue-yellow CSF.
     spatial: Vec<[f64; 4]>,
@@ -429,6 +494,7 @@ fn remap_color(d: f64, cmax: f64) -> f64 {
     }
 }
 
+#[cfg(test)]
 /// The feature difference of HPG 2020, section 4.2, from the filtered `[dx, ddx, dy, ddy]` of the two
 /// images: `((1 / sqrt 2) max(| |edge_r| - |edge_t| |, | |point_r| - |point_t| |))^q_f`.
 fn feature_difference(r: [f64; 4], t: [f64; 4]) -> f64 {
@@ -438,6 +504,7 @@ fn feature_difference(r: [f64; 4], t: [f64; 4]) -> f64 {
     (std::f64::consts::FRAC_1_SQRT_2 * d).powf(QF)
 }
 
+#[cfg(test)]
 /// The colour error of one pixel from the two CSF-filtered YCxCz values (HPG 2020, section 4.1): back to
 /// linear RGB, clamped to `[0, 1]`, to L*a*b*, Hunt-adjusted, HyAB, `^q_c`, remapped.
 fn color_difference(r: [f64; 3], t: [f64; 3], cmax: f64) -> f64 {
@@ -451,9 +518,97 @@ fn combine(color: f64, feature: f64) -> f64 {
     color.powf(1.0 - feature)
 }
 
-/// LDR-FLIP on two YCxCz images (from linear RGB in `[0, 1]`): separated filtering, the horizontal pass
-/// into an intermediate image, the vertical pass accumulated row by row (cache-friendly), then the
-/// per-pixel error. Rows run in parallel.
+/// One image's pixel after FLIP's filters: the CSF-filtered colour as Hunt-adjusted L*a*b* (HPG 2020,
+/// section 4.1: back to linear RGB, clamped to `[0, 1]`) and the magnitudes of the edge and point
+/// detectors' responses (section 4.2). A pixel's error depends on the two images only through these.
+#[derive(Debug, Clone, Copy)]
+struct Filtered {
+    lab: [f64; 3],
+    edge: f64,
+    point: f64,
+}
+
+/// FLIP's filters on one YCxCz image (from linear RGB in `[0, 1]`): separated filtering, the horizontal
+/// pass into an intermediate image (`f32`, as the reference stores it), the vertical pass accumulated row
+/// by row (cache-friendly). Rows run in parallel.
+fn filter(img: &[[f32; 3]], w: usize, h: usize, k: &Kernels) -> Vec<Filtered> {
+    let rs = (k.spatial.len() / 2) as isize;
+    let rf = (k.feature.len() / 2) as isize;
+    let clamp_x = |x: isize| x.clamp(0, w as isize - 1) as usize;
+    // Horizontal pass. Per pixel: Y, Cx, Cz*g1, Cz*g2 (CSF), then on the normalised luminance
+    // (Y + 16) / 116: d/dx, d2/dx2 and the Gaussian (features).
+    let mut mid = vec![[0f32; 7]; w * h];
+    mid.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let s = &img[y * w..(y + 1) * w];
+        let yn: Vec<f64> = s.iter().map(|p| (p[0] as f64 + 16.0) / 116.0).collect();
+        for (x, o) in row.iter_mut().enumerate() {
+            let mut a = [0f64; 7];
+            for (i, kw) in k.spatial.iter().enumerate() {
+                let p = s[clamp_x(x as isize + i as isize - rs)];
+                a[0] += kw[0] * p[0] as f64;
+                a[1] += kw[1] * p[1] as f64;
+                a[2] += kw[2] * p[2] as f64;
+                a[3] += kw[3] * p[2] as f64;
+            }
+            for (i, kf) in k.feature.iter().enumerate() {
+                let v = yn[clamp_x(x as isize + i as isize - rf)];
+                a[4] += kf[1] * v;
+                a[5] += kf[2] * v;
+                a[6] += kf[0] * v;
+            }
+            *o = a.map(|v| v as f32);
+        }
+    });
+    let reach = rs.max(rf);
+    let mut out = vec![Filtered { lab: [0.0; 3], edge: 0.0, point: 0.0 }; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, orow)| {
+        // Per pixel: Y, Cx, Cz (CSF-filtered), dx, ddx, dy, ddy.
+        let mut acc = vec![[0f64; 7]; w];
+        for d in -reach..=reach {
+            let yy = (y as isize + d).clamp(0, h as isize - 1) as usize;
+            let ks = (d.abs() <= rs).then(|| k.spatial[(d + rs) as usize]);
+            let kf = (d.abs() <= rf).then(|| k.feature[(d + rf) as usize]);
+            for (a, m) in acc.iter_mut().zip(&mid[yy * w..(yy + 1) * w]) {
+                let m = m.map(|v| v as f64);
+                if let Some(ks) = ks {
+                    a[0] += ks[0] * m[0];
+                    a[1] += ks[1] * m[1];
+                    a[2] += ks[2] * m[2] + ks[3] * m[3];
+                }
+                if let Some(kf) = kf {
+                    a[3] += kf[0] * m[4];
+                    a[4] += kf[0] * m[5];
+                    a[5] += kf[1] * m[6];
+                    a[6] += kf[2] * m[6];
+                }
+            }
+        }
+        for (o, a) in orow.iter_mut().zip(&acc) {
+            let lab = color::hunt(color::linear_rgb_to_lab(color::ycxcz_to_linear_rgb([a[0], a[1], a[2]]).map(|v| v.clamp(0.0, 1.0))));
+            *o = Filtered { lab, edge: a[3].hypot(a[5]), point: a[4].hypot(a[6]) };
+        }
+    });
+    out
+}
+
+/// The FLIP error per pixel of two filtered images of one size: the colour error (HyAB, `^q_c`,
+/// remapped) raised to `1 -` the feature difference.
+fn errors(r: &[Filtered], t: &[Filtered]) -> Vec<f32> {
+    let cmax = color::max_distance(QC);
+    r.par_iter()
+        .zip(t)
+        .map(|(r, t)| {
+            let color = remap_color(color::hyab(r.lab, t.lab).powf(QC), cmax);
+            let d = (r.edge - t.edge).abs().max((r.point - t.point).abs());
+            let feature = (std::f64::consts::FRAC_1_SQRT_2 * d).powf(QF);
+            combine(color, feature) as f32
+        })
+        .collect()
+}
+
+/// The two-image LDR-FLIP pass as it was before the filters were split per image: the tests' check that
+/// [`filter`] and [`errors`] change no value.
+#[cfg(test)]
 fn ldr_core(r: &[[f32; 3]], t: &[[f32; 3]], w: usize, h: usize, k: &Kernels) -> Vec<f32> {
     let rs = (k.spatial.len() / 2) as isize;
     let rf = (k.feature.len() / 2) as isize;
@@ -661,6 +816,34 @@ mod tests {
         // Every value is an error in [0, 1], and a brighter test differs somewhere.
         assert!(m.values().iter().all(|v| (0.0..=1.0).contains(v)));
         assert!(m.mean() > 0.01);
+    }
+
+    /// One prepared reference scores several tests exactly as the two-image pass of the unsplit filters
+    /// does per exposure (the maximum over the exposures, ties to the earlier one), and as [`hdr`].
+    #[test]
+    fn a_prepared_reference_equals_the_two_image_pass() {
+        let reference = textured(37, 29, 1.0, 7);
+        let o = HdrOptions { start_exposure: None, stop_exposure: None, num_exposures: Some(6) };
+        let prepared = HdrReference::new(&reference, DEFAULT_PPD, &o).unwrap();
+        let e = prepared.exposures();
+        for (gain, seed) in [(1.3, 8), (0.9, 9), (1.0, 7)] {
+            let test = textured(37, 29, gain, seed);
+            let mut want = vec![0f32; 37 * 29];
+            for i in 0..e.count {
+                let k = Kernels::new(DEFAULT_PPD);
+                let pair = ldr_core(&tone_mapped(&reference, e.exposure(i)), &tone_mapped(&test, e.exposure(i)), 37, 29, &k);
+                want.iter_mut().zip(pair).for_each(|(m, v)| *m = m.max(v));
+            }
+            let got = prepared.map(&test).unwrap();
+            let direct = hdr(&reference, &test, DEFAULT_PPD, &o).unwrap();
+            for ((g, w), d) in got.values().iter().zip(&want).zip(direct.values()) {
+                assert!((g - w).abs() as f64 <= 1e-12 && g == d, "{g} {w} {d}");
+            }
+            let mean = want.iter().map(|&v| v as f64).sum::<f64>() / want.len() as f64;
+            assert!((prepared.mean(&test).unwrap() - mean).abs() <= 1e-12);
+            assert_eq!(got.exposure_map(), direct.exposure_map());
+        }
+        assert_eq!(prepared.mean(&textured(36, 29, 1.0, 7)).unwrap_err().kind(), ErrorKind::InvalidInput);
     }
 
     #[test]

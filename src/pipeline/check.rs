@@ -81,6 +81,22 @@ pub fn tolerance(t: Option<f64>, s: Spelling) -> Result<f64> {
     }
 }
 
+/// The render choice of `auto` from `scene` (`none`, or the specs of
+/// [`crate::export::choice::parse_scenes`]), `render_tolerance` (a positive mean FLIP) and `material`
+/// (the conductor of the renders); `None` for `scene = "none"`.
+pub fn render(scene: &str, render_tolerance: f64, material: &str, s: Spelling) -> Result<Option<crate::export::choice::RenderOptions>> {
+    use crate::export::choice::{parse_scenes, RenderOptions};
+    if scene.trim() == "none" {
+        return Ok(None);
+    }
+    let scenes = parse_scenes(scene).map_err(|e| Error::invalid(format!("{}: {}", s.name("scene"), e.message())))?;
+    let material = parse("material", material, s)?;
+    if !(render_tolerance.is_finite() && render_tolerance > 0.0) {
+        return Err(Error::invalid(format!("{} {render_tolerance} must be a positive number (a mean FLIP)", s.name("render_tolerance"))));
+    }
+    Ok(Some(RenderOptions { scenes, tolerance: render_tolerance, material }))
+}
+
 /// Extra ellipsoid starts beyond the default two: 0 to [`MAX_EXTRA_STARTS`].
 pub fn extra_starts(n: usize, s: Spelling) -> Result<usize> {
     if n > MAX_EXTRA_STARTS {

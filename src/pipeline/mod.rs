@@ -14,6 +14,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::error::Result;
+use crate::export::choice::{RenderJudge, RenderOptions};
 use crate::fit::{FitOptions, FitReport};
 use crate::io::ReadOptions;
 use crate::models::ModelChoice;
@@ -42,6 +43,10 @@ pub struct Options {
     pub model: ModelChoice,
     /// How to fit (objective, solver, tolerances, fitted region `max_theta`).
     pub fit: FitOptions,
+    /// `auto`'s render choice (`export::choice`): the answer is the simplest lobe whose render is within
+    /// the tolerance of the scan's table in every scene. `None`: the NDF error alone decides, and the
+    /// report has no `selection.answer`.
+    pub render: Option<RenderOptions>,
 }
 
 impl Default for Options {
@@ -53,6 +58,7 @@ impl Default for Options {
             ndf: NdfOptions::default(),
             model: ModelChoice::Auto,
             fit: FitOptions::default(),
+            render: Some(RenderOptions::default()),
         }
     }
 }
@@ -64,6 +70,7 @@ impl Options {
     pub fn validate(&self) -> Result<()> {
         self.preprocess.validate()?;
         self.ndf.validate()?;
+        self.render.as_ref().map_or(Ok(()), |r| r.validate())?;
         self.fit.validate()
     }
 
@@ -191,7 +198,11 @@ impl Pipeline {
     }
 
     fn finish(&self, ndf: EmpiricalNdf, input: InputInfo, path: &Path, read_ms: f64, ndf_ms: f64) -> Result<Outcome> {
-        let mut report = fit(&ndf, self.options.model, &self.options.fit_options()).map_err(|e| e.with_path(path))?;
+        let mut report = match (&self.options.render, self.options.model) {
+            (Some(render), ModelChoice::Auto) => fit_rendered(&ndf, &self.options.fit_options(), render, &path.display().to_string()),
+            _ => fit(&ndf, self.options.model, &self.options.fit_options()),
+        }
+        .map_err(|e| e.with_path(path))?;
         report.input = Some(input);
         report.timings.read_ms = Some(read_ms);
         report.timings.ndf_ms = Some(ndf_ms);
@@ -273,6 +284,19 @@ pub fn fit(ndf: &EmpiricalNdf, model: ModelChoice, opts: &FitOptions) -> Result<
         ModelChoice::Auto => crate::fit::fit_auto(ndf, opts),
         ModelChoice::Model(id) => crate::fit::fit_model(ndf, id, opts),
     }
+}
+
+/// Stage 3 for `auto` with its render choice: the ladder, its answer decided by the renders
+/// ([`crate::export::choice::RenderJudge`]), the choice written into the report (`scan` names the scan
+/// in the command that writes its table).
+pub fn fit_rendered(ndf: &EmpiricalNdf, opts: &FitOptions, render: &RenderOptions, scan: &str) -> Result<FitReport> {
+    let judge = RenderJudge::new(ndf, render.clone());
+    let t0 = Instant::now();
+    let mut report = crate::fit::fit_auto_with(ndf, opts, &judge)?;
+    let _p = crate::phases::phase("render");
+    judge.apply(&mut report, scan)?;
+    report.timings.fit_ms = ms(t0);
+    Ok(report)
 }
 
 #[cfg(test)]

@@ -2,14 +2,16 @@
 //!
 //! A pixel is the mean of the radiance over its square: an `n x n` Gauss-Legendre rule, and where the
 //! rule's points disagree (the silhouette, a highlight narrower than the pixel) the square is split into
-//! 2 x 2 cells, each integrated the same way, up to `Camera::refine` times.
+//! 2 x 2 cells, each integrated the same way, up to `Camera::refine` times. The centre rule
+//! (`PixelRule::Centre`) takes one point per pixel and the neighbours' second differences instead, and the
+//! Gauss rule only where the image is not smooth at the pixel's scale.
 //!
 //! The cap light is integrated per shading point in polar coordinates `(rho, phi)` about the mirror
 //! direction `r` of the view, where every lobe whose peak is the normal has its peak: rings of radii
 //! growing geometrically from `RHO0` (so a lobe of any width from near-mirror to Lambertian meets rings of
 //! its own size), Gauss-Legendre in `ln rho` on each ring, and on each radius the exact arc of azimuths
-//! inside the cap (spherical law of cosines), Gauss-Legendre over the arc or the trapezoid rule over a
-//! full circle. Where a ring touches the cap's rim the arc's length has a square-root edge; those
+//! inside the cap (spherical law of cosines), Gauss-Legendre over the arc (points in proportion to its
+//! length, 6 to 12) or the trapezoid rule over a full circle. Where a ring touches the cap's rim the arc's length has a square-root edge; those
 //! intervals take the map `rho = a + (b - a)(1 - cos(pi s))/2`, which makes it smooth.
 
 use std::f64::consts::PI;
@@ -18,7 +20,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use super::quadrature::gauss_legendre;
-use super::{sphere_frame, to_local, Brdf, Image, Light, Scene};
+use super::{sphere_frame, to_local, Brdf, Image, Light, PixelRule, Scene};
 
 /// The innermost ring's radius about the mirror direction (radians): a quarter of the angular width of
 /// the narrowest lobe (alpha 0.01, about 2 alpha wide in reflected directions) the rule resolves.
@@ -27,37 +29,117 @@ const RHO0: f64 = 0.005;
 const GROWTH: f64 = 3.0;
 /// Gauss-Legendre points per ring in radius.
 const RADIAL: usize = 4;
-/// Points per ring in azimuth.
+/// Points per ring in azimuth: the trapezoid rule on a full circle, and the most on an arc.
 const AZIMUTH: usize = 12;
+/// An arc's points relative to the full circle's density: an arc is smoother than its share of the
+/// circle (the cap's edge is in the radial map), but its integrand still varies along it.
+const ARC_DENSITY: f64 = 1.5;
+/// The fewest points on an arc: short arcs near the cap's rim still carry a lobe's anisotropy.
+const ARC_MIN: usize = 6;
 
 /// The fixed rules of one render.
 struct Rules {
     pixel: Vec<(f64, f64)>,
+    ring: Ring,
+}
+
+/// The light rule's tables.
+struct Ring {
+    /// Gauss-Legendre in radius, per ring.
     radial: Vec<(f64, f64)>,
-    azimuth: Vec<(f64, f64)>,
+    /// `(cos, sin, weight)` of the trapezoid rule on a full circle.
+    circle: Vec<(f64, f64, f64)>,
+    /// Gauss-Legendre rules of 0 to `AZIMUTH` points, for arcs.
+    arcs: Vec<Vec<(f64, f64)>>,
+}
+
+impl Ring {
+    fn new() -> Ring {
+        let circle = (0..AZIMUTH)
+            .map(|k| {
+                let (sp, cp) = (2.0 * PI * (k as f64 + 0.5) / AZIMUTH as f64).sin_cos();
+                (cp, sp, 2.0 * PI / AZIMUTH as f64)
+            })
+            .collect();
+        Ring { radial: gauss_legendre(RADIAL), circle, arcs: (0..=AZIMUTH).map(gauss_legendre).collect() }
+    }
+
+    /// The rule for an arc of azimuths `|phi| <= half`: `ARC_DENSITY` times the full circle's density of
+    /// points, at least `ARC_MIN` and at most `AZIMUTH`.
+    fn arc(&self, half: f64) -> &[(f64, f64)] {
+        let m = (AZIMUTH as f64 * ARC_DENSITY * half / PI).ceil() as usize;
+        &self.arcs[m.clamp(ARC_MIN, AZIMUTH)]
+    }
 }
 
 /// Render every pixel of `scene` (validated) with `brdf`.
 pub(super) fn render(scene: &Scene, brdf: &dyn Brdf) -> Image {
-    let rules = Rules { pixel: gauss_legendre(scene.camera.points), radial: gauss_legendre(RADIAL), azimuth: gauss_legendre(AZIMUTH) };
-    let n = scene.camera.size;
-    let ext = scene.camera.extent;
+    let rules = Rules { pixel: gauss_legendre(scene.camera.points), ring: Ring::new() };
+    let c = &scene.camera;
+    let n = c.size;
+    let ext = c.extent;
     let side = 2.0 * ext / n as f64;
     let floor = 1e-3 * scene.light.white_radiance();
     let shade = |x: f64, y: f64| scene.normal_at(x, y).map_or([0.0; 3], |nrm| radiance(scene, brdf, nrm, &rules));
-    let rows: Vec<Vec<[f32; 3]>> = (0..n)
-        .into_par_iter()
-        .map(|j| {
-            (0..n)
-                .map(|i| {
-                    let (x0, y0) = (-ext + i as f64 * side, ext - (j + 1) as f64 * side);
-                    let v = cell(&shade, [x0, y0], side, scene.camera.refine, scene.camera.tolerance, floor, &rules.pixel);
-                    v.map(|c| c as f32)
-                })
-                .collect()
-        })
-        .collect();
-    Image { width: n, height: n, data: rows.into_iter().flatten().collect() }
+    // The lower-left corner of pixel (i, j), row j from the top.
+    let corner = |i: usize, j: usize| [-ext + i as f64 * side, ext - (j + 1) as f64 * side];
+    let gauss = |i: usize, j: usize| cell(&shade, corner(i, j), side, c.refine, c.tolerance, floor, &rules.pixel);
+    // A pixel of the centre rule whose image is not smooth: the Gauss rule as it is (refining it would
+    // cost as much as the rest of the image; its points still resolve a highlight's edge to a half pixel).
+    let rough = |i: usize, j: usize| cell(&shade, corner(i, j), side, 0, c.tolerance, floor, &rules.pixel);
+    let mut data = vec![[0f32; 3]; n * n];
+    if c.rule == PixelRule::Centre && c.refine > 0 {
+        // Each centre's value, `None` off the sphere.
+        let mut centres = vec![None; n * n];
+        centres.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
+            for (i, v) in row.iter_mut().enumerate() {
+                let [x, y] = corner(i, j).map(|a| a + side / 2.0);
+                *v = scene.normal_at(x, y).map(|nrm| radiance(scene, brdf, nrm, &rules));
+            }
+        });
+        let at = |i: isize, j: isize| {
+            let inside = (0..n as isize).contains(&i) && (0..n as isize).contains(&j);
+            if inside {
+                centres[j as usize * n + i as usize]
+            } else {
+                None
+            }
+        };
+        data.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
+            for (i, out) in row.iter_mut().enumerate() {
+                let v = if on_silhouette(corner(i, j), side) {
+                    gauss(i, j)
+                } else {
+                    let (ii, jj) = (i as isize, j as isize);
+                    match [at(ii, jj), at(ii - 1, jj), at(ii + 1, jj), at(ii, jj - 1), at(ii, jj + 1)] {
+                        // Off the sphere and not on the silhouette: the whole square is background.
+                        [None, ..] => [0.0; 3],
+                        [Some(m), Some(l), Some(r), Some(d), Some(u)] => {
+                            let fix = [0, 1, 2].map(|k| (l[k] + r[k] + d[k] + u[k] - 4.0 * m[k]) / 24.0);
+                            let level = m[0] + m[1] + m[2];
+                            let size = fix[0].abs() + fix[1].abs() + fix[2].abs();
+                            // Where the correction is large the image is not smooth at the pixel's scale.
+                            if size <= 0.1 * c.tolerance * (level + 3.0 * floor) {
+                                [0, 1, 2].map(|k| m[k] + fix[k])
+                            } else {
+                                rough(i, j)
+                            }
+                        }
+                        // A neighbour off the sphere: no second difference across the silhouette.
+                        _ => gauss(i, j),
+                    }
+                };
+                *out = v.map(|x| x as f32);
+            }
+        });
+    } else {
+        data.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
+            for (i, out) in row.iter_mut().enumerate() {
+                *out = gauss(i, j).map(|x| x as f32);
+            }
+        });
+    }
+    Image { width: n, height: n, data }
 }
 
 /// The mean of `shade` over the square of side `side` with lower-left corner `at`, split where its
@@ -118,7 +200,7 @@ fn radiance(scene: &Scene, brdf: &dyn Brdf, n: Vector3<f64>, rules: &Rules) -> [
             }
             brdf.eval(wi, wo).map(|f| f * irradiance * wo.z)
         }
-        Light::Cap { dir, half_angle, radiance } => cap(brdf, wi, to_local(&frame, dir), half_angle, rules).map(|v| v * radiance),
+        Light::Cap { dir, half_angle, radiance } => cap(brdf, wi, to_local(&frame, dir), half_angle, &rules.ring).map(|v| v * radiance),
     }
 }
 
@@ -126,11 +208,14 @@ fn radiance(scene: &Scene, brdf: &dyn Brdf, n: Vector3<f64>, rules: &Rules) -> [
 /// rings about the mirror direction of the module's documentation.
 #[cfg(test)]
 fn cap_integral(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, half_angle: f64) -> [f64; 3] {
-    let rules = Rules { pixel: Vec::new(), radial: gauss_legendre(RADIAL), azimuth: gauss_legendre(AZIMUTH) };
-    cap(brdf, wi, c, half_angle, &rules)
+    cap(brdf, wi, c, half_angle, &Ring::new())
 }
 
-fn cap(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, delta: f64, rules: &Rules) -> [f64; 3] {
+fn cap(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, delta: f64, rules: &Ring) -> [f64; 3] {
+    // The whole cap below the horizon: the sphere hides it.
+    if c.z <= -delta.sin() {
+        return [0.0; 3];
+    }
     let r = Vector3::new(-wi.x, -wi.y, wi.z);
     let cos_d = r.dot(&c).clamp(-1.0, 1.0);
     let d = cos_d.acos();
@@ -173,8 +258,7 @@ fn cap(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, delta: f64, rules: &R
             };
             let (sr, cr) = rho.sin_cos();
             let w_rho = ws * jac * sr;
-            let mut add = |phi: f64, w: f64| {
-                let (sp, cp) = phi.sin_cos();
+            let mut add = |cp: f64, sp: f64, w: f64| {
                 let l = r * cr + (e1 * cp + e2 * sp) * sr;
                 // Below the horizon the sphere hides the light.
                 if l.z > 0.0 {
@@ -183,8 +267,7 @@ fn cap(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, delta: f64, rules: &R
                 }
             };
             if rho <= full {
-                let m = rules.azimuth.len();
-                (0..m).for_each(|k| add(2.0 * PI * (k as f64 + 0.5) / m as f64, 2.0 * PI / m as f64));
+                rules.circle.iter().for_each(|&(cp, sp, w)| add(cp, sp, w));
             } else {
                 // The arc |phi| <= half of the ring inside the cap: cos(delta) <= cos(rho) cos(d) + sin(rho) sin(d) cos(phi).
                 let denom = sr * sin_d;
@@ -192,7 +275,10 @@ fn cap(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, delta: f64, rules: &R
                     continue;
                 }
                 let half = ((cos_delta - cr * cos_d) / denom).clamp(-1.0, 1.0).acos();
-                rules.azimuth.iter().for_each(|&(x, w)| add(half * (2.0 * x - 1.0), 2.0 * half * w));
+                rules.arc(half).iter().for_each(|&(x, w)| {
+                    let (sp, cp) = (half * (2.0 * x - 1.0)).sin_cos();
+                    add(cp, sp, 2.0 * half * w)
+                });
             }
         }
     }

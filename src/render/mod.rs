@@ -17,7 +17,7 @@ mod scene;
 use nalgebra::Vector3;
 
 pub use image::Image;
-pub use scene::{Camera, Light, Scene};
+pub use scene::{Camera, Light, PixelRule, Scene};
 
 /// What is rendered: a BRDF in the local shading frame (`z` the normal, `x` the tangent `s`).
 pub trait Brdf: Sync {

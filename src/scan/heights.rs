@@ -186,7 +186,7 @@ pub(crate) fn zeroed(n: usize) -> Vec<f64> {
 }
 
 #[cfg(target_os = "linux")]
-fn advise_huge(start: usize, bytes: usize) {
+pub(crate) fn advise_huge(start: usize, bytes: usize) {
     if bytes < HUGE_MIN_BYTES {
         return;
     }
@@ -235,7 +235,7 @@ pub(crate) fn page_size() -> Option<usize> {
 pub(crate) fn release_pages(_start: *const u8, _bytes: usize) {}
 
 #[cfg(not(target_os = "linux"))]
-fn advise_huge(_start: usize, _bytes: usize) {}
+pub(crate) fn advise_huge(_start: usize, _bytes: usize) {}
 
 #[cfg(test)]
 mod tests {

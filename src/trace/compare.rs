@@ -104,8 +104,16 @@ impl SigmaTable {
     /// `sigma(w)` by bilinear interpolation.
     pub fn sigma(&self, w: [f64; 3]) -> f64 {
         let theta = w[2].clamp(-1.0, 1.0).acos().min(std::f64::consts::FRAC_PI_2);
-        let u = (theta / std::f64::consts::FRAC_PI_2).sqrt() * (SIGMA_NODES[0] - 1) as f64;
-        let p = (w[1].atan2(w[0]) + std::f64::consts::PI) / (2.0 * std::f64::consts::PI) * (SIGMA_NODES[1] - 1) as f64;
+        let u = (theta / std::f64::consts::FRAC_PI_2).sqrt();
+        let p = (w[1].atan2(w[0]) + std::f64::consts::PI) / (2.0 * std::f64::consts::PI);
+        self.sigma_at(u, p)
+    }
+
+    /// `sigma` at the warped coordinates `(u_theta, u_phi)` (`super::tally::warp`).
+    #[inline]
+    pub fn sigma_at(&self, u: f64, p: f64) -> f64 {
+        let u = u * (SIGMA_NODES[0] - 1) as f64;
+        let p = p * (SIGMA_NODES[1] - 1) as f64;
         let (a, b) = ((u as usize).min(SIGMA_NODES[0] - 2), (p as usize).min(SIGMA_NODES[1] - 2));
         let (ta, tb) = ((u - a as f64).clamp(0.0, 1.0), (p - b as f64).clamp(0.0, 1.0));
         let at = |a: usize, b: usize| self.v[a * SIGMA_NODES[1] + b];
@@ -120,6 +128,12 @@ impl SigmaTable {
             return f64::MAX;
         }
         (self.sigma(w) / w[2] - 1.0).max(0.0)
+    }
+
+    /// `Lambda(w)` of a direction above the horizon from its warped coordinates `(u, p)`.
+    #[inline]
+    pub fn lambda_at(&self, w: [f64; 3], u: f64, p: f64) -> f64 {
+        (self.sigma_at(u, p) / w[2] - 1.0).max(0.0)
     }
 }
 

@@ -3,12 +3,13 @@
 //!
 //! Level `L >= 1` holds, per block of `2^L x 2^L` cells, the highest corner in the block, rounded up to
 //! `f32` (conservative, half the memory: about 1/3 of a height per point at 8192^2 when level 1 is
-//! `f32`). Level 0 is the cells themselves, whose highest corner is read from the heights. A ray's part
-//! over a block is skipped when its lowest point there (entry or exit: `z` is linear in `t`) is above the
-//! block's maximum; otherwise the block's children are visited in the order the ray meets them, so the
-//! first crossing found is the nearest. Over a periodic grid the ray walks the tiles it crosses (2D DDA)
-//! and descends the pyramid in each, until it is above the highest point going up (it has left) or
-//! below the lowest going down (a numerical leak, counted by the caller).
+//! `f32`). Level 0 is the cells themselves, tested exactly. A ray's part over a block is skipped when its
+//! lowest point there (entry or exit: `z` is linear in `t`) is above the block's maximum; otherwise the
+//! ray descends into the child it is in. Without a stack (Tevs et al. 2008): after a skip the ray moves
+//! to the next block at the same level, or one level up when it leaves the parent, so blocks are met in
+//! the ray's order and the first crossing found is the nearest. Over a periodic grid the cell indices
+//! wrap, until the ray is above the highest point going up (it has left) or below the lowest going down
+//! (a numerical leak, counted by the caller).
 
 use super::surface::{Border, Hit, Surface};
 
@@ -31,10 +32,6 @@ fn up(v: f64) -> f32 {
         f
     }
 }
-
-/// The pending blocks of a descent: (level, block row, block column, t in, t out). Kept by the caller
-/// between rays so that no ray allocates.
-pub(crate) type Stack = Vec<(u8, u32, u32, f64, f64)>;
 
 /// What became of a ray.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -61,6 +58,7 @@ impl Pyramid {
         crate::budget::check_bytes(bytes, "the height pyramid of the traced surface")?;
         let (bx, by) = (s.ncx.div_ceil(2), s.ncy.div_ceil(2));
         let mut l1 = vec![0f32; bx * by];
+        crate::scan::heights::advise_huge(l1.as_ptr() as usize, 4 * l1.len());
         use rayon::prelude::*;
         l1.par_chunks_mut(bx).enumerate().for_each(|(bi, row)| {
             for (bj, v) in row.iter_mut().enumerate() {
@@ -92,21 +90,56 @@ impl Pyramid {
         Ok(Pyramid { levels })
     }
 
-    /// Height above which the block `(bi, bj)` of `level` has nothing (level 0: a cell).
+    /// The maximum of block `(bi, bj)` of `level >= 1`.
     #[inline]
-    fn max_of(&self, s: &Surface, level: usize, bi: usize, bj: usize) -> f64 {
-        if level == 0 {
-            s.cell_max(bi, bj)
-        } else {
-            let (bx, _, v) = &self.levels[level - 1];
-            v[bi * bx + bj] as f64
+    fn max_at(&self, level: usize, bi: usize, bj: usize) -> f64 {
+        let (bx, _, v) = &self.levels[level - 1];
+        v[bi * bx + bj] as f64
+    }
+
+    /// Ask the memory for what a ray starting above cell `(i, j)` reads first: the cell's heights and
+    /// the pyramid's blocks over it at the fine levels (the coarse ones stay cached). A hint only.
+    #[inline]
+    pub fn prefetch(&self, s: &Surface, i: usize, j: usize) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let hint = |p: *const f32| {
+                // SAFETY: a prefetch never faults and reads nothing; the pointers are in bounds anyway.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(p as *const i8) }
+            };
+            for (l, (bx, _, v)) in self.levels.iter().enumerate().take(4) {
+                let k = (i >> (l + 1)) * bx + (j >> (l + 1));
+                if k < v.len() {
+                    hint(v.as_ptr().wrapping_add(k));
+                }
+            }
+            let i1 = if i + 1 >= s.ny { 0 } else { i + 1 };
+            for r in [i, i1] {
+                let k = r * s.nx + j;
+                if k < s.h.len() {
+                    hint(s.h.as_ptr().wrapping_add(k) as *const f32);
+                }
+            }
         }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = (s, i, j);
     }
 
     /// The first hit of the ray `o + t d` (`o` in grid cell units inside the grid, `t >= 0`), not on
-    /// triangle `exclude`.
-    pub fn first_hit(&self, s: &Surface, o: [f64; 3], d: [f64; 3], exclude: u64, stack: &mut Stack) -> Outcome {
-        let (w, h) = (s.ncx as f64, s.ncy as f64);
+    /// triangle `exclude`. `start` is the cell the ray starts in when it starts on the surface (the cell
+    /// of the hit it leaves); without it the ray starts above the surface and is located from `o`.
+    ///
+    /// Stackless descent (Tevs, Ihrke and Seidel 2008, maximum mipmaps): the ray is at the block of the
+    /// current level holding its current point; a block whose maximum lies below the ray's lowest point
+    /// over it is skipped whole (the ray moves to the block's exit, and one level up when that leaves the
+    /// parent), otherwise the ray descends to the child holding its point; at level 0 the cell's two
+    /// triangles are tested. Blocks are visited in the order the ray meets them, so the first crossing is
+    /// the nearest. Over a periodic grid the cell indices wrap and the origin moves by one tile.
+    pub fn first_hit(&self, s: &Surface, o: [f64; 3], d: [f64; 3], start: Option<(usize, usize)>, exclude: u64) -> Outcome {
+        let (ncx, ncy) = (s.ncx as i64, s.ncy as i64);
+        let top = self.levels.len();
+        // A grid of one cell has no level above the cells: the top is the cell itself.
         let inv = [1.0 / d[0], 1.0 / d[1]];
         // Where the ray passes the lowest height going down (a hit must come before) or the highest going
         // up (nothing is met after); level rays have no such end.
@@ -117,104 +150,109 @@ impl Pyramid {
         } else {
             f64::INFINITY
         };
-        let (mut tx, mut ty) = (0i64, 0i64);
-        let mut tmin = 0.0f64;
-        for _ in 0..MAX_TILES {
-            let lo = [o[0] - tx as f64 * w, o[1] - ty as f64 * h, o[2]];
-            let (a0, a1) = slab(lo[0], inv[0], 0.0, w);
-            let (b0, b1) = slab(lo[1], inv[1], 0.0, h);
-            let t0 = a0.max(b0).max(tmin);
-            let t1 = a1.min(b1).min(t_end);
-            if t0 <= t1 {
-                if let Some(hit) = self.descend(s, lo, d, t0, t1, exclude, stack) {
+        let gone = |side: bool| if d[2] > 0.0 { Outcome::Left { side } } else { Outcome::Lost };
+        let mut lo = o;
+        let (mut ci, mut cj, mut level) = match start {
+            Some((i, j)) => (i as i64, j as i64, 0usize),
+            None => (cell_of(o[1], d[1], ncy), cell_of(o[0], d[0], ncx), top),
+        };
+        let mut t = 0.0f64;
+        let mut tiles = 0usize;
+        loop {
+            let (bi, bj) = (ci >> level, cj >> level);
+            let (x0, x1) = (bj << level, ((bj + 1) << level).min(ncx));
+            let (y0, y1) = (bi << level, ((bi + 1) << level).min(ncy));
+            let tx = if d[0] > 0.0 {
+                (x1 as f64 - lo[0]) * inv[0]
+            } else if d[0] < 0.0 {
+                (x0 as f64 - lo[0]) * inv[0]
+            } else {
+                f64::INFINITY
+            };
+            let ty = if d[1] > 0.0 {
+                (y1 as f64 - lo[1]) * inv[1]
+            } else if d[1] < 0.0 {
+                (y0 as f64 - lo[1]) * inv[1]
+            } else {
+                f64::INFINITY
+            };
+            let te = tx.min(ty).max(t);
+            if level == 0 {
+                if let Some(hit) = s.cross_cell(lo, d, ci as usize, cj as usize, t, te.min(t_end), exclude) {
                     let p = [lo[0] + hit.t * d[0], lo[1] + hit.t * d[1], lo[2] + hit.t * d[2]];
                     return Outcome::Hit(hit, p);
                 }
-            }
-            if t1 >= t_end {
-                return if d[2] > 0.0 { Outcome::Left { side: false } } else { Outcome::Lost };
-            }
-            // Off the side of an open grid: gone, whatever lies beyond.
-            if s.border == Border::Open || !t1.is_finite() {
-                return if d[2] > 0.0 { Outcome::Left { side: true } } else { Outcome::Lost };
-            }
-            tmin = t1;
-            if a1 <= b1 {
-                tx += if d[0] > 0.0 { 1 } else { -1 };
-            }
-            if b1 <= a1 {
-                ty += if d[1] > 0.0 { 1 } else { -1 };
-            }
-        }
-        Outcome::Lost
-    }
-
-    /// The first hit inside one tile over `[t0, t1]` (`o` relative to the tile), by descending the pyramid.
-    #[allow(clippy::too_many_arguments)]
-    fn descend(&self, s: &Surface, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64, exclude: u64, stack: &mut Stack) -> Option<Hit> {
-        let top = self.levels.len();
-        if !(self.max_of(s, top, 0, 0).is_finite()) {
-            return None;
-        }
-        let inv = [1.0 / d[0], 1.0 / d[1]];
-        let zlow = |a: f64, b: f64| o[2] + if d[2] < 0.0 { b } else { a } * d[2];
-        stack.clear();
-        if zlow(t0, t1) <= self.max_of(s, top, 0, 0) {
-            stack.push((top as u8, 0, 0, t0, t1));
-        }
-        while let Some((level, bi, bj, ta, tb)) = stack.pop() {
-            let (bi, bj) = (bi as usize, bj as usize);
-            if level == 0 {
-                if let Some(hit) = s.cross_cell(o, d, bi, bj, ta, tb, exclude) {
-                    return Some(hit);
-                }
-                continue;
-            }
-            let cl = level as usize - 1;
-            let size = (1usize << cl) as f64;
-            let mut kids: [(f64, f64, u32, u32); 4] = [(0.0, 0.0, 0, 0); 4];
-            let mut nk = 0;
-            for ci in 2 * bi..2 * bi + 2 {
-                if (ci << cl) >= s.ncy {
+            } else {
+                let zlow = lo[2] + d[2] * if d[2] < 0.0 { te.min(t_end) } else { t };
+                if !(zlow > self.max_at(level, bi as usize, bj as usize)) {
+                    level -= 1;
                     continue;
                 }
-                let (y0, y1) = (ci as f64 * size, ((ci + 1) as f64 * size).min(s.ncy as f64));
-                let (b0, b1) = slab(o[1], inv[1], y0, y1);
-                for cj in 2 * bj..2 * bj + 2 {
-                    if (cj << cl) >= s.ncx {
-                        continue;
-                    }
-                    let (x0, x1) = (cj as f64 * size, ((cj + 1) as f64 * size).min(s.ncx as f64));
-                    let (a0, a1) = slab(o[0], inv[0], x0, x1);
-                    let (c0, c1) = (a0.max(b0).max(ta), a1.min(b1).min(tb));
-                    if c0 > c1 || zlow(c0, c1) > self.max_of(s, cl, ci, cj) {
-                        continue;
-                    }
-                    kids[nk] = (c0, c1, ci as u32, cj as u32);
-                    nk += 1;
+            }
+            // Nothing in this block: on to the next one the ray meets.
+            if te >= t_end {
+                return gone(false);
+            }
+            t = te;
+            let (pi, pj) = (ci, cj);
+            if tx <= ty {
+                cj = if d[0] > 0.0 { x1 } else { x0 - 1 };
+            } else {
+                cj = floor(lo[0] + t * d[0]).clamp(x0, x1 - 1);
+            }
+            if ty <= tx {
+                ci = if d[1] > 0.0 { y1 } else { y0 - 1 };
+            } else {
+                ci = floor(lo[1] + t * d[1]).clamp(y0, y1 - 1);
+            }
+            if cj < 0 || cj >= ncx || ci < 0 || ci >= ncy {
+                // Off the side of an open grid: gone, whatever lies beyond.
+                if s.border == Border::Open {
+                    return gone(true);
+                }
+                tiles += 1;
+                if tiles > MAX_TILES || !t.is_finite() {
+                    return Outcome::Lost;
+                }
+                if cj < 0 {
+                    cj += ncx;
+                    lo[0] += ncx as f64;
+                } else if cj >= ncx {
+                    cj -= ncx;
+                    lo[0] -= ncx as f64;
+                }
+                if ci < 0 {
+                    ci += ncy;
+                    lo[1] += ncy as f64;
+                } else if ci >= ncy {
+                    ci -= ncy;
+                    lo[1] -= ncy as f64;
                 }
             }
-            // Push the farthest first, so the nearest is popped first.
-            kids[..nk].sort_unstable_by(|p, q| q.0.total_cmp(&p.0));
-            for k in &kids[..nk] {
-                stack.push((cl as u8, k.2, k.3, k.0, k.1));
+            // Left the parent block: its neighbour may be skipped whole.
+            if level < top && ((ci >> (level + 1)) != (pi >> (level + 1)) || (cj >> (level + 1)) != (pj >> (level + 1))) {
+                level += 1;
             }
         }
-        None
     }
 }
 
-/// The ray's `t` range inside `[lo, hi]` along one axis (`inv = 1 / d`; a ray along the slab is inside
-/// for every `t` or none).
+/// The cell holding coordinate `x` along an axis of `n` cells, on a cell edge the one the ray enters
+/// (direction component `d`).
 #[inline]
-fn slab(o: f64, inv: f64, lo: f64, hi: f64) -> (f64, f64) {
-    if inv.is_infinite() {
-        return if o >= lo && o < hi { (f64::NEG_INFINITY, f64::INFINITY) } else { (f64::INFINITY, f64::NEG_INFINITY) };
-    }
-    let (a, b) = ((lo - o) * inv, (hi - o) * inv);
-    if a <= b {
-        (a, b)
+fn cell_of(x: f64, d: f64, n: i64) -> i64 {
+    let f = floor(x);
+    let c = if d < 0.0 && f as f64 == x { f - 1 } else { f };
+    c.clamp(0, n - 1)
+}
+
+/// `floor(x)` as an integer, saturating (without SSE4.1 `f64::floor` is a call into libm).
+#[inline]
+pub(crate) fn floor(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) > x {
+        i - 1
     } else {
-        (b, a)
+        i
     }
 }

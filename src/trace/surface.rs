@@ -102,7 +102,9 @@ impl Surface {
             return Err(Error::new(ErrorKind::TooLarge, format!("grid {nx} x {ny} too large to trace")));
         }
         crate::budget::check_bytes((nx as u64 * ny as u64).saturating_mul(8 + 1), "the traced copy of the heights")?;
-        let mut h: Vec<f64> = scan.z.to_vec();
+        // Huge pages: rays read the heights at random places, and 4 KiB pages would miss the TLB.
+        let mut h = crate::scan::heights::zeroed(nx * ny);
+        h.copy_from_slice(&scan.z[..]);
         let measured: Vec<bool> = h.iter().map(|v| v.is_finite()).collect();
         let filled_points = measured.iter().filter(|&&m| !m).count();
         // Nothing measured leaves nothing to trace.
@@ -176,8 +178,9 @@ impl Surface {
     /// The cell and triangle under the point `(X, Y)` (cell units, inside the grid).
     #[inline]
     pub fn locate(&self, x: f64, y: f64) -> (usize, usize, u8) {
-        let j = (x.floor().max(0.0) as usize).min(self.ncx - 1);
-        let i = (y.floor().max(0.0) as usize).min(self.ncy - 1);
+        // Truncation is the floor here: negative coordinates go to cell 0 either way.
+        let j = (x.max(0.0) as usize).min(self.ncx - 1);
+        let i = (y.max(0.0) as usize).min(self.ncy - 1);
         let tri = if x - j as f64 >= y - i as f64 { 0 } else { 1 };
         (i, j, tri)
     }

@@ -43,16 +43,15 @@ impl DirTable {
     /// The bin of a unit direction above the horizon.
     #[inline]
     pub fn bin(&self, w: [f64; 3]) -> Option<usize> {
-        // Below (or on) the horizon no bin holds the direction.
-        if !(w[2] > 0.0) {
-            return None;
-        }
-        let theta = w[2].min(1.0).acos();
-        let u = (theta / FRAC_PI_2).sqrt();
+        warp(w).map(|(u, p)| self.bin_at(u, p))
+    }
+
+    /// The bin at the warped coordinates `(u_theta, u_phi)` of [`warp`].
+    #[inline]
+    pub(crate) fn bin_at(&self, u: f64, p: f64) -> usize {
         let it = ((u * self.n_theta as f64) as usize).min(self.n_theta - 1);
-        let p = (w[1].atan2(w[0]) + PI) / (2.0 * PI);
         let ip = ((p * self.n_phi as f64) as usize).min(self.n_phi - 1);
-        Some(it * self.n_phi + ip)
+        it * self.n_phi + ip
     }
 
     /// Projected solid angle `int cos(theta) dw` of bin `k` (exact).
@@ -81,6 +80,19 @@ impl std::str::FromStr for DirTable {
         let (a, b) = s.split_once('x').ok_or_else(bad)?;
         Ok(DirTable { n_theta: a.trim().parse().map_err(|_| bad())?, n_phi: b.trim().parse().map_err(|_| bad())? })
     }
+}
+
+/// The warped coordinates of a unit direction above the horizon: `u_theta = sqrt(2 theta / pi)` and
+/// `u_phi = (phi + pi) / 2 pi`, both in `[0, 1]` (the tables' and the RGL warp's); `None` on or below
+/// the horizon.
+#[inline]
+pub(crate) fn warp(w: [f64; 3]) -> Option<(f64, f64)> {
+    // Below (or on) the horizon no bin holds the direction.
+    if !(w[2] > 0.0) {
+        return None;
+    }
+    let theta = w[2].min(1.0).acos();
+    Some(((theta / FRAC_PI_2).sqrt(), (w[1].atan2(w[0]) + PI) / (2.0 * PI)))
 }
 
 /// Sums per bin: three channels and the square of the luminance (for the noise).

@@ -9,10 +9,10 @@
 use rand::{RngExt, SeedableRng};
 
 use super::compare::SigmaTable;
-use super::hierarchy::{Outcome, Pyramid, Stack};
+use super::hierarchy::{Outcome, Pyramid};
 use super::surface::Surface;
-use super::tally::{deposit, DirTable, Tally};
-use crate::export::rgl::{Material, RGB_NM};
+use super::tally::{deposit, warp, DirTable, Tally};
+use crate::export::rgl::Material;
 
 /// The random generator of the tracer: xoshiro256++, seeded per block of rays.
 pub(crate) type TraceRng = rand::rngs::Xoshiro256PlusPlus;
@@ -35,12 +35,30 @@ pub(crate) struct Setup<'a> {
     pub spread: Option<[f64; 4]>,
 }
 
+/// How many rays ahead of the traced one the first reads are prefetched.
+const PREFETCH: usize = 4;
+
 /// A well-mixed seed for block `block` of incidence `inc` (SplitMix64 finalizer).
 pub(crate) fn block_seed(seed: u64, inc: usize, block: usize) -> u64 {
     let mut z = seed ^ (inc as u64).wrapping_mul(0xD1B5_4A32_D192_ED03) ^ (block as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
+}
+
+/// The Morton (Z-order) code of a cell: the bits of `x` and `y` interleaved.
+#[inline]
+fn morton(x: u32, y: u32) -> u64 {
+    fn spread(v: u32) -> u64 {
+        let mut v = v as u64;
+        v = (v | (v << 16)) & 0x0000_FFFF_0000_FFFF;
+        v = (v | (v << 8)) & 0x00FF_00FF_00FF_00FF;
+        v = (v | (v << 4)) & 0x0F0F_0F0F_0F0F_0F0F;
+        v = (v | (v << 2)) & 0x3333_3333_3333_3333;
+        v = (v | (v << 1)) & 0x5555_5555_5555_5555;
+        v
+    }
+    spread(x) | (spread(y) << 1)
 }
 
 #[inline]
@@ -58,17 +76,13 @@ impl Setup<'_> {
     /// Fresnel reflectance per channel at the cosine `c`.
     #[inline]
     fn fresnel(&self, c: f64) -> [f64; 3] {
-        match self.material {
-            Material::None => [1.0; 3],
-            m => [m.fresnel(c, RGB_NM[0]), m.fresnel(c, RGB_NM[1]), m.fresnel(c, RGB_NM[2])],
-        }
+        self.material.fresnel_rgb(c)
     }
 
     /// `rays` paths and `g1_rays` masking rays with the generator seeded by `seed`.
     pub fn block(&self, rays: usize, g1_rays: usize, seed: u64) -> Tally {
         let mut t = Tally::new(self.table.len(), self.bounces);
         let mut rng = TraceRng::seed_from_u64(seed);
-        let mut stack: Stack = Vec::with_capacity(128);
         let s = self.s;
         let (w, h) = (s.ncx as f64, s.ncy as f64);
         let z_top = s.zmax + 1e-3 * ((s.zmax - s.zmin) + s.dx.min(s.dy));
@@ -83,25 +97,44 @@ impl Setup<'_> {
                 (wi, self.sigma.lambda(wi))
             }
         };
-        for _ in 0..rays {
-            let (wi, li) = draw(&mut rng);
-            let (x, y) = (rng.random::<f64>() * w, rng.random::<f64>() * h);
+        // The block's start points, independent and uniform, are traced in Morton order of their cells:
+        // neighbours in the order share the pyramid's blocks and the heights' cache lines.
+        let starts = |rng: &mut TraceRng, n: usize| {
+            let mut v: Vec<(u64, f64, f64, [f64; 3], f64)> = (0..n)
+                .map(|_| {
+                    let (wi, li) = draw(rng);
+                    let (x, y) = (rng.random::<f64>() * w, rng.random::<f64>() * h);
+                    (morton(x as u32, y as u32), x, y, wi, li)
+                })
+                .collect();
+            v.sort_unstable_by_key(|p| p.0);
+            v
+        };
+        // A few rays ahead, their first reads are fetched while this one is traced.
+        let ahead = |v: &[(u64, f64, f64, [f64; 3], f64)], k: usize| {
+            if let Some(p) = v.get(k + PREFETCH) {
+                self.pyr.prefetch(s, p.2 as usize, p.1 as usize);
+            }
+        };
+        let v = starts(&mut rng, rays);
+        for (k, &(_, x, y, wi, li)) in v.iter().enumerate() {
+            ahead(&v, k);
             self.predict(&mut t, x, y, wi, li);
-            self.path(&mut t, [x, y, z_top], wi, &mut stack);
+            self.path(&mut t, [x, y, z_top], wi);
         }
-        for _ in 0..g1_rays {
-            let (wi, _) = draw(&mut rng);
-            let (x, y) = (rng.random::<f64>() * w, rng.random::<f64>() * h);
-            self.masking(&mut t, x, y, wi, &mut stack);
+        let v = starts(&mut rng, g1_rays);
+        for (k, &(_, x, y, wi, _)) in v.iter().enumerate() {
+            ahead(&v, k);
+            self.masking(&mut t, x, y, wi);
         }
         t
     }
 
     /// One path from the plane above the surface.
-    fn path(&self, t: &mut Tally, o: [f64; 3], wi: [f64; 3], stack: &mut Stack) {
+    fn path(&self, t: &mut Tally, o: [f64; 3], wi: [f64; 3]) {
         let s = self.s;
         let d = self.to_grid([-wi[0], -wi[1], -wi[2]]);
-        let Outcome::Hit(mut hit, mut p) = self.pyr.first_hit(s, o, d, u64::MAX, stack) else {
+        let Outcome::Hit(mut hit, mut p) = self.pyr.first_hit(s, o, d, None, u64::MAX) else {
             t.not_landed += 1;
             return;
         };
@@ -124,7 +157,7 @@ impl Setup<'_> {
                 wt[ch] *= f[ch];
             }
             dir = [dir[0] + 2.0 * c * m[0], dir[1] + 2.0 * c * m[1], dir[2] + 2.0 * c * m[2]];
-            match self.pyr.first_hit(s, p, self.to_grid(dir), hit.id(), stack) {
+            match self.pyr.first_hit(s, p, self.to_grid(dir), Some((hit.i, hit.j)), hit.id()) {
                 Outcome::Hit(h2, p2) => {
                     t.later_hits += 1;
                     if !s.is_valid(h2.i, h2.j) {
@@ -171,8 +204,9 @@ impl Setup<'_> {
             return;
         }
         let o = [2.0 * c * m[0] - wi[0], 2.0 * c * m[1] - wi[1], 2.0 * c * m[2] - wi[2]];
-        let Some(b) = self.table.bin(o) else { return };
-        let g2 = 1.0 / (1.0 + lambda_i + self.sigma.lambda(o));
+        let Some((u, p)) = warp(o) else { return };
+        let b = self.table.bin_at(u, p);
+        let g2 = 1.0 / (1.0 + lambda_i + self.sigma.lambda_at(o, u, p));
         let a = c / (m[2] * wi[2]) * g2;
         let f = self.fresnel(c);
         deposit(&mut t.pred, b, [a * f[0], a * f[1], a * f[2]]);
@@ -180,7 +214,7 @@ impl Setup<'_> {
 
     /// One masking sample: the point above `(x, y)`, weighted by its projected area towards `wi`
     /// (`<wi.m> / m.n` per unit of macro area), and whether a ray from it towards `wi` leaves unblocked.
-    fn masking(&self, t: &mut Tally, x: f64, y: f64, wi: [f64; 3], stack: &mut Stack) {
+    fn masking(&self, t: &mut Tally, x: f64, y: f64, wi: [f64; 3]) {
         let s = self.s;
         let (i, j, tri) = s.locate(x, y);
         if !s.is_valid(i, j) {
@@ -195,7 +229,7 @@ impl Setup<'_> {
         let cz = s.corners(i, j);
         let p = [x, y, s.height_in(&cz, i, j, x, y)];
         let hit = super::surface::Hit { t: 0.0, i, j, tri };
-        let seen = matches!(self.pyr.first_hit(s, p, self.to_grid(wi), hit.id(), stack), Outcome::Left { .. });
+        let seen = matches!(self.pyr.first_hit(s, p, self.to_grid(wi), Some((i, j)), hit.id()), Outcome::Left { .. });
         let v = if seen { 1.0 } else { 0.0 };
         // Toward: the facet's horizontal normal points along the light's azimuth.
         let side = if m[0] * wi[0] + m[1] * wi[1] > 0.0 { 2 } else { 1 };

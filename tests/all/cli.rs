@@ -140,9 +140,12 @@ fn a_misfit_names_the_measured_route_and_it_runs_needs_shared() {
     assert_eq!(verdict, "ok", "{err}");
     assert!(!err.contains("export --to rgl"), "{err}");
     let Some(scans) = crate::common::shared_scans("a_misfit_names_the_measured_route_and_it_runs_needs_shared") else { return };
-    let (verdict, err) = fit(&scans.join("st_x3p-2.x3p"), "auto", "plane");
+    // A scan no lobe renders like (the render choice answers `measured`): the command that writes its table.
+    let scan = scans.join("hamby44_Unknown-Bullet_E-Land_1.x3p");
+    let (verdict, err) = fit(&scan, "auto", "plane");
     assert_eq!(verdict, "misfit", "{err}");
-    assert!(err.contains("no model of `auto`'s ladder is within the tolerance; `ndfit export --to rgl"), "{err}");
+    assert!(err.contains("no lobe renders within mean FLIP"), "{err}");
+    assert!(err.contains(&format!("`ndfit export {} --to rgl -o OUT.bsdf`", scan.display())), "{err}");
 }
 
 /// `export --to rgl` of a scan takes the reading and fit flags of `ndfit fit`: a raw `.npy` grid without

@@ -118,8 +118,22 @@ fn binding_keywords(lib: &str, name: &str) -> BTreeMap<String, Option<String>> {
     let at = lib.find(&format!("fn {name}(")).unwrap_or_else(|| panic!("fn {name} in python/src/lib.rs"));
     let sig_at = lib[..at].rfind("#[pyo3(signature = (").expect("its signature") + "#[pyo3(signature = (".len();
     let sig = &lib[sig_at..sig_at + lib[sig_at..].find("))]").expect("closed signature")];
-    sig.split(',')
-        .map(str::trim)
+    // Commas inside a quoted default (`scene="point,broad"`) do not split.
+    let mut parts = vec![String::new()];
+    let mut quoted = false;
+    for ch in sig.chars() {
+        match ch {
+            '"' => {
+                quoted = !quoted;
+                parts.last_mut().expect("one part").push(ch);
+            }
+            ',' if !quoted => parts.push(String::new()),
+            _ => parts.last_mut().expect("one part").push(ch),
+        }
+    }
+    parts
+        .iter()
+        .map(|p| p.trim())
         .filter(|p| !p.is_empty() && *p != "*")
         .map(|p| match p.split_once('=') {
             Some((k, v)) => (k.trim().to_string(), Some(v.trim().trim_matches('"').to_string()).filter(|v| v != "None")),

@@ -297,9 +297,55 @@ impl NdfGrids {
         if let Some(bad) = ndf.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
             return Err(Error::invalid(format!("the NDF has a value {bad} (not finite and >= 0) on the table's grid")));
         }
-        // Quadrature over the hemisphere in grid coordinates: dw = 2 pi^2 u_theta sin(theta) du_theta du_phi,
-        // on cells of at most QUAD_RES nodes across (a Gauss rule is exact far beyond the bilinear reading).
-        let nq = n.min(QUAD_RES);
+        let area = ProjectedArea::new(d, n.min(QUAD_RES), n.min(SIGMA_RES), renormalize)?;
+        ndf.iter_mut().for_each(|v| *v *= area.scale);
+        let ProjectedArea { sigma, ns, normalization, scale } = area;
+        Ok(NdfGrids { ndf, n, sigma, ns, normalization, ndf_error, scale })
+    }
+
+    /// `D(m)` as a renderer reads it: bilinear on the `ndf` grid.
+    pub fn d(&self, m: Vector3<f64>) -> f64 {
+        bilinear(&self.ndf, self.n, dir2u(m))
+    }
+
+    /// Smith's `G1(w)` of the tabulated NDF, `min(1, cos(theta) / sigma(w))`; 0 at or below the horizon.
+    pub fn g1(&self, w: Vector3<f64>) -> f64 {
+        smith_g1(&self.sigma, self.ns, w)
+    }
+}
+
+/// `min(1, cos(theta) / sigma(w))` with `sigma` read bilinearly on its `ns x ns` grid; 0 at or below the
+/// horizon.
+fn smith_g1(sigma: &[f64], ns: usize, w: Vector3<f64>) -> f64 {
+    let s = bilinear(sigma, ns, dir2u(w));
+    if w.z > 0.0 && s > 0.0 {
+        (w.z / s).min(1.0)
+    } else {
+        0.0
+    }
+}
+
+/// The projected area `sigma(w) = int D(m) <w.m> dm` of an NDF on an `ns x ns` grid of the table's
+/// sample space, by quadrature (3 x 3 Gauss points per cell of an `nq`-node grid), and the NDF's
+/// `int D(m) (m.n) dm`. `G1(w) = cos(theta) / sigma(w)` is Smith's masking of that NDF (Heitz 2014 eq. 22).
+#[derive(Debug, Clone)]
+pub struct ProjectedArea {
+    /// `sigma` at the nodes, of the NDF rescaled by `scale`.
+    pub sigma: Vec<f64>,
+    /// Nodes per axis of `sigma`.
+    pub ns: usize,
+    /// `int D(m) (m.n) dm` of the NDF before rescaling.
+    pub normalization: f64,
+    /// The factor applied to the NDF: `1 / normalization` when renormalized, else 1.
+    pub scale: f64,
+}
+
+impl ProjectedArea {
+    /// The projected area of `d` (rescaled to `int D (m.n) dm = 1` when `renormalize`), quadrature on
+    /// `nq` nodes across, `sigma` on `ns`.
+    pub fn new(d: &(dyn Fn(Vector3<f64>) -> f64 + Sync), nq: usize, ns: usize, renormalize: bool) -> Result<ProjectedArea> {
+        let (nq, ns) = (nq.max(2), ns.max(2));
+        // Quadrature over the hemisphere in grid coordinates: dw = 2 pi^2 u_theta sin(theta) du_theta du_phi.
         let step = 1.0 / (nq - 1) as f64;
         let mut quad: Vec<(Vector3<f64>, f64)> = (0..(nq - 1) * (nq - 1))
             .into_par_iter()
@@ -322,8 +368,6 @@ impl NdfGrids {
         let total: f64 = quad.iter().map(|(_, w)| w).sum();
         quad.retain(|(_, w)| *w >= PRUNE * total);
         let scale = if renormalize { 1.0 / normalization } else { 1.0 };
-        ndf.iter_mut().for_each(|v| *v *= scale);
-        let ns = n.min(SIGMA_RES);
         let sstep = 1.0 / (ns - 1) as f64;
         let sigma: Vec<f64> = (0..ns * ns)
             .into_par_iter()
@@ -332,22 +376,12 @@ impl NdfGrids {
                 scale * quad.iter().map(|(m, q)| q * w.dot(m).max(0.0)).sum::<f64>()
             })
             .collect();
-        Ok(NdfGrids { ndf, n, sigma, ns, normalization, ndf_error, scale })
+        Ok(ProjectedArea { sigma, ns, normalization, scale })
     }
 
-    /// `D(m)` as a renderer reads it: bilinear on the `ndf` grid.
-    pub fn d(&self, m: Vector3<f64>) -> f64 {
-        bilinear(&self.ndf, self.n, dir2u(m))
-    }
-
-    /// Smith's `G1(w)` of the tabulated NDF, `min(1, cos(theta) / sigma(w))`; 0 at or below the horizon.
+    /// Smith's `G1(w)`, `min(1, cos(theta) / sigma(w))`; 0 at or below the horizon.
     pub fn g1(&self, w: Vector3<f64>) -> f64 {
-        let s = bilinear(&self.sigma, self.ns, dir2u(w));
-        if w.z > 0.0 && s > 0.0 {
-            (w.z / s).min(1.0)
-        } else {
-            0.0
-        }
+        smith_g1(&self.sigma, self.ns, w)
     }
 }
 
