@@ -337,13 +337,16 @@ fn half(ndf: &EmpiricalNdf, odd: bool) -> Option<EmpiricalNdf> {
     Some(h)
 }
 
+/// What a judge has rendered: the table (with its noise floors) and each lobe's score so far.
+type Judged = (Option<Reference>, Vec<(Model, Score)>);
+
 /// The render choice as `auto`'s judge: the scan's table ([`ScanBrdf`], filled by the offered lobe with
 /// the smallest NDF error, [`crate::fit::table_lobe`]) rendered once, the lobes simplest first until one is
 /// within the tolerance, each lobe rendered at most once however often it is offered.
 pub struct RenderJudge<'a> {
     ndf: &'a EmpiricalNdf,
     options: RenderOptions,
-    state: Mutex<(Option<Reference>, Vec<(Model, Score)>)>,
+    state: Mutex<Judged>,
 }
 
 impl<'a> RenderJudge<'a> {
