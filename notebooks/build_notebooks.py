@@ -926,7 +926,7 @@ print("answer:", sel["answer"], "| lobe:", fit["model"], "| render error:", {k: 
 print("each rendered lobe's worst FLIP:", {c["model"]: round(c["render_error"]["worst"], 3) for c in sel["candidates"] if "worst" in (c.get("render_error") or {})})
 prefix = os.path.join(OUT, "choice")
 _, err = ndfit("compare", SCAN, "--png", prefix)
-print(err.strip())
+print(err.strip().replace(ROOT + os.sep, ""))
 fig, ax = plt.subplots(2, 1, figsize=(12, 9))
 for a, name in zip(ax, ["point", "broad"]):
     a.imshow(plt.imread(prefix + "." + name + ".png")); a.axis("off")

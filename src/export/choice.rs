@@ -18,7 +18,7 @@ use nalgebra::Vector3;
 use super::rgl::{AnalyticBrdf, Material, NdfGrids, ProjectedArea, Regularized};
 use crate::error::{Error, Result};
 use crate::fit::{Decide, Decision, Offered};
-use crate::flip::{auto_exposures, hdr, HdrOptions, RgbImage, DEFAULT_PPD};
+use crate::flip::{auto_exposures, hdr, HdrOptions, HdrReference, RgbImage, DEFAULT_PPD};
 use crate::models::Model;
 use crate::ndf::EmpiricalNdf;
 use crate::render::{direction, Brdf, Image, Light, Scene};
@@ -238,20 +238,27 @@ fn unscored(scenes: usize) -> Score {
     Score { per_scene: vec![f64::NAN; scenes], worst: 0.0, excess: f64::NEG_INFINITY }
 }
 
-/// The scores of `lobe` against the `references` (the table's renders in `scenes`, in order).
-fn score(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[Image]) -> Result<Score> {
+/// The table's render prepared as HDR-FLIP's reference at the choice's [`exposures`]: the work on the
+/// reference alone is done once for every lobe scored against it.
+pub fn prepare(reference: &Image) -> Result<HdrReference> {
+    HdrReference::new(&RgbImage::new(reference.width, reference.height, reference.data.clone())?, DEFAULT_PPD, &exposures(reference)?)
+}
+
+/// The scores of `lobe` against the `references` (the table's renders in `scenes`, prepared, in order).
+fn score(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[HdrReference]) -> Result<Score> {
     extend(lobe, scenes, references, &vec![0.0; scenes.len()], unscored(scenes.len()), f64::INFINITY)
 }
 
 /// `so_far` with the scenes it lacks rendered in order, stopping once its excess over the `floors`
 /// exceeds `stop_above` (the lobe can then be neither the answer nor the closest).
-fn extend(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[Image], floors: &[f64], mut so_far: Score, stop_above: f64) -> Result<Score> {
+fn extend(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[HdrReference], floors: &[f64], mut so_far: Score, stop_above: f64) -> Result<Score> {
     for (k, (s, r)) in scenes.iter().zip(references).enumerate() {
         if so_far.excess > stop_above {
             break;
         }
         if so_far.per_scene[k].is_nan() {
-            let v = flip_mean(r, &s.scene.render(lobe)?)?;
+            let img = s.scene.render(lobe)?;
+            let v = r.mean(&RgbImage::new(img.width, img.height, img.data)?)?;
             so_far.per_scene[k] = v;
             so_far.worst = so_far.worst.max(v);
             so_far.excess = so_far.excess.max(v - floors[k]);
@@ -267,7 +274,7 @@ pub fn decide(table: &dyn Brdf, candidates: &[Model], material: Material, scenes
     if candidates.is_empty() || scenes.is_empty() {
         return Err(Error::invalid("the render choice needs at least one candidate lobe and one scene"));
     }
-    let references: Vec<Image> = scenes.iter().map(|s| s.scene.render(table)).collect::<Result<_>>()?;
+    let references: Vec<HdrReference> = scenes.iter().map(|s| prepare(&s.scene.render(table)?)).collect::<Result<_>>()?;
     let scores: Vec<Score> =
         candidates.iter().map(|&model| score(&AnalyticBrdf { model, material }, scenes, &references)).collect::<Result<_>>()?;
     let answer = scores.iter().position(|s| s.excess <= tolerance);
@@ -310,8 +317,10 @@ struct Reference {
     lobe: Model,
     max_theta_deg: f64,
     images: Vec<Image>,
-    /// Per scene, the FLIP the table's own counting noise shows ([`RenderJudge::noise_floors`]).
-    floors: Vec<f64>,
+    prepared: Vec<HdrReference>,
+    /// Per scene, the FLIP the table's own counting noise shows ([`RenderJudge::noise_floors`]); measured
+    /// only once a lobe fails the tolerance without it (a lobe within it passes whatever the floor).
+    floors: Option<Vec<f64>>,
 }
 
 /// One half of `ndf`'s dispersion split (the odd row blocks, or the even), scaled to the whole: each bin's
@@ -387,7 +396,7 @@ impl<'a> RenderJudge<'a> {
     /// The noise floors of the last decision's table (`None` before any decision).
     pub fn floors(&self) -> Option<Vec<f64>> {
         let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        state.0.as_ref().map(|r| r.floors.clone())
+        state.0.as_ref().and_then(|r| r.floors.clone())
     }
 
     /// The table's renders the last decision scored against (`None` before any decision).
@@ -401,7 +410,8 @@ impl<'a> RenderJudge<'a> {
     /// decision.
     pub fn scores(&self, lobes: &[Model]) -> Result<Vec<Score>> {
         let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        let Some((images, floors)) = state.0.as_ref().map(|r| (r.images.clone(), r.floors.clone())) else {
+        let n = self.options.scenes.len();
+        let Some((images, floors)) = state.0.as_ref().map(|r| (r.prepared.clone(), r.floors.clone().unwrap_or(vec![0.0; n]))) else {
             return Err(Error::invalid("no table rendered yet: the judge has not decided"));
         };
         let mut out = Vec::with_capacity(lobes.len());
@@ -513,8 +523,8 @@ impl Decide for RenderJudge<'_> {
         // A new filling lobe (the whole ladder fitted after all) makes a new table: the old scores go.
         if state.0.as_ref().is_none_or(|r| r.lobe != filler || r.max_theta_deg != max_theta_deg) {
             let images = self.table_images(&filler, max_theta_deg)?;
-            let floors = self.noise_floors(&filler, max_theta_deg)?;
-            *state = (Some(Reference { lobe: filler, max_theta_deg, images, floors }), Vec::new());
+            let prepared = images.iter().map(prepare).collect::<Result<_>>()?;
+            *state = (Some(Reference { lobe: filler, max_theta_deg, images, prepared, floors: None }), Vec::new());
         }
         let opts = &self.options;
         let mut answer = None;
@@ -526,7 +536,22 @@ impl Decide for RenderJudge<'_> {
             let so_far = at.map_or(unscored(opts.scenes.len()), |i| state.1[i].1.clone());
             let reference = state.0.as_ref().expect("the table was rendered above");
             let lobe = AnalyticBrdf { model: o.model, material: opts.material };
-            let s = extend(&lobe, &opts.scenes, &reference.images, &reference.floors, so_far, stop_above)?;
+            let known = reference.floors.clone();
+            let floors = known.clone().unwrap_or(vec![0.0; opts.scenes.len()]);
+            let mut s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, so_far, stop_above)?;
+            // The first lobe that fails without the floor makes the floor worth measuring; every score so far
+            // is then held to it, and this lobe's scenes left out are rendered if it still may pass.
+            if known.is_none() && !(s.complete() && s.excess <= opts.tolerance) {
+                let floors = self.noise_floors(&filler, max_theta_deg)?;
+                let rescore = |sc: &mut Score| {
+                    sc.excess = sc.per_scene.iter().zip(&floors).filter(|(v, _)| !v.is_nan()).map(|(v, f)| v - f).fold(f64::NEG_INFINITY, f64::max)
+                };
+                state.1.iter_mut().for_each(|(_, sc)| rescore(sc));
+                rescore(&mut s);
+                let reference = state.0.as_mut().expect("the table was rendered above");
+                reference.floors = Some(floors.clone());
+                s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, s, stop_above)?;
+            }
             match at {
                 Some(i) => state.1[i].1 = s.clone(),
                 None => state.1.push((o.model, s.clone())),
