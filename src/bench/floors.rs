@@ -182,7 +182,9 @@ pub fn run(plan: &Plan, work: &Path, mut log: impl FnMut(&str)) -> Result<Report
     ));
     // `auto` against one single-lobe fit, whole processes: the scan is one ellipsoid cap. `auto` with and
     // without its render choice (`--scene none`): their difference is the render scoring's cost.
-    for (label, model, scene) in [("ggx-aniso", "ggx-aniso", "point,broad"), ("auto", "auto", "point,broad"), ("auto --scene none", "auto", "none")] {
+    for (label, model, scene) in
+        [("ggx-aniso", "ggx-aniso", "point,broad"), ("auto", "auto", "point,broad"), ("auto --scene none", "auto", "none")]
+    {
         cmds.push(Cmd::new(
             &format!("ndfit fit --model {label}"),
             [

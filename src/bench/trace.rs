@@ -173,7 +173,16 @@ pub fn run(plan: &TracePlan, log: impl Fn(&str)) -> Result<TraceBench> {
     line(&format!("{0}^2 at {1} incidences, {2} bounces", plan.large_size, plan.large_incidences.len(), lo.bounces), &large);
     let per_core_met = one.paths_per_s_per_core >= TARGET_PATHS_PER_CORE;
     let large_met = large.wall_s <= TARGET_WALL_S;
-    Ok(TraceBench { schema: "ndfit.bench.trace/1", plan: plan.clone(), threads, one_thread: one, all_threads: all, large, per_core_met, large_met })
+    Ok(TraceBench {
+        schema: "ndfit.bench.trace/1",
+        plan: plan.clone(),
+        threads,
+        one_thread: one,
+        all_threads: all,
+        large,
+        per_core_met,
+        large_met,
+    })
 }
 
 /// The Markdown table of a run (`trace.md`).

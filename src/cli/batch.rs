@@ -85,7 +85,8 @@ pub struct Args {
     pub timeout: Option<f64>,
     /// Options applied to every scan: reading and preprocessing (--dx, --dy, --z-scale, --format, --form,
     /// --crop, --subsample), the NDF (--normals, --ndf-cells, --target-count) and the fit (--objective,
-    /// --solver, --extra-starts, --max-theta, --na, --tail, --tolerance, --preset), e.g.
+    /// --solver, --extra-starts, --max-theta, --na, --tail, --tolerance, --preset) and auto's render choice
+    /// (--scene, --render-tolerance, --material), e.g.
     /// `-- --dx 1e-6 --form poly2`.
     #[arg(last = true)]
     pub scan_options: Vec<String>,

@@ -112,7 +112,15 @@ impl FitHow {
         let tolerance = check::tolerance(self.tolerance, Spelling::Flag)?;
         let fit =
             FitOptions { objective, solver, extra_starts, max_theta: max_theta.to_radians(), tail, tolerance, ..FitOptions::default() };
-        let options = Options { read: read.read_options(), preprocess: read.preprocess(), preset: self.preset, ndf, model, fit, ..Options::default() };
+        let options = Options {
+            read: read.read_options(),
+            preprocess: read.preprocess(),
+            preset: self.preset,
+            ndf,
+            model,
+            fit,
+            ..Options::default()
+        };
         // What the flags' own checks leave (a --subsample of 0) is refused naming the scan.
         options.validate().map_err(|e| e.with_path(path))?;
         Ok(options)

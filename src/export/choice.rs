@@ -251,7 +251,14 @@ fn score(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[HdrReference]) ->
 
 /// `so_far` with the scenes it lacks rendered in order, stopping once its excess over the `floors`
 /// exceeds `stop_above` (the lobe can then be neither the answer nor the closest).
-fn extend(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[HdrReference], floors: &[f64], mut so_far: Score, stop_above: f64) -> Result<Score> {
+fn extend(
+    lobe: &dyn Brdf,
+    scenes: &[NamedScene],
+    references: &[HdrReference],
+    floors: &[f64],
+    mut so_far: Score,
+    stop_above: f64,
+) -> Result<Score> {
     for (k, (s, r)) in scenes.iter().zip(references).enumerate() {
         if so_far.excess > stop_above {
             break;
@@ -544,7 +551,8 @@ impl Decide for RenderJudge<'_> {
             if known.is_none() && !(s.complete() && s.excess <= opts.tolerance) {
                 let floors = self.noise_floors(&filler, max_theta_deg)?;
                 let rescore = |sc: &mut Score| {
-                    sc.excess = sc.per_scene.iter().zip(&floors).filter(|(v, _)| !v.is_nan()).map(|(v, f)| v - f).fold(f64::NEG_INFINITY, f64::max)
+                    sc.excess =
+                        sc.per_scene.iter().zip(&floors).filter(|(v, _)| !v.is_nan()).map(|(v, f)| v - f).fold(f64::NEG_INFINITY, f64::max)
                 };
                 state.1.iter_mut().for_each(|(_, sc)| rescore(sc));
                 rescore(&mut s);

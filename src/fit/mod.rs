@@ -760,7 +760,13 @@ fn ladder(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool, judge: Option<&dyn 
         Some(judge) => {
             let offered: Vec<Offered> = order
                 .iter()
-                .map(|&i| Ok(Offered { model: Model::from_params(fits[i].id, &public(&fits[i]))?, supported: supported[i], delta_data: deltas[i] }))
+                .map(|&i| {
+                    Ok(Offered {
+                        model: Model::from_params(fits[i].id, &public(&fits[i]))?,
+                        supported: supported[i],
+                        delta_data: deltas[i],
+                    })
+                })
                 .collect::<Result<_>>()?;
             let decision = judge.decide(&offered, s.data.max_theta.to_degrees())?;
             // No lobe fitted so far renders close enough, and the ladder stopped early: fit it whole.

@@ -437,4 +437,3 @@ fn the_plot_is_written_and_decodes_at_its_size() {
     assert!(!e.status.success());
     assert_eq!(std::fs::read(&out).unwrap(), before);
 }
-

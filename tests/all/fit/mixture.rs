@@ -256,7 +256,10 @@ fn the_render_choice_keeps_held_out_truths() {
         let rep = ndfit::pipeline::fit_rendered(ndf, &FitOptions::default(), &render, what).expect("auto");
         let sel = rep.selection.as_ref().expect("selection");
         let err = sel.render_error.as_ref().expect("render_error");
-        eprintln!("{what}: answer {:?} ({}), render error {err:?}, noise {:?}, verdict {}", sel.answer, rep.model, sel.render_noise, rep.quality.verdict);
+        eprintln!(
+            "{what}: answer {:?} ({}), render error {err:?}, noise {:?}, verdict {}",
+            sel.answer, rep.model, sel.render_noise, rep.quality.verdict
+        );
         assert_eq!(sel.answer.as_deref(), Some(rep.model.as_str()), "{what}: {:?}", sel.candidates);
         assert!(["point", "broad", "worst"].iter().all(|k| err.contains_key(*k)), "{what}: {err:?}");
         // Held to the tolerance beyond the table's own counting noise, scene by scene.
@@ -269,7 +272,8 @@ fn the_render_choice_keeps_held_out_truths() {
     };
     let truth = model(ModelId::Ggx2, &[0.15, 0.05, 0.5, 0.2, -0.6, 0.5]);
     let tri = NdfOptions { scheme: ndfit::ndf::NormalScheme::Triangles, cells_across: None, ..NdfOptions::default() };
-    let two = empirical_ndf(&facet_mixture(Draw::Ggx(0.15, 0.05, -0.6), Draw::Ggx(0.5, 0.2, -0.6), 0.5, 250_000, false), &tri).expect("ndf");
+    let two =
+        empirical_ndf(&facet_mixture(Draw::Ggx(0.15, 0.05, -0.6), Draw::Ggx(0.5, 0.2, -0.6), 0.5, 250_000, false), &tri).expect("ndf");
     let rep = check(&two, "two lobes");
     let d = delta_to_truth(&rep.to_model().expect("model"), &truth);
     assert!(rep.model.is_mixture() && d <= 0.02, "two lobes: {} at {d} from the truth", rep.model);
