@@ -29,8 +29,8 @@ pub struct RenderArgs {
     /// leaves the choice to the NDF error alone (no selection.answer).
     #[arg(long, default_value = "point,broad")]
     pub scene: String,
-    /// The largest mean FLIP, in every scene, at which a lobe is the answer (data_formats/render.md,
-    /// "The tolerance").
+    /// The largest mean FLIP beyond the scan table's own noise floor, in every scene, at which a lobe is
+    /// the answer (data_formats/render.md, "The tolerance").
     #[arg(long = "render-tolerance", default_value_t = ndfit::export::choice::DEFAULT_RENDER_TOLERANCE)]
     pub render_tolerance: f64,
     /// The conductor of the renders: none (F = 1), Al, Ag, Au, Cu or Cr.

@@ -211,8 +211,8 @@ impl Choice {
 /// is 0: 23 stops up, where a lobe's tail a millionth of its peak dominates the score.
 pub const DYNAMIC_RANGE: f64 = 1e3;
 
-/// The default render tolerance: the largest worst-scene mean FLIP at which a lobe is the answer
-/// (data_formats/render.md, "The tolerance").
+/// The default render tolerance: the largest mean FLIP beyond the table's noise floor, in every scene, at
+/// which a lobe is the answer (data_formats/render.md, "The tolerance").
 pub const DEFAULT_RENDER_TOLERANCE: f64 = 0.02;
 
 /// The conductor of the choice's renders unless told otherwise: aluminium, the metal most scanned samples
@@ -294,7 +294,7 @@ pub fn decide(table: &dyn Brdf, candidates: &[Model], material: Material, scenes
 pub struct RenderOptions {
     /// The scenes a lobe must pass in every one ([`default_scenes`], or [`parse_scenes`]).
     pub scenes: Vec<NamedScene>,
-    /// The largest worst-scene mean FLIP at which a lobe is the answer.
+    /// The largest mean FLIP beyond the table's noise floor, in every scene, at which a lobe is the answer.
     pub tolerance: f64,
     /// The conductor of both renders.
     pub material: Material,
