@@ -1,4 +1,4 @@
-//! The tracer's throughput (`ndfit bench --trace`; issue 53): one-bounce paths per second per core on
+//! The tracer's throughput (`ndfit bench --trace`): one-bounce paths per second per core on
 //! a synthetic Gaussian scan, and the wall time of a large scan at many incidences on every thread.
 //!
 //! The scans are made in memory (`synth::gaussian_surface`, RMS slope 0.3 per axis, correlation length
