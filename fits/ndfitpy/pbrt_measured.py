@@ -9,14 +9,15 @@ never from ndfit's writer, so that agreement with ndfit's references means the f
   span the full turn ("reduction != 1"), and which interpolants are normalized (`vndf`, `luminance`) or
   raw (`ndf`, `sigma`, `spectra`). pbrt reads no `jacobian` flag: it always applies `D / (4 sigma)`.
 - `Interpolant`: `PiecewiseLinear2D<Dimension>` (sampling.h): its constructor (per-slice conditional
-  and marginal CDFs of the bilinear density, stored as float32), `Evaluate` and `Invert`, with the
+  and marginal CDFs of the bilinear density, stored as float32), `Evaluate`, `Invert` and `Sample`, with the
   parameters (incident phi, theta and for `spectra` the wavelength) interpolated linearly between the
   nodes found by `FindInterval` (math.h), the weight clamped to [0, 1].
 - `PbrtMeasured.f`: `MeasuredBxDF::f(wo, wi)`: pbrt's `wo` (towards the camera) is the table's incident
   direction, the lobe is read two-sided (both directions flipped when `wo.z < 0`), the spectrum is
   clamped at 0, and the value returned is the BRDF itself,
   `max(0, R(s)) D(m) / (4 sigma(wo) cos(theta_wi))`, without the cosine Mitsuba's `eval` includes.
-- `PbrtMeasured.pdf`: `MeasuredBxDF::PDF(wo, wi)`.
+- `PbrtMeasured.pdf`, `PbrtMeasured.sample_f`: `MeasuredBxDF::PDF(wo, wi)` and `Sample_f(wo, u)` (the
+  `luminance` warp, then the `vndf` warp, `Interpolant.sample` following `PiecewiseLinear2D::Sample`).
 
 All arithmetic is float64 on the float32 tables pbrt builds; a float32 renderer differs by rounding only.
 """
@@ -132,6 +133,56 @@ class Interpolant:
         v11 = self._lookup(self.data, weights, oy + 1, ox + 1)
         return ((1 - wy) * ((1 - wx) * v00 + wx * v10) + wy * ((1 - wx) * v01 + wx * v11)) * np.prod(self.inv_patch)
 
+    def _find_interval(self, size, pred):
+        """pbrt's `FindInterval(size, pred)`, one binary search per element: the last index whose
+        predicate holds, clamped to [0, size - 2]."""
+        n = np.shape(pred(np.zeros(1, dtype=np.intp)))
+        first = np.ones(n, dtype=np.intp)
+        length = np.full(n, size - 2, dtype=np.intp)
+        while np.any(length > 0):
+            half = length >> 1
+            middle = first + half
+            ok = pred(np.minimum(middle, size - 1)) & (length > 0)
+            first = np.where(ok, middle + 1, first)
+            length = np.where(ok, length - (half + 1), np.where(length > 0, half, 0))
+        return np.clip(first - 1, 0, size - 2)
+
+    def sample(self, u, *param):
+        """`Sample(u, params...)`: the point of the unit square for the uniform `u = (u0, u1)`, and the
+        density there (the row by the marginal CDF, then the column by the row's conditional CDF)."""
+        one_minus_eps = float(np.nextafter(np.float32(1), np.float32(0)))
+        ux = np.clip(np.asarray(u[0], dtype=np.float64), 1 - one_minus_eps, one_minus_eps)
+        uy = np.clip(np.asarray(u[1], dtype=np.float64), 1 - one_minus_eps, one_minus_eps)
+        ux, uy = np.broadcast_arrays(ux, uy)
+        param = [np.broadcast_to(np.asarray(p, dtype=np.float64), ux.shape) for p in param]
+        weights = self._weights(param)
+        lk = lambda arr, *cell: self._lookup(arr, weights, *cell)  # noqa: E731
+        row = self._find_interval(self.h, lambda i: lk(self.marg, np.broadcast_to(i, ux.shape)) < uy)
+        uy = uy - lk(self.marg, row)
+        last = np.full_like(row, self.w - 1)
+        r0, r1 = lk(self.cond, row, last), lk(self.cond, row + 1, last)
+        const = np.abs(r0 - r1) < 1e-4 * (r0 + r1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sy = np.where(const, 2 * uy / (r0 + r1),
+                          (r0 - np.sqrt(np.maximum(0, r0 * r0 - 2 * uy * (r0 - r1)))) / (r0 - r1))
+        ux = ux * ((1 - sy) * r0 + sy * r1)
+
+        def cond_at(i):
+            i = np.broadcast_to(i, ux.shape)
+            return (1 - sy) * lk(self.cond, row, i) + sy * lk(self.cond, row + 1, i)
+
+        col = self._find_interval(self.w, lambda i: cond_at(i) < ux)
+        ux = ux - cond_at(col)
+        v00, v10 = lk(self.data, row, col), lk(self.data, row, col + 1)
+        v01, v11 = lk(self.data, row + 1, col), lk(self.data, row + 1, col + 1)
+        c0, c1 = (1 - sy) * v00 + sy * v01, (1 - sy) * v10 + sy * v11
+        const = np.abs(c0 - c1) < 1e-4 * (c0 + c1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sx = np.where(const, 2 * ux / (c0 + c1),
+                          (c0 - np.sqrt(np.maximum(0, c0 * c0 - 2 * ux * (c0 - c1)))) / (c0 - c1))
+        pos = ((col + sx) / self.inv_patch[0], (row + sy) / self.inv_patch[1])
+        return pos, ((1 - sx) * c0 + sx * c1) * np.prod(self.inv_patch)
+
     def invert(self, sample, *param):
         """`Invert(sample, params...)`: the point of the unit square that `Sample` sends to `sample`, and
         the density there."""
@@ -231,6 +282,35 @@ class PbrtMeasured:
             scale = self.ndf.evaluate(u_wm) / (4.0 * self.sigma.evaluate(u_wo) * wi[:, 2])
         out = np.where(valid[:, None], fr * np.where(valid, scale, 0.0)[:, None], 0.0)
         return out[:, 0] if np.ndim(wavelengths) == 0 else out
+
+    def sample_f(self, wo, u, wavelengths=550.0):
+        """`MeasuredBxDF::Sample_f(wo, u)` for `n` directions `wo` and `n` uniform pairs `u` (shape
+        `(n, 2)`): the sampled `wi`, its value f (as `f`) and its pdf; `wi` is 0 and both are 0 where
+        no direction above the surface was drawn."""
+        wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
+        flip = np.where(wo[:, 2] <= 0, -1.0, 1.0)[:, None]
+        wo = wo * flip
+        theta_o, phi_o = np.arccos(np.clip(wo[:, 2], -1, 1)), np.arctan2(wo[:, 1], wo[:, 0])
+        u = np.asarray(u, dtype=np.float64)
+        s, lum_pdf = self.luminance.sample((u[:, 0], u[:, 1]), phi_o, theta_o)
+        u_wm, pdf = self.vndf.sample(s, phi_o, theta_o)
+        phi_m, theta_m = (2 * u_wm[1] - 1) * np.pi, u_wm[0] ** 2 * (np.pi / 2)
+        if self.isotropic:
+            phi_m = phi_m + phi_o
+        sin_m, cos_m = np.sin(theta_m), np.cos(theta_m)
+        wm = np.stack([sin_m * np.cos(phi_m), sin_m * np.sin(phi_m), cos_m], axis=1)
+        wi = -wo + 2 * np.sum(wo * wm, axis=1)[:, None] * wm
+        ok = wi[:, 2] > 0
+        lam = np.atleast_1d(np.asarray(wavelengths, dtype=np.float64))
+        fr = np.stack([np.maximum(0.0, self.spectra.evaluate(s, phi_o, theta_o, np.full_like(phi_o, l)))
+                       for l in lam], axis=1)
+        u_wo = (_theta2u(theta_o), _phi2u(phi_o))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fr = fr * (self.ndf.evaluate(u_wm) / (4 * self.sigma.evaluate(u_wo) * np.abs(wi[:, 2])))[:, None]
+            pdf = pdf / (4 * np.sum(wo * wm, axis=1) * np.maximum(2 * np.pi ** 2 * u_wm[0] * sin_m, 1e-6))
+        fr = np.where(ok[:, None], fr, 0.0)
+        return np.where(ok[:, None], wi * flip, 0.0), fr[:, 0] if np.ndim(wavelengths) == 0 else fr, \
+            np.where(ok, pdf * lum_pdf, 0.0)
 
     def pdf(self, wo, wi):
         """`MeasuredBxDF::PDF(wo, wi)`: the solid-angle density with which `Sample_f` picks `wi`."""

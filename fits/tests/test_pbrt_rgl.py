@@ -116,8 +116,7 @@ def test_pbrt_table_tails(tables, model):
     keep = ((ref >= 1e-3 * ref.reshape(-1, per).max(axis=1).repeat(per)) & (ref > 0))
     med, p90, p99, med_in, p90_in, n, n_in = figures(got, ref, keep, wo[:, 2])
     # The reverse reading: the light's direction as the table's incident one (pbrt's MeasuredBxDF ignores
-    # TransportMode, so a light subpath of BDPT/MLT reads it so). Incidences 0-70 now bound the outgoing
-    # side; what the lobe's table does at the swapped directions is measured, not bounded.
+    # TransportMode, so a light subpath of BDPT/MLT reads it so), held to the same bounds.
     rev = table.f(wo, wi, 555.0)
     r_med, r_p90, r_p99, r_med_in, r_p90_in, _, _ = figures(rev, ref, keep, wo[:, 2])
     print(f"\npbrt-v4 reading, {model}: {n} pairs >= 1e-3 of peak, median {med:.4f}, 90th pct {p90:.4f}, "
@@ -127,6 +126,7 @@ def test_pbrt_table_tails(tables, model):
           f"99th pct {r_p99:.3f}; outgoing within 80 deg: median {r_med_in:.4f}, 90th pct {r_p90_in:.4f}")
     assert med <= 0.01 and p90_in <= 0.03, (med, p90_in)
     assert p90 <= 0.06, p90
+    assert r_med <= 0.01 and r_p90_in <= 0.03 and r_p90 <= 0.06, (r_med, r_p90_in, r_p90)
     # Every wavelength pbrt samples reads the same value for F = 1 (the spectra's ends held beyond them).
     few = slice(0, len(wi), 97)
     spec = table.f(wi[few], wo[few], WAVELENGTHS)
@@ -214,6 +214,38 @@ def test_numpy_reading_matches_mitsuba_measured(tables, tmp_path):
     # Copper's red over its blue: the wavelength is read, not one channel for all.
     lit = theirs[:, 1] > 1e-3 * theirs[:, 1].max()
     assert np.median(theirs[lit, 2] / theirs[lit, 1]) > 1.3
+
+
+@pytest.mark.parametrize("theta", [35.0, 65.0])
+def test_pbrt_sample_matches_pdf_and_f(tables, theta):
+    """pbrt-v4's Sample_f on the GGX table: its value and pdf are f and PDF at the sampled direction, and
+    its directions fall in cells of equal solid angle as the PDF integrated over them says (test_mitsuba_rgl's
+    sampling check, pbrt's reading)."""
+    table = PbrtMeasured(tables["ggx-aniso"][1])
+    n, nt, nphi, q = 20000, 12, 24, 8
+    wo = np.tile(sph(math.radians(theta), 0.7), (n, 1))
+    wi, f, pdf = table.sample_f(wo, np.random.default_rng(11).random((n, 2)))
+    ok = pdf > 0
+    assert ok.mean() > 0.9, ok.mean()
+    assert np.allclose(f[ok], table.f(wo[ok], wi[ok]), rtol=1e-4, atol=0)
+    assert np.allclose(pdf[ok], table.pdf(wo[ok], wi[ok]), rtol=1e-4, atol=0)
+    i = np.minimum((wi[ok, 2] * nt).astype(int), nt - 1)
+    j = ((np.arctan2(wi[ok, 1], wi[ok, 0]) % (2 * math.pi)) / (2 * math.pi) * nphi).astype(int) % nphi
+    counts = np.zeros((nt, nphi))
+    np.add.at(counts, (i, j), 1)
+    # The pdf integrated over each cell by a q x q midpoint rule in (cos theta, phi).
+    z = (np.arange(nt)[:, None] + (np.arange(q)[None, :] + 0.5) / q).ravel() / nt
+    ph = (np.arange(nphi)[:, None] + (np.arange(q)[None, :] + 0.5) / q).ravel() / nphi * 2 * math.pi
+    zz, pp = np.meshgrid(z, ph, indexing="ij")
+    r = np.sqrt(1 - zz ** 2)
+    d = np.stack([r * np.cos(pp), r * np.sin(pp), zz], axis=-1).reshape(-1, 3)
+    dens = table.pdf(np.tile(wo[0], (len(d), 1)), d).reshape(nt, q, nphi, q).sum(axis=(1, 3))
+    expected = n * dens * (1.0 / nt) * (2 * math.pi / nphi) / (q * q)
+    zs = (counts - expected) / np.sqrt(np.maximum(expected, 1.0))
+    print(f"\npbrt-v4 Sample_f at {theta:.0f} deg: {int(ok.sum())} samples, expected {expected.sum():.0f}, "
+          f"max |z| {np.abs(zs).max():.2f}")
+    assert abs(expected.sum() - ok.sum()) <= 0.02 * n
+    assert np.abs(zs).max() <= 5.0, np.abs(zs).max()
 
 
 def test_pbrt_refuses_what_it_cannot_read(tables, tmp_path):
