@@ -1,7 +1,8 @@
 """pbrt-v4's reading of an RGL tabulated BSDF (Dupuy & Jakob 2018), in numpy, vectorized over directions.
 
-Written from pbrt-v4's source (github.com/mmp/pbrt-v4, src/pbrt/bxdfs.cpp and src/pbrt/util/sampling.h),
-never from ndfit's writer, so that agreement with ndfit's references means the file is read as pbrt reads it:
+Written from pbrt-v4's source (github.com/mmp/pbrt-v4 at 5f7a606, June 2026: src/pbrt/bxdfs.cpp and
+src/pbrt/util/sampling.h), never from ndfit's writer, so that agreement with ndfit's references means the
+file is read as pbrt reads it:
 
 - `read_tensor`: pbrt's `Tensor` loader (bxdfs.cpp): header `tensor_file\\0`, version 1.0, the field table.
 - `PbrtMeasured.__init__`: `MeasuredBxDFData::Create`: the fields pbrt requires (`wavelengths` and `spectra`,
