@@ -19,7 +19,11 @@ What it estimates (all per landed ray, ``F = 1``):
   of the same quantity (visible over facing projected area of the landing cells).
 - ``g1_smith = cos(theta) / sigma_valid(wi)`` (Heitz 2014 eq. 22, 43), exact.
 - ``single``: the share of landed rays whose specular reflection leaves the surface unblocked, the albedo
-  of the first bounce; and its outgoing directions for binning.
+  of the first bounce; and its outgoing directions, binned by ``single_counts`` in the layout of ``ndfit
+  trace --bins`` (``bin_index``): the one-bounce BRDF per bin is the count over ``landed`` over the bin's
+  projected solid angle.
+- ``model_table``: the microfacet model's single scattering per bin, summed exactly over the triangles
+  (no sampling), with the moments that give the noise of a Monte Carlo estimate of it.
 """
 
 from __future__ import annotations
@@ -234,3 +238,80 @@ def trace_incidence(s: Surface, theta_deg: float, phi_deg: float, rays: int, rng
         blocked_long=long,
     )
 
+
+
+def bin_index(w, n_theta: int, n_phi: int) -> np.ndarray:
+    """The outgoing bin ``it * n_phi + ip`` of unit directions ``w`` (``(n, 3)``, above the horizon): bins
+    uniform in ``u = sqrt(2 theta / pi)`` (``n_theta``) and in ``phi`` over ``[-pi, pi)`` (``n_phi``, 0 along
+    the scan's +x), the layout of ``ndfit trace --bins THETAxPHI``."""
+    w = np.asarray(w, float)
+    theta = np.arccos(np.clip(w[:, 2], -1.0, 1.0))
+    it = np.minimum((np.sqrt(theta / (np.pi / 2)) * n_theta).astype(np.int64), n_theta - 1)
+    ip = np.minimum(((np.arctan2(w[:, 1], w[:, 0]) + np.pi) / (2 * np.pi) * n_phi).astype(np.int64), n_phi - 1)
+    return it * n_phi + ip
+
+
+def single_counts(res: IncidenceResult, n_theta: int, n_phi: int) -> np.ndarray:
+    """How many of the landed paths leave after one bounce into each bin (``n_theta * n_phi``); the first
+    bounce's energy per bin is this over ``res.landed`` (F = 1)."""
+    return np.bincount(bin_index(res.out_dirs, n_theta, n_phi), minlength=n_theta * n_phi)
+
+
+@dataclass
+class ModelTable:
+    """The microfacet model's single scattering per outgoing bin (flat, ``n_theta * n_phi``), from the
+    distribution of one sample ``a 1[bin]`` at a uniform point of the landing cells (see ``model_table``)."""
+
+    mean: np.ndarray  # E[a 1_k]: the bin's energy per unit incident energy
+    second: np.ndarray  # E[a^2 1_k]
+    share: np.ndarray  # P(a sample reflects into bin k)
+    wmax: np.ndarray  # the largest a reflected into bin k (0 when none)
+
+
+def model_table(s: Surface, wi, n_theta: int, n_phi: int) -> ModelTable:
+    """The microfacet model's single scattering per bin, exactly, over the landing cells' triangles.
+
+    ``int_bin f(wi, o) cos_o do`` with ``f = D G2 / (4 cos_i cos_o)`` (F = 1), ``D`` the triangles' NDF
+    (each triangle a half cell of macro area) and Smith's height-correlated ``G2 = 1 / (1 + Lambda(wi) +
+    Lambda(o))``, ``1 + Lambda(w) = sigma(w) / cos`` (Heitz 2014 eq. 43, 99), clipped at ``Lambda >= 0``.
+    By ``do = 4 <wi.m> dm`` it is the mean over the triangles of ``a = <wi.m> / (m.z cos_i) G2(wi, o)`` in
+    the bin of the mirror direction ``o``; its other moments give the noise of a Monte Carlo estimate from
+    uniform points of the landing cells (``N`` of them: variance ``(second - mean^2) / N``).
+    """
+    wi = np.asarray(wi, float)
+    m = s.all_normals(landing_only=True)
+    c = m @ wi
+    o = 2 * c[:, None] * m - wi[None, :]
+    ok = (c > 0) & (o[:, 2] > 0)
+    m_ok, o_ok = m[ok], o[ok]
+    lam_i = max(s.sigma(wi) / wi[2] - 1.0, 0.0)
+    lam_o = np.maximum(_sigma_many(m, o_ok) / o_ok[:, 2] - 1.0, 0.0)
+    a = c[ok] / (m_ok[:, 2] * wi[2]) / (1.0 + lam_i + lam_o)
+    k = bin_index(o_ok, n_theta, n_phi)
+    nb = n_theta * n_phi
+    wmax = np.zeros(nb)
+    np.maximum.at(wmax, k, a)
+    n = len(m)
+    return ModelTable(np.bincount(k, a, nb) / n, np.bincount(k, a * a, nb) / n, np.bincount(k, None, nb) / n, wmax)
+
+
+def _sigma_many(m, w, chunk: int = 1024) -> np.ndarray:
+    """``sigma(w) = mean over the triangles of <w.m>+ / m.z`` at many directions ``w``, exactly.
+
+    With ``q = m / m.z = (-sx, -sy, 1)``, ``<w.q>+ = w.q + <-w.q>+``: the first term's mean is linear in
+    ``w``, and ``-w.q > 0`` only on triangles whose slope ``|s|`` exceeds ``cot(theta_w)``, so each group of
+    directions (sorted by elevation) sums the clipped part over the steep triangles alone."""
+    q = m / m[:, 2:3]
+    steep = np.hypot(q[:, 0], q[:, 1])
+    q = q[np.argsort(-steep)]
+    steep = -np.sort(-steep)
+    out = w @ q.mean(axis=0)
+    order = np.argsort(w[:, 2], kind="stable")[::-1]  # elevation ascending
+    for a in range(0, len(order), chunk):
+        idx = order[a : a + chunk]
+        wz = w[idx, 2].min()
+        cot = wz / np.sqrt(max(1.0 - wz * wz, 1e-300))
+        n = int(np.count_nonzero(steep > cot * (1 - 1e-12)))
+        if n:
+            out[idx] += np.clip(-(w[idx] @ q[:n].T), 0.0, None).sum(axis=1) / len(q)
+    return out

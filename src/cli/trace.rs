@@ -1,7 +1,8 @@
 //! `ndfit trace SCAN --incidence 0,40,70 [-o OUT.json]`: trace the scan's own microgeometry with
 //! geometric optics and measure the microfacet model against it (docs/TRACE.md). The scan is read and
 //! preprocessed as `ndfit fit` reads it (plane removed by default); the verdict line goes to standard
-//! error; `--plot OUT.png` draws the first bounce's BRDF and the masking against the model.
+//! error; `--plot OUT.png` draws the first bounce's BRDF and the masking against the model; `--tables
+//! OUT.csv` writes the per-bin tables for outside checks.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -52,6 +53,14 @@ pub struct Args {
     /// microfacet model, and the traced masking G1 against Smith's over the incidences.
     #[arg(long, value_name = "OUT.png")]
     pub plot: Option<PathBuf>,
+    /// Also write the per-bin tables as CSV, one row per incidence and outgoing bin: incidence,
+    /// theta_i_deg, phi_i_deg, bin, i_theta, i_phi, theta_lo_deg, theta_hi_deg, phi_lo_deg, phi_hi_deg,
+    /// theta_o_deg, phi_o_deg (the bin's centre), ox, oy, oz (its unit vector), proj_solid_angle, then the
+    /// energies per landed path single (first bounce), multi (later bounces), model (the microfacet
+    /// model's single scattering), each as _r, _g, _b and luminance (no suffix), and var_total (Monte
+    /// Carlo variance of the luminance of single + multi). BRDF over a bin = energy / proj_solid_angle.
+    #[arg(long, value_name = "OUT.csv")]
+    pub tables: Option<PathBuf>,
     /// No verdict line on standard error.
     #[arg(long)]
     pub quiet: bool,
@@ -78,7 +87,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     };
     // Every option is checked before the scan is read, and the output before any work.
     opts.validate()?;
-    a.scan.check_outputs(a.out.as_deref().into_iter().chain(a.plot.as_deref()))?;
+    a.scan.check_outputs(a.out.as_deref().into_iter().chain(a.plot.as_deref()).chain(a.tables.as_deref()))?;
     let scan = a.scan.load()?;
     let bar = (std::io::stderr().is_terminal() && !a.quiet).then(|| {
         let b = indicatif::ProgressBar::new((opts.rays * opts.incidences_deg.len()) as u64);
@@ -103,6 +112,9 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     }
     if let Some(p) = &a.plot {
         ndfit::trace::write_plot(p, &report)?;
+    }
+    if let Some(p) = &a.tables {
+        ndfit::trace::write_tables_csv(p, &report)?;
     }
     if !a.quiet {
         eprintln!("ndfit: trace: {}", report.verdict.line);

@@ -35,6 +35,7 @@ mod hierarchy;
 #[cfg(feature = "plot")]
 mod plot;
 mod surface;
+mod table_csv;
 mod tally;
 mod tracer;
 
@@ -44,6 +45,7 @@ pub use compare::SingleComparison;
 #[cfg(feature = "plot")]
 pub use plot::{plane_of_incidence, write_plot, PLOT_HEIGHT, PLOT_WIDTH};
 pub use surface::Border;
+pub use table_csv::{write_tables_csv, COLUMNS as TABLE_COLUMNS};
 pub use tally::{DirTable, LUMA};
 
 use crate::error::{Error, Result};

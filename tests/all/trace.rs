@@ -437,3 +437,54 @@ fn the_plot_is_written_and_decodes_at_its_size() {
     assert!(!e.status.success());
     assert_eq!(std::fs::read(&out).unwrap(), before);
 }
+
+/// `--tables`: one row per incidence and bin under the documented header; the bins' layout is the
+/// table's (indices, edges, projected solid angles adding up to pi), and the energies add up to the
+/// document's first-bounce, later-bounce and model albedos.
+#[test]
+fn the_tables_csv_lays_out_every_bin_and_adds_up_to_the_document() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("g.x3p");
+    let synth = std::process::Command::new(crate::common::ndfit_bin())
+        .args(["synth", scan.to_str().unwrap(), "--surface", "gaussian", "--nx", "64", "--ny", "64", "--sigma-x", "0.4"])
+        .output()
+        .unwrap();
+    assert!(synth.status.success(), "{}", String::from_utf8_lossy(&synth.stderr));
+    let (out, csv_path) = (dir.path().join("t.json"), dir.path().join("t.csv"));
+    let ok = std::process::Command::new(crate::common::ndfit_bin())
+        .args(["trace", scan.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tables", csv_path.to_str().unwrap()])
+        .args(["--rays", "20000", "--incidence", "0,60", "--azimuth", "30", "--bins", "6x10", "--quiet"])
+        .output()
+        .unwrap();
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let mut rd = csv::Reader::from_path(&csv_path).unwrap();
+    let head: Vec<String> = rd.headers().unwrap().iter().map(String::from).collect();
+    assert_eq!(head, ndfit::trace::TABLE_COLUMNS);
+    let col = |name: &str| head.iter().position(|h| h == name).unwrap();
+    let rows: Vec<Vec<f64>> = rd.records().map(|r| r.unwrap().iter().map(|x| x.parse::<f64>().unwrap()).collect()).collect();
+    let t = DirTable { n_theta: 6, n_phi: 10 };
+    assert_eq!(rows.len(), 2 * t.len());
+    for (inc, rec) in v["incidences"].as_array().unwrap().iter().enumerate() {
+        let part = &rows[inc * t.len()..(inc + 1) * t.len()];
+        let sum = |name: &str| part.iter().map(|r| r[col(name)]).sum::<f64>();
+        for (k, r) in part.iter().enumerate() {
+            assert_eq!(r[col("incidence")], inc as f64);
+            assert_eq!(r[col("theta_i_deg")], rec["theta_deg"].as_f64().unwrap());
+            assert_eq!((r[col("bin")], r[col("i_theta")], r[col("i_phi")]), (k as f64, (k / 10) as f64, (k % 10) as f64));
+            assert_eq!(r[col("theta_lo_deg")], t.theta_edge(k / 10).to_degrees());
+            assert_eq!(r[col("phi_hi_deg")], t.phi_edge(k % 10 + 1).to_degrees());
+            let o = [r[col("ox")], r[col("oy")], r[col("oz")]];
+            assert_eq!(t.bin(o), Some(k));
+            assert_eq!(r[col("proj_solid_angle")], t.proj_solid_angle(k));
+            let luma = ndfit::trace::LUMA;
+            let l = luma[0] * r[col("single_r")] + luma[1] * r[col("single_g")] + luma[2] * r[col("single_b")];
+            assert!((l - r[col("single")]).abs() <= 1e-15);
+        }
+        assert!((sum("proj_solid_angle") - std::f64::consts::PI).abs() < 1e-12);
+        let by = rec["albedo_by_bounce"].as_array().unwrap();
+        assert!((sum("single") - by[0].as_f64().unwrap()).abs() < 1e-12);
+        assert!((sum("single") + sum("multi") - rec["albedo"].as_f64().unwrap()).abs() < 1e-12);
+        assert!((sum("model") - rec["single"]["albedo_model"].as_f64().unwrap()).abs() < 1e-12);
+    }
+}
