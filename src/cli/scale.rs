@@ -6,6 +6,8 @@ use std::process::ExitCode;
 
 use anyhow::anyhow;
 use ndfit::models::ModelId;
+use ndfit::pipeline::check::Spelling;
+use ndfit::pipeline::scale::recommend_rendered;
 use ndfit::scale::Blur;
 use ndfit::scale::{analyze, recommend, Fitter, ScaleOptions};
 use ndfit::scale::{report_json, write_csv};
@@ -48,6 +50,18 @@ pub struct Args {
     /// Seed of the blur samples (the same seed gives the same result).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The render rule's scenes (as `ndfit fit --scene`: point, broad, each with :light=, :view=, :cap=,
+    /// :size=): at each footprint every model is rendered against the NDF seen there, and the answer is
+    /// the simplest within --render-tolerance at every footprint; `none` keeps the NDF error's rule alone.
+    #[arg(long = "render-scene", default_value = "point,broad")]
+    pub render_scene: String,
+    /// The largest mean FLIP beyond a footprint table's own noise, in every scene, at which a model passes
+    /// (data_formats/render.md, "The tolerance").
+    #[arg(long = "render-tolerance", default_value_t = ndfit::export::choice::DEFAULT_RENDER_TOLERANCE)]
+    pub render_tolerance: f64,
+    /// The conductor of the renders: none (F = 1), Al, Ag, Au, Cu or Cr.
+    #[arg(long, default_value = "Al")]
+    pub material: String,
     /// Output directory for scale.json, scale.csv and scale.png; without it the JSON goes to stdout.
     #[arg(short = 'o', long)]
     pub out: Option<PathBuf>,
@@ -74,6 +88,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         anyhow::bail!("--scene-steps must be in 1..=50, got {}", args.scene_steps);
     }
     let scene = args.scene.as_deref().map(ndfit::scale::parse_scene).transpose().map_err(|e| anyhow!("--scene: {e}"))?;
+    let render = ndfit::pipeline::check::render(&args.render_scene, args.render_tolerance, &args.material, Spelling::Flag)
+        .map_err(|e| anyhow!("{}", e.message().replacen("--scene", "--render-scene", 1)))?;
     let scene_fps = scene.map(|r| r.log_spaced(args.scene_steps)).unwrap_or_default();
     if args.footprint.is_empty() && scene_fps.is_empty() {
         anyhow::bail!("give --footprint METRES[,METRES...] or --scene");
@@ -96,6 +112,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let rec_fps: Vec<f64> = if scene_fps.is_empty() { args.footprint.clone() } else { scene_fps.clone() };
     let rec_results: Vec<_> = results.iter().filter(|r| rec_fps.contains(&r.stats.footprint)).cloned().collect();
     let rec = recommend(&rec_results, args.tolerance);
+    let rendered = match &render {
+        Some(r) if !rec_results.is_empty() => Some(recommend_rendered(&rec_results, &rec, r).map_err(|e| anyhow!("{path}: {e}"))?),
+        _ => None,
+    };
 
     let input = json!({"path": path, "format": hf.meta.format, "nx": hf.nx, "ny": hf.ny, "dx": hf.dx, "dy": hf.dy});
     let options = json!({
@@ -109,8 +129,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         "seed": opts.seed,
         "blur": opts.blur,
         "fitter": "ndfit::fit::fit_model (Levenberg-Marquardt, Poisson deviance)",
+        "render_scene": args.render_scene,
+        "render_tolerance": render.as_ref().map(|r| r.tolerance),
+        "material": render.as_ref().map(|r| r.material.as_str()),
     });
-    let report = report_json(input, options, &results, Some(&rec));
+    let mut report = report_json(input, options, &results, Some(&rec));
+    if let (Some(r), Some(map)) = (&rendered, report.as_object_mut()) {
+        map.insert("render_recommendation".into(), serde_json::to_value(r)?);
+    }
     let text = serde_json::to_string_pretty(&report)? + "\n";
     match &args.out {
         None => super::write_stdout(text.as_bytes())?,
@@ -120,6 +146,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             ndfit::io::write_atomic(&dir.join("scale.csv"), |w| write_csv(w, &results))?;
             ndfit::scale::write_plot(&dir.join("scale.png"), &results)?;
             eprintln!("{}", rec.explanation);
+            if let Some(r) = &rendered {
+                eprintln!("{}", r.explanation);
+            }
         }
     }
     Ok(ExitCode::SUCCESS)

@@ -520,6 +520,40 @@ impl RenderJudge<'_> {
     }
 }
 
+impl RenderJudge<'_> {
+    /// `lobe`'s complete score against the last decision's table, held to the table's noise floors
+    /// when it fails without them (measured then, as a decision measures them): whether the lobe passes
+    /// here, not only where the decision stopped. An error before any decision.
+    pub fn full_score(&self, lobe: &Model) -> Result<Score> {
+        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let opts = &self.options;
+        let Some(reference) = state.0.as_ref() else {
+            return Err(Error::invalid("no table rendered yet: the judge has not decided"));
+        };
+        let (filler, max_theta_deg, known) = (reference.lobe, reference.max_theta_deg, reference.floors.clone());
+        let at = state.1.iter().position(|(m, _)| m == lobe);
+        let so_far = at.map_or(unscored(opts.scenes.len()), |i| state.1[i].1.clone());
+        let brdf = AnalyticBrdf { model: *lobe, material: opts.material };
+        let floors = known.clone().unwrap_or(vec![0.0; opts.scenes.len()]);
+        let mut s = extend(&brdf, &opts.scenes, &reference.prepared, &floors, so_far, f64::INFINITY)?;
+        if known.is_none() && s.excess > opts.tolerance {
+            let floors = self.noise_floors(&filler, max_theta_deg)?;
+            let rescore = |sc: &mut Score| {
+                sc.excess =
+                    sc.per_scene.iter().zip(&floors).filter(|(v, _)| !v.is_nan()).map(|(v, f)| v - f).fold(f64::NEG_INFINITY, f64::max)
+            };
+            state.1.iter_mut().for_each(|(_, sc)| rescore(sc));
+            rescore(&mut s);
+            state.0.as_mut().expect("the table was rendered above").floors = Some(floors);
+        }
+        match at {
+            Some(i) => state.1[i].1 = s.clone(),
+            None => state.1.push((*lobe, s.clone())),
+        }
+        Ok(s)
+    }
+}
+
 impl Decide for RenderJudge<'_> {
     fn decide(&self, offered: &[Offered], max_theta_deg: f64) -> Result<Decision> {
         if offered.is_empty() {

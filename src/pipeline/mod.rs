@@ -9,6 +9,7 @@
 
 pub mod check;
 pub(crate) mod preset;
+pub mod scale;
 
 use std::path::Path;
 use std::time::Instant;

@@ -183,6 +183,9 @@ pub struct FootprintResult {
     pub models: Vec<ModelAtFootprint>,
     /// The empirical NDF at F (kept for the recommendation and plots).
     pub ndf_at: EmpiricalNdf,
+    /// Per bin of `ndf_at`, the count from the footprints of the scan's lower half (rows): a spatially
+    /// disjoint split whose two halves measure the NDF's own noise.
+    pub first_half: Vec<u64>,
     /// Coefficient of variation of `tr Sigma_w(x0)` over the points: large values make the mixture (S1)
     /// heavier-tailed than one Gaussian of covariance `Sigma_F` (scale.md sec. 4b).
     pub sigma_w_spread: f64,
@@ -242,6 +245,7 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
         let pts = ff.valid_points();
         let split = pts.iter().take_while(|&&p| p / hf.nx < hf.ny / 2).count() * opts.samples_per_point;
         let halves = (counts_on(&ndf_at, &s_at[..split]), counts_on(&ndf_at, &s_at[split..]));
+        let first_half = halves.0.clone();
         let pixel_roughness = aniso_params(&(2.0 * stats.sigma_f)).ok();
         let traces: Vec<f64> = ff.valid_points().iter().map(|&p| ff.wxx[p] + ff.wyy[p]).collect();
         let tm = traces.iter().sum::<f64>() / traces.len().max(1) as f64;
@@ -296,6 +300,7 @@ pub fn analyze(hf: &Heightfield, opts: &ScaleOptions, fitter: Option<&dyn Fitter
             pixel_roughness,
             models,
             ndf_at,
+            first_half,
             sigma_w_spread,
             theory_notes,
             ggx_kernel,

@@ -262,6 +262,7 @@ mod cli {
             vec![scan.display().to_string(), "--footprint".into(), "1".into()], // kernel far wider than the scan
             vec![dir.path().join("missing.x3p").display().to_string(), "--footprint".into(), "1e-5".into()],
             vec![scan.display().to_string(), "--footprint".into(), "1e-5".into(), "--models".into(), "phong".into()],
+            vec![scan.display().to_string(), "--footprint".into(), "1e-5".into(), "--render-scene".into(), "spot".into()],
         ];
         for args in cases {
             let o = Command::new(ndfit_bin()).arg("scale").args(&args).arg("-o").arg(&out).output().unwrap();
@@ -334,6 +335,64 @@ mod routes {
         // Reproducible: the same input gives the same recommendation and numbers.
         let res2 = analyze(&hf, &opts, Some(&Moments)).unwrap();
         assert_eq!(recommend(&res2, 0.1), rec);
+    }
+
+    #[test]
+    fn the_render_rule_answers_beckmann_where_the_ndf_at_f_is_beckmann() {
+        // The same truth as above (S1': the NDF at F of a Gaussian surface is Beckmann), decided by the
+        // render: every footprint's table is the blurred slopes' histogram, Beckmann (the ML fit by the
+        // method of moments) renders within the tolerance of it, GGX of the same roughness matrix (the
+        // wrong shape) visibly not. A random field of 1024^2 samples (`synth`'s, as `auto`'s held-out
+        // Gaussian truth): a surface of a few hundred fixed modes deviates from Gaussian alike in both
+        // halves, so the halves' split would not measure it.
+        use ndfit::export::choice::{flip_mean, RenderJudge, RenderOptions};
+        use ndfit::fit::{Decide, Offered};
+        use ndfit::render::Brdf;
+        use ndfit::synth::{gaussian_surface, GaussianParams, SynthSettings};
+        let settings = SynthSettings { nx: 1024, ny: 1024, seed: 4, ..SynthSettings::default() };
+        let (hf, _) = gaussian_surface(&settings, &GaussianParams::default()).unwrap();
+        let opts = ScaleOptions {
+            footprints: vec![2.0 * hf.dx, 8.0 * hf.dx],
+            blur: Blur::Mean,
+            models: vec![ModelId::Beckmann, ModelId::Ggx],
+            ..ScaleOptions::default()
+        };
+        let res = analyze(&hf, &opts, Some(&Moments)).unwrap();
+        let render = RenderOptions::default();
+        let rec = ndfit::pipeline::scale::recommend_rendered(&res, &recommend(&res, 0.1), &render).unwrap();
+        eprintln!("{}", rec.explanation);
+        assert_eq!(rec.answer, "beckmann", "{}", rec.explanation);
+        let ggx = rec.candidates.iter().find(|c| c.model == ModelId::Ggx).unwrap();
+        let beckmann = rec.candidates.iter().find(|c| c.model == ModelId::Beckmann).unwrap();
+        assert_eq!((beckmann.passes, ggx.passes), (Some(true), Some(false)));
+        assert!(beckmann.worst_excess.unwrap() <= render.tolerance);
+        assert_eq!(beckmann.worst_by_footprint.len(), 2, "rendered at every footprint");
+        // A second path to one figure: the footprint's table and the lobe rendered apart and scored by the
+        // unprepared FLIP equal the rule's worst at that footprint.
+        let r = &res[1];
+        let mut ndf = r.ndf_at.clone();
+        ndf.counts_odd = r.first_half.clone();
+        let lobe = r.models.iter().find(|m| m.id == ModelId::Beckmann).unwrap().empirical.model.unwrap();
+        let max_theta = ndfit::fit::FitOptions::default().max_theta.to_degrees();
+        let judge = RenderJudge::new(&ndf, render.clone());
+        let ggx_lobe = r.models.iter().find(|m| m.id == ModelId::Ggx).unwrap().empirical.model.unwrap();
+        let delta = |id: ModelId| r.models.iter().find(|m| m.id == id).unwrap().empirical.delta.map(|d| d.delta);
+        let offered = [
+            Offered { model: lobe, supported: true, delta_data: delta(ModelId::Beckmann) },
+            Offered { model: ggx_lobe, supported: true, delta_data: delta(ModelId::Ggx) },
+        ];
+        judge.decide(&offered, max_theta).unwrap();
+        let filler = if delta(ModelId::Ggx).unwrap() < delta(ModelId::Beckmann).unwrap() { ggx_lobe } else { lobe };
+        let tables = judge.table_images(&filler, max_theta).unwrap();
+        let brdf = ndfit::export::rgl::AnalyticBrdf { model: lobe, material: render.material };
+        let worst = render
+            .scenes
+            .iter()
+            .zip(&tables)
+            .map(|(s, t)| flip_mean(t, &s.scene.render(&brdf as &dyn Brdf).unwrap()).unwrap())
+            .fold(0.0, f64::max);
+        let said = beckmann.worst_by_footprint[&format!("{:.3e}", r.stats.footprint)].unwrap();
+        assert!((worst - said).abs() < 1e-9, "{worst} vs {said}");
     }
 
     #[test]
