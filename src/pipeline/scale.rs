@@ -3,8 +3,6 @@
 //! choice's scenes (`export::choice`), and the answer is the simplest candidate within the render
 //! tolerance at every footprint, or the measured NDF when none is (data_formats/scale.md sec. 9).
 
-use std::collections::BTreeMap;
-
 use serde::Serialize;
 
 use crate::error::Result;
@@ -21,9 +19,9 @@ pub struct RenderedCandidate {
     pub model: ModelId,
     /// Number of parameters.
     pub n_params: usize,
-    /// Per footprint rendered (metres, as text), the worst mean FLIP over the scenes against that
-    /// footprint's table (`None` where the lobe was not rendered in every scene).
-    pub worst_by_footprint: BTreeMap<String, Option<f64>>,
+    /// Per footprint rendered (ascending), the worst mean FLIP over the scenes against that footprint's
+    /// table (`None` where the lobe was not rendered in every scene).
+    pub worst_by_footprint: Vec<AtFootprint<Option<f64>>>,
     /// The largest FLIP beyond the tables' noise floors over the footprints rendered: what the tolerance
     /// holds (`None`: never rendered).
     pub worst_excess: Option<f64>,
@@ -45,15 +43,19 @@ pub struct RenderRecommendation {
     pub material: &'static str,
     /// The candidates in the NDF rule's order (simplest first), with what their renders showed.
     pub candidates: Vec<RenderedCandidate>,
-    /// Per footprint (metres, as text): the lobe that footprint alone would answer, or `measured`.
-    pub per_footprint: BTreeMap<String, String>,
+    /// Per footprint (ascending): the lobe that footprint alone would answer, or `measured`.
+    pub per_footprint: Vec<AtFootprint<String>>,
     /// The reasoning in plain words.
     pub explanation: String,
 }
 
-/// Footprints as the report keys them.
-fn key(fp: f64) -> String {
-    format!("{fp:.3e}")
+/// A value at one footprint.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AtFootprint<T> {
+    /// The footprint (metres).
+    pub footprint_m: f64,
+    /// What holds there.
+    pub value: T,
 }
 
 /// The render rule over `results` (the footprints a recommendation covers), candidates in the order of
@@ -122,8 +124,10 @@ pub fn recommend_rendered(results: &[FootprintResult], ndf_rec: &Recommendation,
         .enumerate()
         .map(|(i, &id)| {
             let rendered: Vec<(usize, &Score)> = (0..results.len()).filter_map(|k| scores[k][i].as_ref().map(|s| (k, s))).collect();
-            let worst_by_footprint =
-                rendered.iter().map(|(k, s)| (key(results[*k].stats.footprint), s.complete().then_some(s.worst))).collect();
+            let worst_by_footprint = rendered
+                .iter()
+                .map(|(k, s)| AtFootprint { footprint_m: results[*k].stats.footprint, value: s.complete().then_some(s.worst) })
+                .collect();
             let worst_excess = rendered.iter().map(|(_, s)| s.excess).fold(None, |a: Option<f64>, e| Some(a.map_or(e, |a| a.max(e))));
             let failed = rendered.iter().any(|(_, s)| s.complete() && s.excess > opts.tolerance);
             let passes = if Some(i) == answer {
@@ -136,10 +140,13 @@ pub fn recommend_rendered(results: &[FootprintResult], ndf_rec: &Recommendation,
             RenderedCandidate { model: id, n_params: id.n_params(), worst_by_footprint, worst_excess, passes }
         })
         .collect();
-    let per_footprint: BTreeMap<String, String> = results
+    let per_footprint: Vec<AtFootprint<String>> = results
         .iter()
         .zip(&alone)
-        .map(|(r, a)| (key(r.stats.footprint), a.map_or("measured".to_string(), |i| ids[i].as_str().to_string())))
+        .map(|(r, a)| AtFootprint {
+            footprint_m: r.stats.footprint,
+            value: a.map_or("measured".to_string(), |i| ids[i].as_str().to_string()),
+        })
         .collect();
     let names: Vec<String> = opts.scenes.iter().map(|s| s.name.clone()).collect();
     let explanation = explain(answer.map(|i| &candidates[i]), &candidates, &per_footprint, opts, &names);
@@ -158,7 +165,7 @@ pub fn recommend_rendered(results: &[FootprintResult], ndf_rec: &Recommendation,
 fn explain(
     chosen: Option<&RenderedCandidate>,
     candidates: &[RenderedCandidate],
-    per_footprint: &BTreeMap<String, String>,
+    per_footprint: &[AtFootprint<String>],
     opts: &RenderOptions,
     names: &[String],
 ) -> String {
@@ -168,7 +175,7 @@ fn explain(
         opts.material.as_str(),
         opts.tolerance
     )];
-    let each: Vec<String> = per_footprint.iter().map(|(f, a)| format!("{a} at {f} m")).collect();
+    let each: Vec<String> = per_footprint.iter().map(|a| format!("{} at {:.3e} m", a.value, a.footprint_m)).collect();
     words.push(format!("Each footprint alone answers {}.", each.join(", ")));
     for c in candidates.iter().filter(|c| c.passes == Some(false) && c.worst_excess.is_some()) {
         words.push(format!("{} renders {:.3} beyond the noise at worst: rejected.", c.model, c.worst_excess.unwrap_or(f64::NAN)));
