@@ -26,6 +26,7 @@ mod scale;
 mod scan_args;
 mod synth;
 mod trace;
+mod trace_rgl;
 
 /// Measured microgeometry to microfacet parameters: empirical NDFs of heightfield scans and fits of the
 /// Ellipsoid, GGX and Beckmann NDFs.

@@ -55,6 +55,12 @@ pub struct Args {
     /// No verdict line on standard error.
     #[arg(long)]
     pub quiet: bool,
+    /// What to write: json (the comparison, `ndfit.trace/1`) or rgl (the traced BRDF as a tabulated
+    /// material for Mitsuba 3's and pbrt-v4's `measured`, written to -o; docs/TRACE.md).
+    #[arg(long = "to", default_value = "json", value_name = "FORMAT")]
+    pub to: String,
+    #[command(flatten, next_help_heading = "The traced BRDF as a material (--to rgl)")]
+    pub rgl: super::trace_rgl::RglArgs,
 }
 
 /// `THETAxPHI` bins.
@@ -64,6 +70,11 @@ fn parse_bins(s: &str) -> Result<DirTable, String> {
 
 /// Run `ndfit trace`.
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    match a.to.as_str() {
+        "json" => {}
+        "rgl" => return super::trace_rgl::run(&a),
+        other => anyhow::bail!("{}: --to: {other:?} is not json or rgl", a.scan.scan.display()),
+    }
     let opts = TraceOptions {
         incidences_deg: a.incidence.clone(),
         azimuth_deg: a.azimuth,

@@ -36,6 +36,7 @@ mod hierarchy;
 mod plot;
 mod surface;
 mod tally;
+mod to_rgl;
 mod tracer;
 
 use rayon::prelude::*;
@@ -45,6 +46,7 @@ pub use compare::SingleComparison;
 pub use plot::{plane_of_incidence, write_plot, PLOT_HEIGHT, PLOT_WIDTH};
 pub use surface::Border;
 pub use tally::{DirTable, LUMA};
+pub use to_rgl::{trace_rgl, NodeRecord, TracedRglOptions, TracedTable, CARRY_FLOOR};
 
 use crate::error::{Error, Result};
 use crate::export::rgl::Material;
