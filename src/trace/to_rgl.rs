@@ -9,10 +9,12 @@
 //! per unit incident, `dE/dwo = f cos(theta_o)`; with `|dwo/ds| = 4 |wi.m| (2 pi^2 u_theta sin(theta_m)) /
 //! p(u)` (the half-vector Jacobian, Walter et al. 2007 eq. 14, times the grid's, over the normalized
 //! written density `p`),
-//! `R(s) = dE/ds J(s)` with `J = 4 sigma(wi) / (D(m) |dwo/ds|)`. Each path's energy times its own `J` is
-//! splatted with tent weights on the four nodes around its `s`, each node's sum divided by its tent's
-//! integral: the estimate of `R` averaged over the tent, which the renderer's bilinear reading of `R`
-//! takes back exactly where `J` varies little across a cell.
+//! `R(s) = dE/ds J(s)` with `J = 4 sigma(wi) / (D(m) |dwo/ds|)`. Each path's energy is splatted with tent
+//! weights `T_n` on the four nodes around its `s`; node `n` holds its tent's energy over
+//! `int T_n(s) / J(s) ds` (a quadrature over the sample space where `wo` is above the horizon). That is `R`
+//! averaged over the tent with the weight `1 / J`, and the renderer's bilinear `R` times `1 / J`
+//! integrates back to exactly the energy splatted (the tents sum to one): the table conserves the traced
+//! energy by construction, up to that quadrature.
 //!
 //! What the parameterization cannot hold is counted, not hidden: a path whose half vector has a
 //! tabulated `D(m)` below [`CARRY_FLOOR`] of its peak (or no density of the warp) is left out of the table
@@ -100,7 +102,8 @@ pub struct NodeRecord {
 /// The traced table and what was measured on the way.
 #[derive(Debug, Clone)]
 pub struct TracedTable {
-    /// The file's fields (also `traced_albedo` and `uncarried`, `[phi_i, theta_i]`).
+    /// The file's fields, with three more per incident node (`[phi_i, theta_i]`, luminance):
+    /// `traced_albedo`, `uncarried` and `table_albedo` of [`NodeRecord`].
     pub table: Table,
     /// One record per incident node, `phi_i` outermost as the file lays them.
     pub nodes: Vec<NodeRecord>,
@@ -171,6 +174,7 @@ pub fn trace_rgl(
     let (np, nt) = (opts.rgl.phi_i, opts.rgl.theta_i);
     table.tensor.fields.push(Field::f32("traced_albedo", &[np, nt], &nodes.iter().map(|r| r.albedo).collect::<Vec<_>>()));
     table.tensor.fields.push(Field::f32("uncarried", &[np, nt], &nodes.iter().map(|r| r.uncarried).collect::<Vec<_>>()));
+    table.tensor.fields.push(Field::f32("table_albedo", &[np, nt], &nodes.iter().map(|r| r.table_albedo).collect::<Vec<_>>()));
     Ok(TracedTable { table, nodes, traced_directions: groups, paths })
 }
 
@@ -287,14 +291,10 @@ fn reflect(
     let mut done = 0u64;
     let mut refl = vec![Vec::new(); slices.len()];
     let mut stats = vec![SliceStats::default(); slices.len()];
-    let node_area = |k: usize| {
-        let h = 1.0 / (w - 1) as f64;
-        let a = |i: usize| if i == 0 || i == w - 1 { 0.5 * h } else { h };
-        a(k % w) * a(k / w)
-    };
     for (g, (wi_t, members)) in groups.iter().enumerate() {
         let targets: Vec<Target> =
             members.iter().map(|&k| Target { wi: slices[k].wi, warp: slices[k].warp(), sigma: grids.sigma_at(slices[k].wi) }).collect();
+        let tents: Vec<Vec<f64>> = targets.iter().map(|tg| tent_integrals(tg, grids, w)).collect();
         let per_block = targets.len() * (nc + 1) * nn * 8;
         let chunk = (ACC_BUDGET / per_block.max(1)).clamp(1, 64);
         let mut acc = Acc::new(targets.len(), nc, nn);
@@ -336,19 +336,22 @@ fn reflect(
         let n = acc.landed.max(1) as f64;
         let albedo = luminance(&acc.out, lambdas) / n;
         for (t, &k) in members.iter().enumerate() {
-            let r: Vec<f64> = (0..nc * nn).map(|q| acc.sum[t][q] / (n * node_area(q % nn))).collect();
+            let tent = &tents[t];
+            let r: Vec<f64> = (0..nc * nn).map(|q| if tent[q % nn] > 0.0 { acc.sum[t][q] / (n * tent[q % nn]) } else { 0.0 }).collect();
+            let mass = |q: usize| luminance(&(0..nc).map(|c| acc.sum[t][c * nn + q]).collect::<Vec<_>>(), lambdas) / n;
+            // Energy on a node whose tent reflects nothing above the horizon has no reflectance to carry it.
+            let stranded: f64 = (0..nn).filter(|&q| !(tent[q] > 0.0)).map(mass).sum();
             // Relative standard error of each node's luminance estimate, median over the nodes that hold any.
             let mut rel: Vec<f64> = (0..nn)
                 .filter_map(|q| {
-                    let a = node_area(q);
-                    let mean = luminance(&(0..nc).map(|c| acc.sum[t][c * nn + q]).collect::<Vec<_>>(), lambdas) / (n * a);
-                    let var = (acc.sq[t][q] / (a * a * n) - mean * mean).max(0.0) / n;
+                    let mean = mass(q);
+                    let var = (acc.sq[t][q] / n - mean * mean).max(0.0) / n;
                     (mean > 0.0).then(|| var.sqrt() / mean)
                 })
                 .collect();
             rel.sort_by(f64::total_cmp);
             let noise = rel.get(rel.len() / 2).copied().unwrap_or(0.0);
-            stats[k] = SliceStats { albedo, uncarried: acc.uncarried[t] / n, noise };
+            stats[k] = SliceStats { albedo, uncarried: acc.uncarried[t] / n + stranded, noise };
             refl[k] = r;
         }
     }
@@ -362,7 +365,8 @@ fn reflect(
 }
 
 /// One leaving path's energy `wt` (per channel, per path) on target `t`: its half vector's point of the
-/// sample space, the Jacobian `J = 4 sigma(wi) / (D(m) |dwo/ds|)`, tent weights on the four nodes around.
+/// sample space, tent weights on the four nodes around; uncarried where the table's `D(m)` is below
+/// [`CARRY_FLOOR`] of its peak or the warp has no density there.
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn splat(a: &mut Acc, t: usize, tg: &Target, wo: Vector3<f64>, wt: &[f64], grids: &NdfGrids, peak: f64, lambdas: &[f64], w: usize) {
@@ -373,8 +377,7 @@ fn splat(a: &mut Acc, t: usize, tg: &Target, wo: Vector3<f64>, wt: &[f64], grids
     let dm = grids.d(m);
     let c = tg.wi.dot(&m);
     let jac = 2.0 * std::f64::consts::PI.powi(2) * u[0] * u2theta(u[0]).sin();
-    let j = tg.sigma * p / (dm * c * jac);
-    if !(dm > CARRY_FLOOR * peak && p > 0.0 && c > 0.0 && j.is_finite()) {
+    if !(dm > CARRY_FLOOR * peak && p > 0.0 && c > 0.0 && jac > 0.0) {
         a.uncarried[t] += luminance(wt, lambdas);
         return;
     }
@@ -386,7 +389,7 @@ fn splat(a: &mut Acc, t: usize, tg: &Target, wo: Vector3<f64>, wt: &[f64], grids
     };
     let ((i, tx), (k, ty)) = (f(sp[0]), f(sp[1]));
     let nn = w * w;
-    let lum = luminance(wt, lambdas) * j;
+    let lum = luminance(wt, lambdas);
     for (node, tw) in [
         (k * w + i, (1.0 - tx) * (1.0 - ty)),
         (k * w + i + 1, tx * (1.0 - ty)),
@@ -394,10 +397,66 @@ fn splat(a: &mut Acc, t: usize, tg: &Target, wo: Vector3<f64>, wt: &[f64], grids
         ((k + 1) * w + i + 1, tx * ty),
     ] {
         for (ch, v) in wt.iter().enumerate() {
-            a.sum[t][ch * nn + node] += v * j * tw;
+            a.sum[t][ch * nn + node] += v * tw;
         }
         a.sq[t][node] += (lum * tw).powi(2);
     }
+}
+
+/// Quadrature points per axis across the whole sample space, at least, for [`tent_integrals`]: the
+/// integrand is cut where `wo` meets the horizon, inside cells, which a rule of a few points per cell
+/// places coarsely.
+const TENT_POINTS: usize = 256;
+
+/// `int T_n(s) / J(s) ds` for every node `n` of the target's sample space: `1 / J = D(m) |dwo/ds| /
+/// (4 sigma(wi)) = D(m) |wi.m| (2 pi^2 u_theta sin(theta_m)) / (p(u) sigma(wi))`, zero where `wo` is at or
+/// below the horizon (the renderer evaluates nothing there); a midpoint rule of at least [`TENT_POINTS`]
+/// points per axis.
+fn tent_integrals(tg: &Target, grids: &NdfGrids, w: usize) -> Vec<f64> {
+    let h = 1.0 / (w - 1) as f64;
+    let q = TENT_POINTS.div_ceil(w - 1).max(2);
+    let pts: Vec<(f64, f64)> = (0..q).map(|a| ((a as f64 + 0.5) / q as f64, 1.0 / q as f64)).collect();
+    let rows: Vec<Vec<(usize, f64)>> = (0..w - 1)
+        .into_par_iter()
+        .map(|j| {
+            let mut out = Vec::with_capacity(4 * (w - 1));
+            for i in 0..w - 1 {
+                let mut corner = [0.0; 4];
+                for &(gx, wx) in &pts {
+                    for &(gy, wy) in &pts {
+                        let u = tg.warp.sample([(i as f64 + gx) * h, (j as f64 + gy) * h]);
+                        let m = u2dir(u);
+                        let c = tg.wi.dot(&m);
+                        let wo = 2.0 * c * m - tg.wi;
+                        let p = tg.warp.density(u);
+                        let jac = 2.0 * std::f64::consts::PI.powi(2) * u[0] * u2theta(u[0]).sin();
+                        if !(wo.z > 0.0 && p > 0.0 && c > 0.0 && tg.sigma > 0.0) {
+                            continue;
+                        }
+                        let inv_j = grids.d(m) * c * jac / (p * tg.sigma) * wx * wy * h * h;
+                        corner[0] += inv_j * (1.0 - gx) * (1.0 - gy);
+                        corner[1] += inv_j * gx * (1.0 - gy);
+                        corner[2] += inv_j * (1.0 - gx) * gy;
+                        corner[3] += inv_j * gx * gy;
+                    }
+                }
+                out.extend([
+                    (j * w + i, corner[0]),
+                    (j * w + i + 1, corner[1]),
+                    ((j + 1) * w + i, corner[2]),
+                    ((j + 1) * w + i + 1, corner[3]),
+                ]);
+            }
+            out
+        })
+        .collect();
+    let mut tent = vec![0.0; w * w];
+    for row in &rows {
+        for &(k, v) in row {
+            tent[k] += v;
+        }
+    }
+    tent
 }
 
 /// Uniform start points over the grid (cell units) in Morton order of their cells, as the tracer's.
@@ -469,9 +528,10 @@ fn walk(
 }
 
 /// The table's albedo at one slice as the renderer evaluates it: `int eval_cos(wi, wo) dwo` over the
-/// sample space of the slice's warp (`dwo = |dwo/ds| ds`), a midpoint rule of `(2 w)^2` points, luminance.
+/// sample space of the slice's warp (`dwo = |dwo/ds| ds`), a midpoint rule of `4 w` points per axis (at most
+/// [`TENT_POINTS`]), luminance.
 fn table_albedo(measured: &Measured, sl: &SliceWarp) -> f64 {
-    let q = 2 * sl.w;
+    let q = (4 * sl.w).min(TENT_POINTS);
     let warp = sl.warp();
     let wi = [sl.wi.x as f32, sl.wi.y as f32, sl.wi.z as f32];
     let mut sum = 0.0;
