@@ -134,3 +134,49 @@ fn white_furnace_of_the_traced_table() {
         assert!((q - r.albedo).abs() <= tol, "table {q} vs traced {} at {}", r.albedo, r.theta_deg);
     }
 }
+
+/// `ndfit trace --to rgl`: a file the format's check and the renderer's reader accept, with the traced
+/// fields; the same seed writes the same bytes; bad options and a missing `-o` are refused in a line or
+/// two, leaving what was written untouched.
+#[test]
+fn the_command_writes_a_table_and_clobbers_nothing_on_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("g.x3p");
+    let synth = std::process::Command::new(crate::common::ndfit_bin())
+        .args(["synth", scan.to_str().unwrap(), "--surface", "gaussian", "--nx", "64", "--ny", "64"])
+        .output()
+        .unwrap();
+    assert!(synth.status.success(), "{}", String::from_utf8_lossy(&synth.stderr));
+    let out = dir.path().join("t.bsdf");
+    let run = |args: &[&str]| {
+        std::process::Command::new(crate::common::ndfit_bin())
+            .args(["trace", scan.to_str().unwrap(), "--to", "rgl", "--theta-i", "3", "--phi-i", "3", "--warp-res", "8"])
+            .args(["--paths", "4096", "--ndf-res", "32"])
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let ok = run(&["-o", out.to_str().unwrap(), "--material", "Au"]);
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let before = std::fs::read(&out).unwrap();
+    let t = ndfit::export::rgl::TensorFile::parse(&before).unwrap();
+    rgl::check_structure(&t, rgl::Flavour::Rgb).unwrap();
+    Measured::new(&t).unwrap();
+    for name in ["traced_albedo", "uncarried", "table_albedo"] {
+        let f = t.field(name).unwrap_or_else(|| panic!("no {name}"));
+        assert_eq!(f.shape, vec![3, 3], "{name}");
+    }
+    let again = dir.path().join("u.bsdf");
+    assert!(run(&["-o", again.to_str().unwrap(), "--material", "Au"]).status.success());
+    assert_eq!(std::fs::read(&again).unwrap(), before, "the same seed wrote other bytes");
+    let o = out.to_str().unwrap();
+    for bad in
+        [&["-o", o, "--warp-res", "2"][..], &["-o", o, "--paths", "0"], &["-o", o, "--plot", "x.png"], &[], &["-o", o, "--to", "csv"]]
+    {
+        let e = run(bad);
+        assert!(!e.status.success(), "{bad:?}");
+        let msg = String::from_utf8_lossy(&e.stderr);
+        assert!(!msg.contains("panicked") && msg.lines().count() <= 2, "{bad:?}: {msg}");
+        assert_eq!(std::fs::read(&out).unwrap(), before, "{bad:?} clobbered the output");
+    }
+}
