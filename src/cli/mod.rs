@@ -127,7 +127,8 @@ enum Command {
     Bench(bench::Args),
     /// The NDF at the footprints a renderer sees, and the simplest model for them.
     Scale(scale::Args),
-    /// Trace the scan's own microgeometry (geometric optics) and measure the microfacet model against it.
+    /// Trace the scan's own microgeometry (geometric optics) and measure the microfacet model against it;
+    /// with `--to rgl`, write the traced BRDF as a tabulated material.
     Trace(trace::Args),
     /// Render a fit's lobe or an RGL table on a sphere (point or broad light) to EXR or .npy.
     Render(render::Args),

@@ -1,7 +1,8 @@
 //! `ndfit trace SCAN --incidence 0,40,70 [-o OUT.json]`: trace the scan's own microgeometry with
 //! geometric optics and measure the microfacet model against it (docs/TRACE.md). The scan is read and
 //! preprocessed as `ndfit fit` reads it (plane removed by default); the verdict line goes to standard
-//! error; `--plot OUT.png` draws the first bounce's BRDF and the masking against the model.
+//! error; `--plot OUT.png` draws the first bounce's BRDF and the masking against the model. `--to rgl -o
+//! OUT.bsdf` writes the traced BRDF as a tabulated material instead (`trace_rgl.rs`).
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -45,7 +46,8 @@ pub struct Args {
     /// Largest single-bounce error beyond noise and multiple-scattering share for the verdict `holds`.
     #[arg(long, default_value_t = 0.05)]
     pub tolerance: f64,
-    /// Output JSON (`ndfit.trace/1`); without it the JSON goes to standard output.
+    /// Output JSON (`ndfit.trace/1`; without it the JSON goes to standard output), or with `--to rgl` the
+    /// table (written atomically).
     #[arg(short = 'o', long)]
     pub out: Option<PathBuf>,
     /// Also write a PNG: the first bounce's BRDF in the plane of incidence, traced against the
