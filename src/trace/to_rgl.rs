@@ -8,8 +8,7 @@
 //! node the paths of the tracer (all bounces, Fresnel per bounce and wavelength) give the energy leaving
 //! per unit incident, `dE/dwo = f cos(theta_o)`; with `|dwo/ds| = 4 |wi.m| (2 pi^2 u_theta sin(theta_m)) /
 //! p(u)` (the half-vector Jacobian, Walter et al. 2007 eq. 14, times the grid's, over the normalized
-//! written density `p`),
-//! `R(s) = dE/ds J(s)` with `J = 4 sigma(wi) / (D(m) |dwo/ds|)`. Each path's energy is splatted with tent
+//! written density `p`), `R(s) = dE/ds J(s)` with `J = 4 sigma(wi) / (D(m) |dwo/ds|)`. Each path's energy is splatted with tent
 //! weights `T_n` on the four nodes around its `s`; node `n` holds its tent's energy over
 //! `int T_n(s) / J(s) ds` (a quadrature over the sample space where `wo` is above the horizon). That is `R`
 //! averaged over the tent with the weight `1 / J`, and the renderer's bilinear `R` times `1 / J`
@@ -191,15 +190,16 @@ struct SliceStats {
     noise: f64,
 }
 
-/// One distinct warp of a traced direction: the slice it belongs to and what its paths deposit.
+/// One distinct warp of a traced direction: the slice's incident direction, its warp, `sigma(wi)` as the
+/// renderer reads it.
 struct Target<'a> {
     wi: Vector3<f64>,
     warp: rgl::warp::Bilinear<'a>,
     sigma: f64,
 }
 
-/// Per block of paths, per target: `R`'s sums per channel and node, the squares of its luminance's,
-/// the uncarried energy; and the energy leaving per channel, the landed paths.
+/// Per block of paths, per target: the tent-weighted energy per channel and node, the squares of its
+/// luminance's terms, the uncarried energy; and the energy leaving per channel, the landed paths.
 #[derive(Clone)]
 struct Acc {
     sum: Vec<Vec<f64>>,
