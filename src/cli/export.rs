@@ -123,12 +123,8 @@ fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
         let description = format!("ndfit tabulated {} model of {name} {}; {tail}", model.id(), params_text(&model));
         rgl::tabulate(&|m| model.d(m), &description, &opts, false).map_err(fail)?
     } else {
-        // The table is the scan's NDF filled by the ladder's closest lobe whatever the render answers, so
-        // the render choice need not run here.
-        let options = ndfit::Options { render: None, ..args.how.options(&args.read, ndfit::ModelChoice::Auto, &args.fit)? };
-        let outcome = ndfit::Pipeline::new(options).run_path(&args.fit)?;
-        let fit = outcome.fit.table_model()?;
-        let max_theta = outcome.fit.quality.max_theta_deg;
+        let options = args.how.options(&args.read, ndfit::ModelChoice::Auto, &args.fit)?;
+        let (outcome, fit, max_theta) = scan_table_ndf(options, &args.fit)?;
         let reg = rgl::Regularized::new(&outcome.ndf, &fit, max_theta);
         let description = format!(
             "ndfit measured NDF of the scan {name}: {}; fitted {} {}; {tail}",
@@ -158,6 +154,19 @@ fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// What `--to rgl` of a scan tabulates: the pipeline's outcome (the empirical NDF and the fit), the lobe
+/// whose tails fill the NDF ([`ndfit::fit::FitReport::table_model`]) and the fit region (degrees), for
+/// [`rgl::Regularized`]. `ndfit trace --to rgl` lays its reflectance on the same NDF.
+pub(super) fn scan_table_ndf(options: ndfit::Options, scan: &Path) -> anyhow::Result<(ndfit::Outcome, Model, f64)> {
+    // The table is the scan's NDF filled by the ladder's closest lobe whatever the render answers, so
+    // the render choice need not run here.
+    let options = ndfit::Options { render: None, ..options };
+    let outcome = ndfit::Pipeline::new(options).run_path(scan)?;
+    let fit = outcome.fit.table_model()?;
+    let max_theta = outcome.fit.quality.max_theta_deg;
+    Ok((outcome, fit, max_theta))
+}
+
 /// Whether the file's first non-blank byte opens a JSON object (a fit), rather than a scan.
 fn looks_like_json(p: &Path) -> anyhow::Result<bool> {
     use std::io::Read;
@@ -167,7 +176,7 @@ fn looks_like_json(p: &Path) -> anyhow::Result<bool> {
 }
 
 /// `(name = value, ...)` of a model's parameters.
-fn params_text(m: &Model) -> String {
+pub(super) fn params_text(m: &Model) -> String {
     let names = m.id().param_names();
     let vals = m.params();
     let parts: Vec<String> = names.iter().zip(&vals).map(|(n, v)| format!("{n} = {v:.6}")).collect();
@@ -175,7 +184,7 @@ fn params_text(m: &Model) -> String {
 }
 
 /// The material as the description states it.
-fn material_text(m: Material) -> String {
+pub(super) fn material_text(m: Material) -> String {
     match m {
         Material::None => "none (F = 1)".into(),
         _ => format!("{} (complex index: {})", m.as_str(), m.source()),

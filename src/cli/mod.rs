@@ -26,6 +26,7 @@ mod scale;
 mod scan_args;
 mod synth;
 mod trace;
+mod trace_rgl;
 
 /// Measured microgeometry to microfacet parameters: empirical NDFs of heightfield scans and fits of the
 /// Ellipsoid, GGX and Beckmann NDFs.
@@ -126,7 +127,8 @@ enum Command {
     Bench(bench::Args),
     /// The NDF at the footprints a renderer sees, and the simplest model for them.
     Scale(scale::Args),
-    /// Trace the scan's own microgeometry (geometric optics) and measure the microfacet model against it.
+    /// Trace the scan's own microgeometry (geometric optics) and measure the microfacet model against it;
+    /// with `--to rgl`, write the traced BRDF as a tabulated material.
     Trace(trace::Args),
     /// Render a fit's lobe or an RGL table on a sphere (point or broad light) to EXR or .npy.
     Render(render::Args),

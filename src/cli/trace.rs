@@ -2,7 +2,8 @@
 //! geometric optics and measure the microfacet model against it (docs/TRACE.md). The scan is read and
 //! preprocessed as `ndfit fit` reads it (plane removed by default); the verdict line goes to standard
 //! error; `--plot OUT.png` draws the first bounce's BRDF and the masking against the model; `--tables
-//! OUT.csv` writes the per-bin tables for outside checks.
+//! OUT.csv` writes the per-bin tables for outside checks. `--to rgl -o OUT.bsdf` writes the traced BRDF
+//! as a tabulated material instead (`trace_rgl.rs`).
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -46,7 +47,8 @@ pub struct Args {
     /// Largest single-bounce error beyond noise and multiple-scattering share for the verdict `holds`.
     #[arg(long, default_value_t = 0.05)]
     pub tolerance: f64,
-    /// Output JSON (`ndfit.trace/1`); without it the JSON goes to standard output.
+    /// Output JSON (`ndfit.trace/1`; without it the JSON goes to standard output), or with `--to rgl` the
+    /// table (written atomically).
     #[arg(short = 'o', long)]
     pub out: Option<PathBuf>,
     /// Also write a PNG: the first bounce's BRDF in the plane of incidence, traced against the
@@ -64,6 +66,12 @@ pub struct Args {
     /// No verdict line on standard error.
     #[arg(long)]
     pub quiet: bool,
+    /// What to write: json (the comparison, `ndfit.trace/1`) or rgl (the traced BRDF as a tabulated
+    /// material for Mitsuba 3's and pbrt-v4's `measured`, written to -o; docs/TRACE.md).
+    #[arg(long = "to", default_value = "json", value_name = "FORMAT")]
+    pub to: String,
+    #[command(flatten, next_help_heading = "The traced BRDF as a material (--to rgl)")]
+    pub rgl: super::trace_rgl::RglArgs,
 }
 
 /// `THETAxPHI` bins.
@@ -73,6 +81,11 @@ fn parse_bins(s: &str) -> Result<DirTable, String> {
 
 /// Run `ndfit trace`.
 pub fn run(a: Args) -> anyhow::Result<ExitCode> {
+    match a.to.as_str() {
+        "json" => {}
+        "rgl" => return super::trace_rgl::run(&a),
+        other => anyhow::bail!("{}: --to: {other:?} is not json or rgl", a.scan.scan.display()),
+    }
     let opts = TraceOptions {
         incidences_deg: a.incidence.clone(),
         azimuth_deg: a.azimuth,

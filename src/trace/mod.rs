@@ -37,6 +37,7 @@ mod plot;
 mod surface;
 mod table_csv;
 mod tally;
+mod to_rgl;
 mod tracer;
 
 use rayon::prelude::*;
@@ -47,6 +48,7 @@ pub use plot::{plane_of_incidence, write_plot, PLOT_HEIGHT, PLOT_WIDTH};
 pub use surface::Border;
 pub use table_csv::{write_tables_csv, COLUMNS as TABLE_COLUMNS};
 pub use tally::{DirTable, LUMA};
+pub use to_rgl::{trace_rgl, NodeRecord, TracedRglOptions, TracedTable, CARRY_FLOOR};
 
 use crate::error::{Error, Result};
 use crate::export::rgl::Material;

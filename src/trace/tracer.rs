@@ -48,7 +48,7 @@ pub(crate) fn block_seed(seed: u64, inc: usize, block: usize) -> u64 {
 
 /// The Morton (Z-order) code of a cell: the bits of `x` and `y` interleaved.
 #[inline]
-fn morton(x: u32, y: u32) -> u64 {
+pub(crate) fn morton(x: u32, y: u32) -> u64 {
     fn spread(v: u32) -> u64 {
         let mut v = v as u64;
         v = (v | (v << 16)) & 0x0000_FFFF_0000_FFFF;

@@ -26,4 +26,5 @@ mod synth;
 mod tails;
 mod tiled_info;
 mod trace;
+mod trace_rgl;
 mod zerocopy;

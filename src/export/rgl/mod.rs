@@ -30,7 +30,7 @@ pub(crate) mod conductor;
 pub(crate) mod empirical;
 pub(crate) mod measured;
 pub(crate) mod tensor;
-mod warp;
+pub(crate) mod warp;
 
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -97,7 +97,7 @@ const SIGMA_RES: usize = 64;
 const QUAD_RES: usize = 128;
 
 impl RglOptions {
-    fn check(&self) -> Result<()> {
+    pub(crate) fn check(&self) -> Result<()> {
         let bad = |name: &str, v: usize, lo: usize| Error::invalid(format!("{name} must be in [{lo}, {MAX_RES}], got {v}"));
         for (name, v, lo) in [
             ("theta_i", self.theta_i, 2),
@@ -312,6 +312,11 @@ impl NdfGrids {
     pub fn g1(&self, w: Vector3<f64>) -> f64 {
         smith_g1(&self.sigma, self.ns, w)
     }
+
+    /// The projected area `sigma(w)` as a renderer reads it: bilinear on the `sigma` grid.
+    pub fn sigma_at(&self, w: Vector3<f64>) -> f64 {
+        bilinear(&self.sigma, self.ns, dir2u(w))
+    }
 }
 
 /// `min(1, cos(theta) / sigma(w))` with `sigma` read bilinearly on its `ns x ns` grid; 0 at or below the
@@ -402,6 +407,70 @@ pub fn tabulate_guided(
     opts: &RglOptions,
     renormalize: bool,
 ) -> Result<Table> {
+    let material = opts.material;
+    let reflectance = |grids: &NdfGrids, slices: &[SliceWarp], lambdas: &[f64]| -> Result<Vec<Vec<f64>>> {
+        Ok(slices.par_iter().map(|s| smith_reflectance(grids, s, lambdas, material)).collect())
+    };
+    tabulate_with(d, guide, description, opts, renormalize, &reflectance)
+}
+
+/// One incident node's sampling warp, as the writer lays the reflectance on it: the written `vndf`
+/// density and the half-vector coordinates `u` that its nodes of the sample space map to (Dupuy & Jakob
+/// 2018, sec. 5).
+#[derive(Debug, Clone)]
+pub(crate) struct SliceWarp {
+    /// The incident direction (scan frame, `z` up).
+    pub wi: Vector3<f64>,
+    /// Nodes per axis of the warp.
+    pub w: usize,
+    /// The written density at the `w x w` nodes of `u` (`u_theta` fastest), rounded to `f32` as stored.
+    pub vndf: Vec<f64>,
+    /// The point `u` that each node of the sample space maps to.
+    pub nodes: Vec<[f64; 2]>,
+    /// At each node, the visible NDF over the written density (both normalized): the factor the
+    /// `luminance` warp applies so that the two warps together sample the visible NDF.
+    pub ratio: Vec<f64>,
+}
+
+impl SliceWarp {
+    /// The inverse-CDF warp of the written density.
+    pub fn warp(&self) -> warp::Bilinear<'_> {
+        warp::Bilinear::new(&self.vndf, self.w, self.w)
+    }
+}
+
+/// The reflectance of a microfacet table at one slice's nodes, `F(wi.m) G1(wo)` per wavelength (separable
+/// Smith, as Mitsuba's `roughconductor`), `channels x w x w`.
+fn smith_reflectance(grids: &NdfGrids, s: &SliceWarp, lambdas: &[f64], material: Material) -> Vec<f64> {
+    let n = s.w * s.w;
+    let mut refl = vec![0.0; lambdas.len() * n];
+    for (k, &u) in s.nodes.iter().enumerate() {
+        let m = u2dir(u);
+        let c = s.wi.dot(&m);
+        let wo = 2.0 * c * m - s.wi;
+        // Smith masking of the outgoing direction from the tabulated projected area; none below the horizon.
+        let g1 = grids.g1(wo);
+        for (l, &nm) in lambdas.iter().enumerate() {
+            refl[l * n + k] = material.fresnel(c, nm) * g1;
+        }
+    }
+    refl
+}
+
+/// The reflectance of every slice (`phi_i` outermost, as the file lays them), each `channels x w x w`
+/// at the slice's nodes, from the `ndf` and `sigma` grids, the slices' warps and the wavelengths.
+pub(crate) type Reflectance<'a> = dyn Fn(&NdfGrids, &[SliceWarp], &[f64]) -> Result<Vec<Vec<f64>>> + 'a;
+
+/// [`tabulate_guided`] with the reflectance at the sample-space nodes supplied by `reflectance`; the
+/// `luminance` warp is made from it.
+pub(crate) fn tabulate_with(
+    d: &(dyn Fn(Vector3<f64>) -> f64 + Sync),
+    guide: &(dyn Fn(Vector3<f64>) -> f64 + Sync),
+    description: &str,
+    opts: &RglOptions,
+    renormalize: bool,
+    reflectance: &Reflectance<'_>,
+) -> Result<Table> {
     opts.check()?;
     let grids = NdfGrids::new(d, guide, opts.ndf_res, renormalize)?;
     let NdfGrids { ref ndf, n, ref sigma, ns, normalization, ndf_error, scale } = grids;
@@ -412,7 +481,7 @@ pub fn tabulate_guided(
     let w = opts.warp_res;
     let wstep = 1.0 / (w - 1) as f64;
     let slices: Vec<(f64, f64)> = phi_i.iter().flat_map(|&p| theta_i.iter().map(move |&t| (p, t))).collect();
-    let per_slice: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = slices
+    let warps: Vec<SliceWarp> = slices
         .par_iter()
         .map(|&(phi, theta)| {
             let wi = Vector3::new(phi.cos() * theta.sin(), phi.sin() * theta.sin(), theta.cos());
@@ -437,41 +506,53 @@ pub fn tabulate_guided(
             };
             let warp = warp::Bilinear::new(&vndf, w, w);
             let written = warp.total();
-            let mut refl = vec![0.0; lambdas.len() * w * w];
-            let mut lum = vec![0.0; w * w];
-            for k in 0..w * w {
-                let u = warp.sample([(k % w) as f64 * wstep, (k / w) as f64 * wstep]);
-                let m = u2dir(u);
-                let c = wi.dot(&m);
-                let wo = 2.0 * c * m - wi;
-                // Smith masking of the outgoing direction from the tabulated projected area; none below the horizon.
-                let g1 = grids.g1(wo);
-                for (l, &nm) in lambdas.iter().enumerate() {
-                    refl[l * w * w + k] = opts.material.fresnel(c, nm) * g1;
-                }
-                let luminance = match opts.flavour {
-                    Flavour::Rgb => (0..3).map(|l| LUMA[l] * refl[l * w * w + k]).sum(),
-                    Flavour::Spectral => (0..lambdas.len()).map(|l| refl[l * w * w + k]).sum::<f64>() / lambdas.len() as f64,
-                };
-                // The sampling density the luminance warp adds in front of the written one: the VNDF over
-                // the written density at this node's half vector, so that the two warps follow the VNDF.
-                let p_written = bilinear(&vndf, w, u) / written;
-                let ratio = if te > 0.0 && p_written > 0.0 { visible(u) / te / p_written } else { 1.0 };
-                lum[k] = (luminance * ratio).max(0.0);
-            }
+            let nodes: Vec<[f64; 2]> = (0..w * w).map(|k| warp.sample([(k % w) as f64 * wstep, (k / w) as f64 * wstep])).collect();
+            // The sampling density the luminance warp adds in front of the written one: the VNDF over
+            // the written density at this node's half vector, so that the two warps follow the VNDF.
+            let ratio = nodes
+                .iter()
+                .map(|&u| {
+                    let p_written = bilinear(&vndf, w, u) / written;
+                    if te > 0.0 && p_written > 0.0 {
+                        visible(u) / te / p_written
+                    } else {
+                        1.0
+                    }
+                })
+                .collect();
+            SliceWarp { wi, w, vndf, nodes, ratio }
+        })
+        .collect();
+    let refls = reflectance(&grids, &warps, lambdas)?;
+    if refls.len() != warps.len() || refls.iter().any(|r| r.len() != lambdas.len() * w * w) {
+        return Err(Error::invalid("the reflectance does not cover every slice's nodes and channels"));
+    }
+    let lums: Vec<Vec<f64>> = warps
+        .par_iter()
+        .zip(&refls)
+        .map(|(s, refl)| {
+            let mut lum: Vec<f64> = (0..w * w)
+                .map(|k| {
+                    let luminance = match opts.flavour {
+                        Flavour::Rgb => (0..3).map(|l| LUMA[l] * refl[l * w * w + k]).sum(),
+                        Flavour::Spectral => (0..lambdas.len()).map(|l| refl[l * w * w + k]).sum::<f64>() / lambdas.len() as f64,
+                    };
+                    (luminance * s.ratio[k]).max(0.0)
+                })
+                .collect();
             // A slice that reflects nothing (grazing incidence on a very rough NDF) still needs a density to
             // normalize: a uniform one, whose samples all carry the zero reflectance.
             if !lum.iter().any(|&v| v > 0.0) {
                 lum.iter_mut().for_each(|v| *v = 1.0);
             }
-            (vndf, lum, refl)
+            lum
         })
         .collect();
 
     let (np, nt, nl) = (opts.phi_i, opts.theta_i, lambdas.len());
-    let vndf: Vec<f64> = per_slice.iter().flat_map(|s| s.0.iter().copied()).collect();
-    let luminance: Vec<f64> = per_slice.iter().flat_map(|s| s.1.iter().copied()).collect();
-    let refl: Vec<f64> = per_slice.iter().flat_map(|s| s.2.iter().copied()).collect();
+    let vndf: Vec<f64> = warps.iter().flat_map(|s| s.vndf.iter().copied()).collect();
+    let luminance: Vec<f64> = lums.iter().flat_map(|s| s.iter().copied()).collect();
+    let refl: Vec<f64> = refls.iter().flat_map(|s| s.iter().copied()).collect();
     let mut fields = vec![
         Field::u8("description", description.as_bytes()),
         Field::u8("jacobian", &[1]),

@@ -13,6 +13,8 @@ pub struct Bilinear<'a> {
     row: Vec<f64>,
     /// Cumulative integral over `y` at each node row (`h` values, from 0).
     marginal: Vec<f64>,
+    /// Cumulative integral over `x` along each node row, at each node (`w x h` values, from 0).
+    cond: Vec<f64>,
 }
 
 impl<'a> Bilinear<'a> {
@@ -25,7 +27,53 @@ impl<'a> Bilinear<'a> {
         for j in 1..h {
             marginal[j] = marginal[j - 1] + 0.5 * dy * (row[j - 1] + row[j]);
         }
-        Bilinear { data, w, h, row, marginal }
+        let mut cond = vec![0.0; w * h];
+        for j in 0..h {
+            for i in 1..w {
+                cond[j * w + i] = cond[j * w + i - 1] + 0.5 * dx * (data[j * w + i - 1] + data[j * w + i]);
+            }
+        }
+        Bilinear { data, w, h, row, marginal, cond }
+    }
+
+    /// The normalized density at `u` (clamped into the unit square): the bilinear value over the total.
+    pub fn density(&self, u: [f64; 2]) -> f64 {
+        let t = self.total();
+        if t > 0.0 {
+            super::bilinear(self.data, self.w, u) / t
+        } else {
+            0.0
+        }
+    }
+
+    /// The uniform sample that [`Bilinear::sample`] maps to `u` (clamped into the unit square): the
+    /// marginal CDF of `y`, then the conditional CDF of `x` at that `y`.
+    pub fn invert(&self, u: [f64; 2]) -> [f64; 2] {
+        let (w, h) = (self.w, self.h);
+        let (dx, dy) = (1.0 / (w - 1) as f64, 1.0 / (h - 1) as f64);
+        let cell = |t: f64, n: usize| {
+            let p = t.clamp(0.0, 1.0) * (n - 1) as f64;
+            let i = (p as usize).min(n - 2);
+            (i, p - i as f64)
+        };
+        let ((i, tx), (j, ty)) = (cell(u[0], w), cell(u[1], h));
+        let total = self.total();
+        if !(total > 0.0) {
+            return [u[0].clamp(0.0, 1.0), u[1].clamp(0.0, 1.0)];
+        }
+        let (r0, r1) = (self.row[j], self.row[j + 1]);
+        let sy = (self.marginal[j] + dy * ty * (r0 + 0.5 * (r1 - r0) * ty)) / total;
+        // The conditional at y: the rows' values and cumulative sums interpolated linearly between rows.
+        let lerp = |a: f64, b: f64| a + (b - a) * ty;
+        let line_total = lerp(r0, r1);
+        if !(line_total > 0.0) {
+            return [u[0].clamp(0.0, 1.0), sy.clamp(0.0, 1.0)];
+        }
+        let (v0, v1) =
+            (lerp(self.data[j * w + i], self.data[(j + 1) * w + i]), lerp(self.data[j * w + i + 1], self.data[(j + 1) * w + i + 1]));
+        let before = lerp(self.cond[j * w + i], self.cond[(j + 1) * w + i]);
+        let sx = (before + dx * tx * (v0 + 0.5 * (v1 - v0) * tx)) / line_total;
+        [sx.clamp(0.0, 1.0), sy.clamp(0.0, 1.0)]
     }
 
     /// The total integral over the unit square.
@@ -95,6 +143,21 @@ fn segment(mass: f64, d: f64, v0: f64, v1: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `invert` undoes `sample` wherever the density is positive.
+    #[test]
+    fn invert_undoes_sample() {
+        let (w, h) = (6, 5);
+        let data: Vec<f64> = (0..w * h).map(|k| 0.1 + ((k * 7919) % 11) as f64 / 11.0).collect();
+        let b = Bilinear::new(&data, w, h);
+        for a in 0..37 {
+            for c in 0..29 {
+                let s = [(a as f64 + 0.3) / 37.0, (c as f64 + 0.6) / 29.0];
+                let back = b.invert(b.sample(s));
+                assert!((back[0] - s[0]).abs() < 1e-9 && (back[1] - s[1]).abs() < 1e-9, "{s:?} -> {back:?}");
+            }
+        }
+    }
 
     /// The map sends the uniform measure to the density: the mass of `[0, x] x [0, y]` under the density
     /// equals the measure of the samples' preimage, checked by a midpoint sum over a fine grid of `s`.
