@@ -75,6 +75,21 @@ impl Brdf for ScanBrdf<'_> {
         let bare = self.area.scale * self.reg.d(h) * self.area.g1(wi) * self.area.g1(wo) / (4.0 * wi.z * wo.z);
         self.material.fresnel_rgb(wi.dot(&h)).map(|f| bare * f)
     }
+
+    fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], out: &mut [[f64; 3]]) {
+        // `G1(wi)` once for every light point (its reading of the `sigma` grid is the costly part).
+        let gi = if wi.z > 0.0 { self.area.g1(wi) } else { 0.0 };
+        for (o, &wo) in out.iter_mut().zip(wos) {
+            // As `eval`: reflection only.
+            if !(wi.z > 0.0 && wo.z > 0.0) {
+                *o = [0.0; 3];
+                continue;
+            }
+            let h = (wi + wo).normalize();
+            let bare = self.area.scale * self.reg.d(h) * gi * self.area.g1(wo) / (4.0 * wi.z * wo.z);
+            *o = self.material.fresnel_rgb(wi.dot(&h)).map(|f| bare * f);
+        }
+    }
 }
 
 /// A scene of the choice with the name the report gives it.
@@ -687,6 +702,101 @@ mod tests {
         assert!(worst[2] < 0.01, "{worst:?}");
         assert!(worst[0] > 0.1, "{worst:?}");
         assert_eq!((c.answer, c.closest, c.reported()), (Some(2), 2, 2));
+    }
+
+    /// A scan's NDF (an ellipsoid cap) and its truth as a lobe.
+    fn cap_ndf() -> (EmpiricalNdf, Model) {
+        use crate::synth::{ellipsoid_surface, EllipsoidParams, SynthSettings};
+        let p = EllipsoidParams { alpha_x: 0.3, alpha_y: 0.15, theta_z: 0.4, ..Default::default() };
+        let (hf, truth) = ellipsoid_surface(&SynthSettings { nx: 160, ny: 160, ..Default::default() }, &p).unwrap();
+        let scan = crate::preprocess::apply(hf, &crate::preprocess::Preprocess::default()).unwrap();
+        (crate::ndf::empirical_ndf(&scan, &crate::ndf::NdfOptions::default()).unwrap(), truth.to_model().unwrap())
+    }
+
+    /// Light points about a shading point: every direction of a coarse grid of the hemisphere, and a few
+    /// below the horizon.
+    fn directions() -> Vec<Vector3<f64>> {
+        let mut d: Vec<Vector3<f64>> =
+            (0..9).flat_map(|i| (0..16).map(move |j| direction(i as f64 * 0.19, j as f64 * 0.4 - 3.0))).collect();
+        d.push(direction(1.7, 0.2));
+        d.push(Vector3::new(0.0, 0.0, 1.0));
+        d
+    }
+
+    /// `eval_many` gives, bit for bit, what `eval` gives pair by pair: the table's and every kind of lobe
+    /// (Smith lobes, whose `Lambda(wi)` is shared, the ellipsoid and a mixture), for `wi` from the normal
+    /// to below the horizon.
+    #[test]
+    fn evaluating_many_light_points_equals_one_by_one() {
+        let (ndf, truth) = cap_ndf();
+        let reg = Regularized::new(&ndf, &truth, 40.0);
+        let area = ProjectedArea::new(&|m| reg.d(m), 24, 12, true).unwrap();
+        let table = ScanBrdf { reg: &reg, area: &area, material: Material::Al };
+        let lobes = [
+            ggx(0.3),
+            Model::from_params(ModelId::GgxAniso, &[0.3, 0.1, 0.7]).unwrap(),
+            Model::from_params(ModelId::BeckmannAniso, &[0.2, 0.35, -0.3]).unwrap(),
+            Model::from_params(ModelId::Student, &[0.25, 2.5]).unwrap(),
+            truth,
+            Model::from_params(ModelId::Ggx2, &[0.05, 0.05, 0.5, 0.5, 0.0, 0.5]).unwrap(),
+        ];
+        let analytic: Vec<AnalyticBrdf> = lobes.iter().map(|&model| AnalyticBrdf { model, material: Material::Au }).collect();
+        let wos = directions();
+        for wi in [direction(0.0, 0.0), direction(0.4, 1.0), direction(1.2, -2.0), direction(1.5, 0.3), direction(1.8, 0.0)] {
+            for brdf in std::iter::once(&table as &dyn Brdf).chain(analytic.iter().map(|a| a as &dyn Brdf)) {
+                let mut many = vec![[f64::NAN; 3]; wos.len()];
+                brdf.eval_many(wi, &wos, &mut many);
+                for (&wo, m) in wos.iter().zip(&many) {
+                    assert_eq!(m.map(f64::to_bits), brdf.eval(wi, wo).map(f64::to_bits), "{wi:?} {wo:?}");
+                }
+            }
+        }
+    }
+
+    /// The regularized NDF's cell lookup equals a search of the bins, as it was read before the lookup.
+    #[test]
+    fn the_cell_lookup_equals_a_search_of_the_bins() {
+        use crate::models::Ndf;
+        use crate::ndf::SlopeFrame;
+        let (ndf, truth) = cap_ndf();
+        let reg = Regularized::new(&ndf, &truth, 40.0);
+        let grid = &ndf.grid;
+        let searched = |m: Vector3<f64>| {
+            let fit = truth.d(m);
+            let s = SlopeFrame::slope_of(m);
+            let p = ndf.frame.to_lambert(s[0], s[1]);
+            let [x0, x1, y0, _] = grid.bounds(0);
+            let h = x1 - x0;
+            let (fx, fy) = ((p[0] - x0) / h - 0.5, (p[1] - y0) / h - 0.5);
+            let (ix, iy) = (fx.floor(), fy.floor());
+            let (tx, ty) = (fx - ix, fy - iy);
+            let value = |cx: f64, cy: f64| {
+                let n = grid.n as f64;
+                if !(0.0..n).contains(&cx) || !(0.0..n).contains(&cy) {
+                    return fit;
+                }
+                let c = (cy as usize * grid.n + cx as usize) as u32;
+                match ndf.bin_cells.binary_search(&c).ok().map(|k| &ndf.bins[k]) {
+                    Some(b) if b.count > 0 && b.d > 0.0 => {
+                        let r = b.stderr / (crate::export::rgl::empirical::REL_NOISE * b.d);
+                        let w = 1.0 / (1.0 + r * r);
+                        w * b.d + (1.0 - w) * fit
+                    }
+                    _ => fit,
+                }
+            };
+            (1.0 - ty) * ((1.0 - tx) * value(ix, iy) + tx * value(ix + 1.0, iy))
+                + ty * ((1.0 - tx) * value(ix, iy + 1.0) + tx * value(ix + 1.0, iy + 1.0))
+        };
+        let mut inside = 0;
+        for i in 0..60 {
+            for j in 0..60 {
+                let m = direction(i as f64 * 0.7f64.to_radians(), j as f64 * 0.105);
+                inside += usize::from(m.z >= 40f64.to_radians().cos());
+                assert_eq!(reg.d(m).to_bits(), if m.z >= 40f64.to_radians().cos() { searched(m) } else { truth.d(m) }.to_bits(), "{m:?}");
+            }
+        }
+        assert!(inside > 1000, "{inside}");
     }
 
     /// Stated scenes change what they name and nothing else; a bad name, key or value is refused naming it.

@@ -430,6 +430,10 @@ pub(crate) fn smith_g1(lambda: f64, u: Vector3<f64>, m: Vector3<f64>) -> f64 {
 /// so that `theta_z` means the same thing in every model.
 #[inline]
 pub(crate) fn rotate_z(theta_z: f64, m: Vector3<f64>) -> Vector3<f64> {
+    // No turn (every isotropic lobe): `m` itself, what `c = 1, s = 0` give up to the sign of a zero.
+    if theta_z == 0.0 {
+        return m;
+    }
     let (s, c) = theta_z.sin_cos();
     Vector3::new(c * m.x - s * m.y, s * m.x + c * m.y, m.z)
 }

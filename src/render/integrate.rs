@@ -240,7 +240,8 @@ fn cap(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, delta: f64, rules: &R
     }
     breaks.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (cos_delta, sin_d) = (delta.cos(), d.sin());
-    let mut acc = [0.0; 3];
+    // The light points above the horizon and their weights, evaluated together once gathered.
+    let (mut dirs, mut weights) = (Vec::with_capacity(4 * AZIMUTH * breaks.len()), Vec::with_capacity(4 * AZIMUTH * breaks.len()));
     for pair in breaks.windows(2) {
         let ((a, rim_a), (b, rim_b)) = (pair[0], pair[1]);
         if b <= a {
@@ -262,8 +263,8 @@ fn cap(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, delta: f64, rules: &R
                 let l = r * cr + (e1 * cp + e2 * sp) * sr;
                 // Below the horizon the sphere hides the light.
                 if l.z > 0.0 {
-                    let f = brdf.eval(wi, l);
-                    (0..3).for_each(|k| acc[k] += w_rho * w * f[k] * l.z);
+                    dirs.push(l);
+                    weights.push(w_rho * w);
                 }
             };
             if rho <= full {
@@ -281,6 +282,12 @@ fn cap(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, delta: f64, rules: &R
                 });
             }
         }
+    }
+    let mut f = vec![[0.0; 3]; dirs.len()];
+    brdf.eval_many(wi, &dirs, &mut f);
+    let mut acc = [0.0; 3];
+    for ((l, w), f) in dirs.iter().zip(&weights).zip(&f) {
+        (0..3).for_each(|k| acc[k] += w * f[k] * l.z);
     }
     acc
 }

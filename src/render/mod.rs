@@ -25,6 +25,14 @@ pub trait Brdf: Sync {
     /// camera and `wo` toward the light, both unit vectors pointing away from the surface (Mitsuba's
     /// `si.wi` and `wo`).
     fn eval(&self, wi: Vector3<f64>, wo: Vector3<f64>) -> [f64; 3];
+
+    /// `f(wi, wo)` for every `wo` of `wos` into `out` (the light points of one shading point), each the
+    /// same value as [`Brdf::eval`] gives; a BRDF may do the work on `wi` alone once for all of them.
+    fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], out: &mut [[f64; 3]]) {
+        for (o, &wo) in out.iter_mut().zip(wos) {
+            *o = self.eval(wi, wo);
+        }
+    }
 }
 
 impl<F: Fn(Vector3<f64>, Vector3<f64>) -> [f64; 3] + Sync> Brdf for F {

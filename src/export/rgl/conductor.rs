@@ -201,7 +201,7 @@ impl Material {
     pub fn fresnel_rgb(self, cos_i: f64) -> [f64; 3] {
         match self.eta_rgb() {
             None => [1.0; 3],
-            Some(eta) => eta.map(|e| crate::models::fresnel::fresnel_conductor(cos_i, e)),
+            Some(eta) => crate::models::fresnel::fresnel_conductor3(cos_i, &eta),
         }
     }
 }

@@ -20,12 +20,29 @@ pub struct Regularized<'a> {
     ndf: &'a EmpiricalNdf,
     fit: &'a Model,
     cos_max: f64,
+    /// Per grid cell (row-major), the index in `blend` of its measured bin, `u32::MAX` for none: a
+    /// lookup per corner instead of a search of the bins (a renderer reads `D` hundreds of thousands
+    /// of times).
+    cells: Vec<u32>,
+    /// Per measured bin (`count > 0`, `D > 0`), its weight `w` and its `D`.
+    blend: Vec<[f64; 2]>,
 }
 
 impl<'a> Regularized<'a> {
     /// The empirical `ndf` regularized by the `fit`, the bins trusted up to `max_theta_deg`.
     pub fn new(ndf: &'a EmpiricalNdf, fit: &'a Model, max_theta_deg: f64) -> Regularized<'a> {
-        Regularized { ndf, fit, cos_max: max_theta_deg.to_radians().cos() }
+        let n = ndf.grid.n;
+        let mut cells = vec![u32::MAX; n * n];
+        let mut blend = Vec::new();
+        for (&c, b) in ndf.bin_cells.iter().zip(&ndf.bins) {
+            // An empty or zero bin takes the fit; a cell outside the grid cannot be looked up.
+            if b.count > 0 && b.d > 0.0 && (c as usize) < cells.len() {
+                let r = b.stderr / (REL_NOISE * b.d);
+                cells[c as usize] = blend.len() as u32;
+                blend.push([1.0 / (1.0 + r * r), b.d]);
+            }
+        }
+        Regularized { ndf, fit, cos_max: max_theta_deg.to_radians().cos(), cells, blend }
     }
 
     /// `D(m)` (scan frame, `z` up): the blended values of the four bins around `m` interpolated bilinearly
@@ -53,14 +70,9 @@ impl<'a> Regularized<'a> {
             if !(0.0..n).contains(&cx) || !(0.0..n).contains(&cy) {
                 return fit;
             }
-            let c = (cy as usize * grid.n + cx as usize) as u32;
-            match self.ndf.bin_cells.binary_search(&c).ok().map(|k| &self.ndf.bins[k]) {
-                Some(b) if b.count > 0 && b.d > 0.0 => {
-                    let r = b.stderr / (REL_NOISE * b.d);
-                    let w = 1.0 / (1.0 + r * r);
-                    w * b.d + (1.0 - w) * fit
-                }
-                _ => fit,
+            match self.blend.get(self.cells[cy as usize * grid.n + cx as usize] as usize) {
+                Some(&[w, d]) => w * d + (1.0 - w) * fit,
+                None => fit,
             }
         };
         (1.0 - ty) * ((1.0 - tx) * value(ix, iy) + tx * value(ix + 1.0, iy))

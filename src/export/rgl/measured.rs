@@ -308,4 +308,34 @@ impl Brdf for AnalyticBrdf {
         let c = wi.dot(&(wi + wo).normalize());
         self.material.fresnel_rgb(c).map(|f| bare * f)
     }
+
+    fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], out: &mut [[f64; 3]]) {
+        use crate::models::Ndf;
+        // A Smith lobe's `G1(wi, h)` is `X+(wi.h) / (1 + Lambda(wi))`: `Lambda(wi)` once for every light
+        // point. Other lobes (the ellipsoid's masking, mixtures), and `wi` below the horizon, point by point.
+        let smith = matches!(
+            self.model,
+            Model::Ggx(_) | Model::GgxAniso(_) | Model::Beckmann(_) | Model::BeckmannAniso(_) | Model::Student(_) | Model::StudentAniso(_)
+        );
+        if !(smith && wi.z > 0.0) {
+            for (o, &wo) in out.iter_mut().zip(wos) {
+                *o = self.eval(wi, wo);
+            }
+            return;
+        }
+        let lambda_i = self.model.lambda(wi);
+        for (o, &wo) in out.iter_mut().zip(wos) {
+            // `MicrofacetBrdf::eval` with the separable masking and no Fresnel term, step by step.
+            if !(wo.z > 0.0) {
+                *o = [0.0; 3];
+                continue;
+            }
+            let h = wi + wo;
+            let h = h / h.norm();
+            let g = crate::models::smith_g1(lambda_i, wi, h) * self.model.g1(wo, h);
+            let bare = if g == 0.0 { 0.0 } else { self.model.d(h) * g / (4.0 * wi.z * wo.z) };
+            // Nothing reflected: no half vector to take.
+            *o = if bare == 0.0 { [0.0; 3] } else { self.material.fresnel_rgb(wi.dot(&(wi + wo).normalize())).map(|f| bare * f) };
+        }
+    }
 }
