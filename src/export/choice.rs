@@ -186,6 +186,11 @@ impl Score {
         self.per_scene.iter().all(|v| !v.is_nan())
     }
 
+    /// Hold the scenes rendered to new noise `floors`: `excess` becomes the largest `per_scene - floor`.
+    fn hold_to(&mut self, floors: &[f64]) {
+        self.excess = self.per_scene.iter().zip(floors).filter(|(v, _)| !v.is_nan()).map(|(v, f)| v - f).fold(f64::NEG_INFINITY, f64::max);
+    }
+
     /// The score as the fit report writes it: per scene rendered by name, and `worst` when complete.
     pub fn by_name(&self, scenes: &[NamedScene]) -> BTreeMap<String, f64> {
         let mut m: BTreeMap<String, f64> =
@@ -553,12 +558,8 @@ impl RenderJudge<'_> {
         let mut s = extend(&brdf, &opts.scenes, &reference.prepared, &floors, so_far, f64::INFINITY)?;
         if known.is_none() && s.excess > opts.tolerance {
             let floors = self.noise_floors(&filler, max_theta_deg)?;
-            let rescore = |sc: &mut Score| {
-                sc.excess =
-                    sc.per_scene.iter().zip(&floors).filter(|(v, _)| !v.is_nan()).map(|(v, f)| v - f).fold(f64::NEG_INFINITY, f64::max)
-            };
-            state.1.iter_mut().for_each(|(_, sc)| rescore(sc));
-            rescore(&mut s);
+            state.1.iter_mut().for_each(|(_, sc)| sc.hold_to(&floors));
+            s.hold_to(&floors);
             state.0.as_mut().expect("the table was rendered above").floors = Some(floors);
         }
         match at {
@@ -599,12 +600,8 @@ impl Decide for RenderJudge<'_> {
             // is then held to it, and this lobe's scenes left out are rendered if it still may pass.
             if known.is_none() && !(s.complete() && s.excess <= opts.tolerance) {
                 let floors = self.noise_floors(&filler, max_theta_deg)?;
-                let rescore = |sc: &mut Score| {
-                    sc.excess =
-                        sc.per_scene.iter().zip(&floors).filter(|(v, _)| !v.is_nan()).map(|(v, f)| v - f).fold(f64::NEG_INFINITY, f64::max)
-                };
-                state.1.iter_mut().for_each(|(_, sc)| rescore(sc));
-                rescore(&mut s);
+                state.1.iter_mut().for_each(|(_, sc)| sc.hold_to(&floors));
+                s.hold_to(&floors);
                 let reference = state.0.as_mut().expect("the table was rendered above");
                 reference.floors = Some(floors.clone());
                 s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, s, stop_above)?;
