@@ -34,32 +34,55 @@ pub struct Args {
     /// `--to rgl`: the conductor: none (a perfect mirror, F = 1), Al, Ag, Au, Cu or Cr.
     #[arg(long, default_value = "none")]
     pub material: String,
-    /// `--to rgl`: write `spectra` with `wavelengths` (pbrt-v4, Mitsuba's spectral variants) instead of
-    /// `rgb` (Mitsuba's RGB variants, which refuse a file with wavelengths).
-    #[arg(long)]
-    pub spectral: bool,
-    /// `--to rgl`: incident elevations, 0 to 90 degrees.
-    #[arg(long, default_value_t = RglOptions::default().theta_i)]
-    pub theta_i: usize,
-    /// `--to rgl`: incident azimuths over the full turn (both ends included).
-    #[arg(long, default_value_t = RglOptions::default().phi_i)]
-    pub phi_i: usize,
-    /// `--to rgl`: nodes per axis of the NDF grid (8 to 512); by default the smallest of 64, 128, 256 and 512
-    /// at which the renderer's interpolation reproduces the NDF to 1% down to 1e-4 of its peak (the
-    /// projected-area grid takes at most 64).
-    #[arg(long)]
-    pub ndf_res: Option<usize>,
-    /// `--to rgl`: nodes per axis of the sampling warps and the reflectance (the file's size grows with its
-    /// square times theta_i x phi_i: 22 MB for RGB at the default; 32 halves the accuracy near grazing
-    /// outgoing directions for a quarter of the size).
-    #[arg(long, default_value_t = RglOptions::default().warp_res)]
-    pub warp_res: usize,
+    /// `--to rgl`: the table's resolution and channels.
+    #[command(flatten, next_help_heading = "The table (--to rgl)")]
+    pub table: TableArgs,
     /// `--to rgl` of a scan: how it is read, preprocessed, binned and fitted (the flags of `ndfit fit`,
     /// `auto` as the fit the tabulated NDF's tails come from); unused for a fit file.
     #[command(flatten, next_help_heading = "Reading, binning and fitting a scan (--to rgl of a scan; as ndfit fit)")]
     pub read: ReadArgs,
     #[command(flatten)]
     pub how: FitHow,
+}
+
+/// An RGL table's resolution and channels, the flags `ndfit export --to rgl` and `ndfit trace --to rgl`
+/// share.
+#[derive(Debug, Clone, clap::Args)]
+pub struct TableArgs {
+    /// Write `spectra` with `wavelengths` (pbrt-v4, Mitsuba's spectral variants) instead of `rgb`
+    /// (Mitsuba's RGB variants, which refuse a file with wavelengths).
+    #[arg(long)]
+    pub spectral: bool,
+    /// Incident elevations, 0 to 90 degrees.
+    #[arg(long, default_value_t = RglOptions::default().theta_i)]
+    pub theta_i: usize,
+    /// Incident azimuths over the full turn (both ends included).
+    #[arg(long, default_value_t = RglOptions::default().phi_i)]
+    pub phi_i: usize,
+    /// Nodes per axis of the NDF grid (8 to 512); by default the smallest of 64, 128, 256 and 512 at which
+    /// the renderer's interpolation reproduces the NDF to 1% down to 1e-4 of its peak (the projected-area
+    /// grid takes at most 64).
+    #[arg(long)]
+    pub ndf_res: Option<usize>,
+    /// Nodes per axis of the sampling warps and the reflectance (the file's size grows with its square
+    /// times theta_i x phi_i: 22 MB for RGB at the default; 32 halves the accuracy near grazing outgoing
+    /// directions for a quarter of the size).
+    #[arg(long, default_value_t = RglOptions::default().warp_res)]
+    pub warp_res: usize,
+}
+
+impl TableArgs {
+    /// The table these flags ask for, of the conductor `material`.
+    pub fn options(&self, material: Material) -> RglOptions {
+        RglOptions {
+            theta_i: self.theta_i,
+            phi_i: self.phi_i,
+            ndf_res: self.ndf_res,
+            warp_res: self.warp_res,
+            material,
+            flavour: if self.spectral { Flavour::Spectral } else { Flavour::Rgb },
+        }
+    }
 }
 
 /// Run `ndfit export`.
@@ -100,14 +123,7 @@ fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
         bail!("{path}: --json is not for --to rgl (the table is a binary file)");
     }
     let material: Material = args.material.parse().map_err(|e: ndfit::Error| anyhow!("{path}: --material: {}", e.message()))?;
-    let opts = RglOptions {
-        theta_i: args.theta_i,
-        phi_i: args.phi_i,
-        ndf_res: args.ndf_res,
-        warp_res: args.warp_res,
-        material,
-        flavour: if args.spectral { Flavour::Spectral } else { Flavour::Rgb },
-    };
+    let opts = args.table.options(material);
     ndfit::io::protect_input(&args.fit);
     ndfit::io::check_output(out)?;
     let name = args.fit.file_name().map_or(path.to_string(), |n| n.to_string_lossy().into_owned());

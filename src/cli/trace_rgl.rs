@@ -6,11 +6,11 @@ use std::io::IsTerminal;
 use std::process::ExitCode;
 
 use anyhow::{anyhow, bail};
-use ndfit::export::rgl::{self, Flavour, RglOptions};
+use ndfit::export::rgl;
 use ndfit::models::Ndf;
 use ndfit::trace::{trace_rgl, TracedRglOptions};
 
-use super::export::{material_text, params_text, scan_table_ndf};
+use super::export::{material_text, params_text, scan_table_ndf, TableArgs};
 
 /// The table's flags of `ndfit trace --to rgl` (as `ndfit export --to rgl` names them).
 #[derive(Debug, Clone, clap::Args)]
@@ -18,22 +18,10 @@ pub struct RglArgs {
     /// Paths traced per incident direction of the table (the nodes of one direction share them).
     #[arg(long, default_value_t = TracedRglOptions::default().paths)]
     pub paths: usize,
-    /// Incident elevations of the table, 0 to 90 degrees (the 90-degree node is traced at 89.9).
-    #[arg(long, default_value_t = RglOptions::default().theta_i)]
-    pub theta_i: usize,
-    /// Incident azimuths over the full turn (both ends included).
-    #[arg(long, default_value_t = RglOptions::default().phi_i)]
-    pub phi_i: usize,
-    /// Nodes per axis of the NDF grid (8 to 512); by default chosen as `ndfit export --to rgl` chooses it.
-    #[arg(long)]
-    pub ndf_res: Option<usize>,
-    /// Nodes per axis of the sampling warps and the reflectance.
-    #[arg(long, default_value_t = RglOptions::default().warp_res)]
-    pub warp_res: usize,
-    /// Write `spectra` with `wavelengths` (pbrt-v4, Mitsuba's spectral variants; the paths carry the
-    /// Fresnel factor at each wavelength) instead of `rgb` (Mitsuba's RGB variants).
-    #[arg(long)]
-    pub spectral: bool,
+    /// The table's resolution and channels (the 90-degree incident node is traced at 89.9 degrees;
+    /// with `--spectral` the paths carry the Fresnel factor at each wavelength).
+    #[command(flatten)]
+    pub table: TableArgs,
 }
 
 /// Run `ndfit trace --to rgl`.
@@ -47,20 +35,7 @@ pub fn run(a: &super::trace::Args) -> anyhow::Result<ExitCode> {
         bail!("{path}: --plot draws the comparison of --to json; it is not for --to rgl");
     }
     let r = &a.rgl;
-    let opts = TracedRglOptions {
-        rgl: RglOptions {
-            theta_i: r.theta_i,
-            phi_i: r.phi_i,
-            ndf_res: r.ndf_res,
-            warp_res: r.warp_res,
-            material: a.material,
-            flavour: if r.spectral { Flavour::Spectral } else { Flavour::Rgb },
-        },
-        paths: r.paths,
-        bounces: a.bounces,
-        seed: a.seed,
-        border: a.border,
-    };
+    let opts = TracedRglOptions { rgl: r.table.options(a.material), paths: r.paths, bounces: a.bounces, seed: a.seed, border: a.border };
     opts.validate().map_err(|e| anyhow!("{path}: {}", e.message()))?;
     a.scan.check_outputs([out.as_path()])?;
     // The NDF as `ndfit export SCAN --to rgl` tabulates it (the fit's flags at their defaults).

@@ -65,6 +65,10 @@ pub struct AtFootprint<T> {
 /// as the rule needs them.
 pub fn recommend_rendered(results: &[FootprintResult], ndf_rec: &Recommendation, opts: &RenderOptions) -> Result<RenderRecommendation> {
     opts.validate()?;
+    // With no footprint every candidate would pass vacuously.
+    if results.is_empty() {
+        return Err(crate::error::Error::invalid("the render rule needs at least one footprint"));
+    }
     let ids: Vec<ModelId> = ndf_rec.candidates.iter().map(|c| c.model).collect();
     let max_theta_deg = crate::fit::FitOptions::default().max_theta.to_degrees();
     // Each footprint's NDF with its spatial halves as the split the judges measure the table's noise by.

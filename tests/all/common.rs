@@ -83,3 +83,16 @@ pub fn md5_hex(data: &[u8]) -> String {
     use md5::Digest;
     md5::Md5::digest(data).iter().map(|b| format!("{b:02x}")).collect()
 }
+
+/// `ndfit synth` of a 64 x 64 Gaussian surface at `dir/g.x3p` with the extra flags `extra` (a small scan
+/// for the commands' own tests); its path.
+pub fn synth_small_gaussian(dir: &std::path::Path, extra: &[&str]) -> PathBuf {
+    let scan = dir.join("g.x3p");
+    let synth = std::process::Command::new(ndfit_bin())
+        .args(["synth", scan.to_str().expect("utf-8 path"), "--surface", "gaussian", "--nx", "64", "--ny", "64"])
+        .args(extra)
+        .output()
+        .expect("ndfit synth runs");
+    assert!(synth.status.success(), "{}", String::from_utf8_lossy(&synth.stderr));
+    scan
+}

@@ -352,12 +352,7 @@ fn hostile_scans_and_options_are_refused_or_traced_without_panic() {
 #[test]
 fn the_command_writes_the_named_fields_and_clobbers_nothing_on_error() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = dir.path().join("g.x3p");
-    let synth = std::process::Command::new(crate::common::ndfit_bin())
-        .args(["synth", scan.to_str().unwrap(), "--surface", "gaussian", "--nx", "64", "--ny", "64"])
-        .output()
-        .unwrap();
-    assert!(synth.status.success(), "{}", String::from_utf8_lossy(&synth.stderr));
+    let scan = crate::common::synth_small_gaussian(dir.path(), &[]);
     let out = dir.path().join("t.json");
     let run = |args: &[&str]| {
         std::process::Command::new(crate::common::ndfit_bin())
@@ -444,12 +439,7 @@ fn the_plot_is_written_and_decodes_at_its_size() {
 #[test]
 fn the_tables_csv_lays_out_every_bin_and_adds_up_to_the_document() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = dir.path().join("g.x3p");
-    let synth = std::process::Command::new(crate::common::ndfit_bin())
-        .args(["synth", scan.to_str().unwrap(), "--surface", "gaussian", "--nx", "64", "--ny", "64", "--sigma-x", "0.4"])
-        .output()
-        .unwrap();
-    assert!(synth.status.success(), "{}", String::from_utf8_lossy(&synth.stderr));
+    let scan = crate::common::synth_small_gaussian(dir.path(), &["--sigma-x", "0.4"]);
     let (out, csv_path) = (dir.path().join("t.json"), dir.path().join("t.csv"));
     let ok = std::process::Command::new(crate::common::ndfit_bin())
         .args(["trace", scan.to_str().unwrap(), "-o", out.to_str().unwrap(), "--tables", csv_path.to_str().unwrap()])

@@ -141,12 +141,7 @@ fn white_furnace_of_the_traced_table() {
 #[test]
 fn the_command_writes_a_table_and_clobbers_nothing_on_error() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = dir.path().join("g.x3p");
-    let synth = std::process::Command::new(crate::common::ndfit_bin())
-        .args(["synth", scan.to_str().unwrap(), "--surface", "gaussian", "--nx", "64", "--ny", "64"])
-        .output()
-        .unwrap();
-    assert!(synth.status.success(), "{}", String::from_utf8_lossy(&synth.stderr));
+    let scan = crate::common::synth_small_gaussian(dir.path(), &[]);
     let out = dir.path().join("t.bsdf");
     let run = |args: &[&str]| {
         std::process::Command::new(crate::common::ndfit_bin())
