@@ -14,7 +14,7 @@ use crate::error::{Error, Result};
 use crate::synth::{gaussian_surface, GaussianParams, SynthSettings};
 use crate::trace::{trace, TraceOptions};
 
-/// The targets: one-bounce paths per second per core at 2048^2, and the wall time (s) of a
+/// The targets the tracer is held to: one-bounce paths per second per core at 2048^2, and the wall time (s) of a
 /// 4096^2 scan at 16 incidences on 2 cores.
 pub const TARGET_PATHS_PER_CORE: f64 = 1e6;
 /// See [`TARGET_PATHS_PER_CORE`].
@@ -38,7 +38,7 @@ pub struct TracePlan {
 }
 
 impl TracePlan {
-    /// The measurement: 2048^2 one-bounce, 4096^2 at 16 incidences (0 to 75 degrees) with the
+    /// The standard measurement: 2048^2 one-bounce, 4096^2 at 16 incidences (0 to 75 degrees) with the
     /// defaults of `ndfit trace` (2^20 paths per incidence, 16 bounces).
     pub fn full() -> TracePlan {
         TracePlan {
