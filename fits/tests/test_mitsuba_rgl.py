@@ -388,9 +388,8 @@ def test_table_tails(tmp_path, model, params, dist):
     brdf = (ref / np.array([wo[2] for _, wo in pairs])).reshape(len(TAIL_INCIDENCES) * len(TAIL_AZIMUTHS), -1)
     keep = (brdf >= 1e-3 * brdf.max(axis=1, keepdims=True)).ravel() & (ref > 0)
     rel = np.abs(got[keep] - ref[keep]) / ref[keep]
-    # Outgoing directions within 10 degrees of the horizon apart: there the reflectance F G1(wo) falls to 0
-    # at the masking's cliff, which the format's bilinear reflectance grid resolves only to its node spacing
-    # (data_formats/rgl.md, "The tails").
+    # The directions within 10 degrees of the outgoing horizon, where the masking is steep, are the hardest
+    # (data_formats/rgl.md, "The tails"); they are reported apart as well.
     wo_z = np.array([wo[2] for _, wo in pairs])[keep]
     inner = rel[wo_z >= math.cos(math.radians(80.0))]
     med, p90 = float(np.median(rel)), float(np.percentile(rel, 90))
@@ -398,8 +397,8 @@ def test_table_tails(tmp_path, model, params, dist):
     print(f"{model} table vs its BRDF where >= 1e-3 of peak, incidences 0-70 deg: {keep.sum()} pairs, "
           f"median {med:.4f}, 90th pct {p90:.4f}, 99th pct {np.percentile(rel, 99):.3f}; "
           f"outgoing within 80 deg ({len(inner)} pairs): median {med_in:.4f}, 90th pct {p90_in:.4f}")
-    assert med <= 0.01 and p90_in <= 0.03, (med, p90_in)
-    assert p90 <= 0.06, p90
+    assert med <= 0.01 and p90 <= 0.03, (med, p90)
+    assert p90_in <= 0.01, p90_in
 
 
 def test_table_tails_fail_with_a_coarse_table(tmp_path):

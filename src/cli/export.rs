@@ -53,32 +53,34 @@ pub struct TableArgs {
     /// (Mitsuba's RGB variants, which refuse a file with wavelengths).
     #[arg(long)]
     pub spectral: bool,
-    /// Incident elevations, 0 to 90 degrees.
-    #[arg(long, default_value_t = RglOptions::default().theta_i)]
-    pub theta_i: usize,
-    /// Incident azimuths over the full turn (both ends included).
-    #[arg(long, default_value_t = RglOptions::default().phi_i)]
-    pub phi_i: usize,
+    /// Incident elevations, 0 to 90 degrees [default: 12 for export, 16 for trace --to rgl].
+    #[arg(long)]
+    pub theta_i: Option<usize>,
+    /// Incident azimuths over the full turn, both ends included [default: 25 for export, 17 for trace --to
+    /// rgl].
+    #[arg(long)]
+    pub phi_i: Option<usize>,
     /// Nodes per axis of the NDF grid (8 to 512); by default the smallest of 64, 128, 256 and 512 at which
     /// the renderer's interpolation reproduces the NDF to 1% down to 1e-4 of its peak (the projected-area
     /// grid takes at most 64).
     #[arg(long)]
     pub ndf_res: Option<usize>,
-    /// Nodes per axis of the sampling warps and the reflectance (the file's size grows with its square
-    /// times theta_i x phi_i: 22 MB for RGB at the default; 32 halves the accuracy near grazing outgoing
-    /// directions for a quarter of the size).
-    #[arg(long, default_value_t = RglOptions::default().warp_res)]
-    pub warp_res: usize,
+    /// Nodes per axis of the sampling warps and the reflectance [default: 88 for export, 64 for trace --to
+    /// rgl]. The file's size grows with its square times theta_i x phi_i: 46 MB for RGB at export's
+    /// defaults, 22 MB at trace's; what each resolution gives near grazing outgoing directions is in
+    /// data_formats/rgl.md, "The tails".
+    #[arg(long)]
+    pub warp_res: Option<usize>,
 }
 
 impl TableArgs {
-    /// The table these flags ask for, of the conductor `material`.
-    pub fn options(&self, material: Material) -> RglOptions {
+    /// The table these flags ask for, of the conductor `material`, `defaults` where a flag is not given.
+    pub fn options(&self, material: Material, defaults: RglOptions) -> RglOptions {
         RglOptions {
-            theta_i: self.theta_i,
-            phi_i: self.phi_i,
-            ndf_res: self.ndf_res,
-            warp_res: self.warp_res,
+            theta_i: self.theta_i.unwrap_or(defaults.theta_i),
+            phi_i: self.phi_i.unwrap_or(defaults.phi_i),
+            ndf_res: self.ndf_res.or(defaults.ndf_res),
+            warp_res: self.warp_res.unwrap_or(defaults.warp_res),
             material,
             flavour: if self.spectral { Flavour::Spectral } else { Flavour::Rgb },
         }
@@ -123,7 +125,7 @@ fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
         bail!("{path}: --json is not for --to rgl (the table is a binary file)");
     }
     let material: Material = args.material.parse().map_err(|e: ndfit::Error| anyhow!("{path}: --material: {}", e.message()))?;
-    let opts = args.table.options(material);
+    let opts = args.table.options(material, RglOptions::default());
     ndfit::io::protect_input(&args.fit);
     ndfit::io::check_output(out)?;
     let name = args.fit.file_name().map_or(path.to_string(), |n| n.to_string_lossy().into_owned());

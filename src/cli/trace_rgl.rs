@@ -35,7 +35,13 @@ pub fn run(a: &super::trace::Args) -> anyhow::Result<ExitCode> {
         bail!("{path}: --plot draws the comparison of --to json; it is not for --to rgl");
     }
     let r = &a.rgl;
-    let opts = TracedRglOptions { rgl: r.table.options(a.material), paths: r.paths, bounces: a.bounces, seed: a.seed, border: a.border };
+    let opts = TracedRglOptions {
+        rgl: r.table.options(a.material, TracedRglOptions::default().rgl),
+        paths: r.paths,
+        bounces: a.bounces,
+        seed: a.seed,
+        border: a.border,
+    };
     opts.validate().map_err(|e| anyhow!("{path}: {}", e.message()))?;
     a.scan.check_outputs([out.as_path()])?;
     // The NDF as `ndfit export SCAN --to rgl` tabulates it (the fit's flags at their defaults).

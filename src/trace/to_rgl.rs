@@ -61,7 +61,7 @@ pub struct TracedRglOptions {
 
 impl Default for TracedRglOptions {
     fn default() -> Self {
-        TracedRglOptions { rgl: RglOptions::default(), paths: 1 << 18, bounces: 16, seed: 1, border: Border::Periodic }
+        TracedRglOptions { rgl: RglOptions::coarse(), paths: 1 << 18, bounces: 16, seed: 1, border: Border::Periodic }
     }
 }
 

@@ -17,9 +17,9 @@
 //!   second sampling warp: the two warps together sample the visible NDF times the luminance.
 //!
 //! The `ndf` grid is as fine as the NDF needs ([`ndf_resolution`]). Measured in Mitsuba 3
-//! (fits/tests/test_mitsuba_rgl.py, data_formats/rgl.md): a table reproduces its BRDF to a median well
-//! under 1% wherever the BRDF is at least `1e-3` of its peak; outgoing directions within ten degrees of
-//! the horizon are the limit, where the masking's fall to zero lies between reflectance nodes.
+//! (fits/tests/test_mitsuba_rgl.py, data_formats/rgl.md "The tails"): at the default resolution a table
+//! reproduces its BRDF wherever the BRDF is at least `1e-3` of its peak; the outgoing directions within a
+//! few degrees of the horizon, where the masking is steep, are the hardest.
 //!
 //! `phi = 0` is the scan's `+x`: a renderer's tangent `u` along the scan's `+x` reproduces the scan's
 //! frame. Tables are anisotropic over the full incident azimuth range `[-pi, pi]` (pbrt-v4 reads no
@@ -80,8 +80,20 @@ pub struct RglOptions {
 }
 
 impl Default for RglOptions {
+    /// The resolution at which a table reproduces its lobe's BRDF to the bounds of data_formats/rgl.md,
+    /// "The tails": a renderer reads the reflectance of an incidence between nodes at the nodes' own half
+    /// vectors, so near the outgoing horizon, where the masking is steep, the incident azimuths' spacing
+    /// weighs more than the elevations'.
     fn default() -> Self {
-        RglOptions { theta_i: 16, phi_i: 17, ndf_res: None, warp_res: 64, material: Material::None, flavour: Flavour::Rgb }
+        RglOptions { theta_i: 12, phi_i: 25, ndf_res: None, warp_res: 88, material: Material::None, flavour: Flavour::Rgb }
+    }
+}
+
+impl RglOptions {
+    /// A table of half the default's size (16 x 17 incidences, 64 nodes per warp axis), a traced table's
+    /// resolution: its reflectance is counted per node, so fewer nodes carry less noise at the same paths.
+    pub fn coarse() -> RglOptions {
+        RglOptions { theta_i: 16, phi_i: 17, warp_res: 64, ..RglOptions::default() }
     }
 }
 
@@ -192,13 +204,19 @@ pub const NDF_TOLERANCE: f64 = 0.01;
 /// VNDF itself. The reflectance lives on the nodes of the sample space, which the `vndf` warp sends to
 /// half vectors (Dupuy & Jakob 2018, sec. 5): the VNDF alone leaves its fast-falling tail between two
 /// nodes, one of them at the horizon, where the reflectance interpolates across the masking's cliff. The
-/// tempered share, over the half vectors that reflect above the horizon, puts nodes down the tail; the
+/// tempered share, over the half vectors that reflect above (or just below) the horizon, puts nodes down
+/// the tail; the
 /// `luminance` warp takes the ratio back, so sampling still follows the VNDF times the reflectance, and a
 /// renderer weighs by the true `ndf` either way.
 pub const DEFENSIVE: f64 = 0.75;
 
 /// The power of the tempered VNDF: eight decades of the VNDF become one.
 const TEMPER: f64 = 0.125;
+
+/// How far below the horizon (degrees of outgoing elevation) the tempered VNDF reaches: the warp's density
+/// does not end at the masking's cliff, so the nodes on either side of it lie close and its bilinear
+/// reading spans a fraction of a cell (the 99th percentile of the error halves, data_formats/rgl.md).
+const HORIZON_MARGIN_DEG: f64 = 5.0;
 
 /// A quadrature point whose weight is below this share of the total is dropped from the projected area's
 /// sums (its whole contribution is below `1e-6` even on a 512-node grid).
@@ -549,10 +567,11 @@ pub(crate) fn tabulate_with(
                 scale * d(m) * wi.dot(&m).max(0.0) * 2.0 * PI * PI * u[0] * u2theta(u[0]).sin()
             };
             let exact: Vec<f64> = (0..w * w).map(|k| visible([(k % w) as f64 * wstep, (k / w) as f64 * wstep])).collect();
-            // Only half vectors that reflect above the horizon carry reflectance worth a node.
+            // Only half vectors that reflect above the horizon, or just below it, carry reflectance worth a node.
+            let floor = -HORIZON_MARGIN_DEG.to_radians().sin();
             let above = |k: usize| {
                 let m = u2dir([(k % w) as f64 * wstep, (k / w) as f64 * wstep]);
-                (2.0 * wi.dot(&m) * m - wi).z > 0.0
+                (2.0 * wi.dot(&m) * m - wi).z > floor
             };
             let tempered: Vec<f64> = exact.iter().enumerate().map(|(k, v)| if above(k) { v.powf(TEMPER) } else { 0.0 }).collect();
             let (te, tt) = (warp::Bilinear::new(&exact, w, w).total(), warp::Bilinear::new(&tempered, w, w).total());
