@@ -21,7 +21,7 @@ use crate::fit::{Decide, Decision, Offered};
 use crate::flip::{auto_exposures, hdr, HdrOptions, HdrReference, RgbImage, DEFAULT_PPD};
 use crate::models::Model;
 use crate::ndf::EmpiricalNdf;
-use crate::render::{direction, Brdf, Image, Light, Scene};
+use crate::render::{direction, Brdf, BrdfSet, Image, Light, Scene};
 
 /// An exported table as a renderer shows it: `D` read bilinearly from the table's `ndf` grid, Smith's
 /// `G1` from its `sigma` grid, both directions' masking separable (as Mitsuba's `measured` with
@@ -88,6 +88,76 @@ impl Brdf for ScanBrdf<'_> {
             let h = (wi + wo).normalize();
             let bare = self.area.scale * self.reg.d(h) * gi * self.area.g1(wo) / (4.0 * wi.z * wo.z);
             *o = self.material.fresnel_rgb(wi.dot(&h)).map(|f| bare * f);
+        }
+    }
+}
+
+impl ScanBrdf<'_> {
+    /// `f(wi, wo)` as `bare F(c)`, `F` the conductor's Fresnel term, for `wi` and `wo` above the horizon
+    /// (`None` otherwise): `(bare, c)` with `c = wi.normalize(wi + wo)`; `gi` is `G1(wi)`.
+    #[inline]
+    fn unshaded(&self, wi: Vector3<f64>, wo: Vector3<f64>, gi: f64) -> Option<(f64, f64)> {
+        if !(wi.z > 0.0 && wo.z > 0.0) {
+            return None;
+        }
+        let h = (wi + wo).normalize();
+        let bare = self.area.scale * self.reg.d(h) * gi * self.area.g1(wo) / (4.0 * wi.z * wo.z);
+        Some((bare, wi.dot(&h)))
+    }
+}
+
+/// The scan's table and a lobe rendered in one pass ([`Scene::render_set`]): where both are evaluated
+/// at one pair of directions and are of one conductor, the Fresnel term is computed once (both take it
+/// at the same cosine, bit for bit; where the cosines differ each takes its own). Each value is what the
+/// BRDF's own `eval` gives.
+pub struct TableAndLobe<'a> {
+    /// The table.
+    pub table: ScanBrdf<'a>,
+    /// The lobe.
+    pub lobe: AnalyticBrdf,
+}
+
+impl TableAndLobe<'_> {
+    /// Both values from their unshaded forms, one Fresnel term where it is shared.
+    #[inline]
+    fn shade(&self, table: Option<(f64, f64)>, lobe: Option<(f64, f64)>) -> [[f64; 3]; 2] {
+        let material = self.table.material;
+        let ft = table.map(|(bare, c)| (bare, c, material.fresnel_rgb(c)));
+        let t = ft.map_or([0.0; 3], |(bare, _, f)| f.map(|f| bare * f));
+        let l = match (lobe, ft) {
+            (None, _) => [0.0; 3],
+            (Some((bare, c)), Some((_, ct, f))) if c.to_bits() == ct.to_bits() => f.map(|f| bare * f),
+            (Some(_), _) => self.lobe.shaded(lobe),
+        };
+        [t, l]
+    }
+
+    /// Whether the two share their Fresnel term: both are wanted and of one conductor.
+    fn shared(&self, active: [bool; 2]) -> bool {
+        active == [true; 2] && self.table.material == self.lobe.material
+    }
+}
+
+impl BrdfSet<2> for TableAndLobe<'_> {
+    fn eval(&self, wi: Vector3<f64>, wo: Vector3<f64>, active: [bool; 2], out: &mut [[f64; 3]; 2]) {
+        if !self.shared(active) {
+            return [&self.table as &dyn Brdf, &self.lobe].eval(wi, wo, active, out);
+        }
+        // As `ScanBrdf::eval`: `G1(wi)` only above the horizon.
+        let table = if wi.z > 0.0 && wo.z > 0.0 { self.table.unshaded(wi, wo, self.table.area.g1(wi)) } else { None };
+        *out = self.shade(table, self.lobe.unshaded(wi, wo, None));
+    }
+
+    fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], active: [bool; 2], out: &mut [Vec<[f64; 3]>; 2]) {
+        if !self.shared(active) {
+            return [&self.table as &dyn Brdf, &self.lobe].eval_many(wi, wos, active, out);
+        }
+        // As each one's `eval_many`: `G1(wi)` and `Lambda(wi)` once for every light point.
+        let gi = if wi.z > 0.0 { self.table.area.g1(wi) } else { 0.0 };
+        let lambda_i = self.lobe.shared_lambda(wi);
+        let [t, l] = out;
+        for ((&wo, t), l) in wos.iter().zip(t.iter_mut()).zip(l.iter_mut()) {
+            [*t, *l] = self.shade(self.table.unshaded(wi, wo, gi), self.lobe.unshaded(wi, wo, lambda_i));
         }
     }
 }
@@ -266,11 +336,12 @@ pub fn prepare(reference: &Image) -> Result<HdrReference> {
 
 /// The scores of `lobe` against the `references` (the table's renders in `scenes`, prepared, in order).
 fn score(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[HdrReference]) -> Result<Score> {
-    extend(lobe, scenes, references, &vec![0.0; scenes.len()], unscored(scenes.len()), f64::INFINITY)
+    extend(lobe, scenes, references, &vec![0.0; scenes.len()], unscored(scenes.len()), f64::INFINITY, None)
 }
 
 /// `so_far` with the scenes it lacks rendered in order, stopping once its excess over the `floors`
-/// exceeds `stop_above` (the lobe can then be neither the answer nor the closest).
+/// exceeds `stop_above` (the lobe can then be neither the answer nor the closest). `rendered` holds the
+/// lobe's renders in the scenes when they were made already (with the table's).
 fn extend(
     lobe: &dyn Brdf,
     scenes: &[NamedScene],
@@ -278,13 +349,21 @@ fn extend(
     floors: &[f64],
     mut so_far: Score,
     stop_above: f64,
+    rendered: Option<Vec<Image>>,
 ) -> Result<Score> {
+    let mut rendered: Vec<Option<Image>> = rendered.map_or_else(Vec::new, |v| v.into_iter().map(Some).collect());
     for (k, (s, r)) in scenes.iter().zip(references).enumerate() {
         if so_far.excess > stop_above {
             break;
         }
         if so_far.per_scene[k].is_nan() {
-            let img = s.scene.render(lobe)?;
+            let phase = crate::phases::phase("choice.lobe.render");
+            let img = match rendered.get_mut(k).and_then(Option::take) {
+                Some(img) => img,
+                None => s.scene.render(lobe)?,
+            };
+            drop(phase);
+            let _p = crate::phases::phase("choice.lobe.flip");
             let v = r.mean(&RgbImage::new(img.width, img.height, img.data)?)?;
             so_far.per_scene[k] = v;
             so_far.worst = so_far.worst.max(v);
@@ -402,10 +481,35 @@ impl<'a> RenderJudge<'a> {
     }
 
     fn images_of(&self, ndf: &EmpiricalNdf, lobe: &Model, max_theta_deg: f64) -> Result<Vec<Image>> {
+        Ok(self.images_with(ndf, lobe, max_theta_deg, None)?.0)
+    }
+
+    /// [`RenderJudge::images_of`], and with `also` the renders of that lobe in each scene, made in the
+    /// same passes (the same images as its own renders).
+    fn images_with(
+        &self,
+        ndf: &EmpiricalNdf,
+        lobe: &Model,
+        max_theta_deg: f64,
+        also: Option<&Model>,
+    ) -> Result<(Vec<Image>, Option<Vec<Image>>)> {
+        let phase = crate::phases::phase("choice.table.area");
         let reg = Regularized::new(ndf, lobe, max_theta_deg);
         let area = ProjectedArea::new(&|m| reg.d(m), AREA_QUAD, AREA_RES, true)?;
+        drop(phase);
         let table = ScanBrdf { reg: &reg, area: &area, material: self.options.material };
-        self.options.scenes.iter().map(|s| s.scene.render(&table)).collect()
+        let _p = crate::phases::phase("choice.table.render");
+        let Some(&model) = also else {
+            return Ok((self.options.scenes.iter().map(|s| s.scene.render(&table)).collect::<Result<_>>()?, None));
+        };
+        let pair = TableAndLobe { table, lobe: AnalyticBrdf { model, material: self.options.material } };
+        let (mut tables, mut lobes) = (Vec::new(), Vec::new());
+        for s in &self.options.scenes {
+            let [t, l] = s.scene.render_set(&pair)?;
+            tables.push(t);
+            lobes.push(l);
+        }
+        Ok((tables, Some(lobes)))
     }
 
     /// Per scene, the FLIP the table's own counting noise shows: half the FLIP between the tables of the
@@ -446,7 +550,7 @@ impl<'a> RenderJudge<'a> {
             let at = state.1.iter().position(|(m, _)| *m == model);
             let so_far = at.map_or(unscored(self.options.scenes.len()), |i| state.1[i].1.clone());
             let lobe = AnalyticBrdf { model, material: self.options.material };
-            let s = extend(&lobe, &self.options.scenes, &images, &floors, so_far, f64::INFINITY)?;
+            let s = extend(&lobe, &self.options.scenes, &images, &floors, so_far, f64::INFINITY, None)?;
             match at {
                 Some(i) => state.1[i].1 = s.clone(),
                 None => state.1.push((model, s.clone())),
@@ -555,7 +659,7 @@ impl RenderJudge<'_> {
         let so_far = at.map_or(unscored(opts.scenes.len()), |i| state.1[i].1.clone());
         let brdf = AnalyticBrdf { model: *lobe, material: opts.material };
         let floors = known.clone().unwrap_or(vec![0.0; opts.scenes.len()]);
-        let mut s = extend(&brdf, &opts.scenes, &reference.prepared, &floors, so_far, f64::INFINITY)?;
+        let mut s = extend(&brdf, &opts.scenes, &reference.prepared, &floors, so_far, f64::INFINITY, None)?;
         if known.is_none() && s.excess > opts.tolerance {
             let floors = self.noise_floors(&filler, max_theta_deg)?;
             state.1.iter_mut().for_each(|(_, sc)| sc.hold_to(&floors));
@@ -578,8 +682,14 @@ impl Decide for RenderJudge<'_> {
         let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
         let filler = offered[crate::fit::table_lobe(&offered.iter().map(|o| o.delta_data).collect::<Vec<_>>())].model;
         // A new filling lobe (the whole ladder fitted after all) makes a new table: the old scores go.
+        // The first lobe the guard supports is always rendered in full against a new table (nothing
+        // decided before it can stop it): it is rendered in the table's passes.
+        let mut first: Option<(Model, Vec<Image>)> = None;
         if state.0.as_ref().is_none_or(|r| r.lobe != filler || r.max_theta_deg != max_theta_deg) {
-            let images = self.table_images(&filler, max_theta_deg)?;
+            let also = offered.iter().find(|o| o.supported).map(|o| o.model);
+            let (images, lobe_images) = self.images_with(self.ndf, &filler, max_theta_deg, also.as_ref())?;
+            first = also.zip(lobe_images);
+            let _p = crate::phases::phase("choice.table.prepare");
             let prepared = images.iter().map(prepare).collect::<Result<_>>()?;
             *state = (Some(Reference { lobe: filler, max_theta_deg, images, prepared, floors: None }), Vec::new());
         }
@@ -595,7 +705,9 @@ impl Decide for RenderJudge<'_> {
             let lobe = AnalyticBrdf { model: o.model, material: opts.material };
             let known = reference.floors.clone();
             let floors = known.clone().unwrap_or(vec![0.0; opts.scenes.len()]);
-            let mut s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, so_far, stop_above)?;
+            let rendered =
+                if at.is_none() && first.as_ref().is_some_and(|(m, _)| *m == o.model) { first.take().map(|(_, i)| i) } else { None };
+            let mut s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, so_far, stop_above, rendered)?;
             // The first lobe that fails without the floor makes the floor worth measuring; every score so far
             // is then held to it, and this lobe's scenes left out are rendered if it still may pass.
             if known.is_none() && !(s.complete() && s.excess <= opts.tolerance) {
@@ -604,7 +716,7 @@ impl Decide for RenderJudge<'_> {
                 s.hold_to(&floors);
                 let reference = state.0.as_mut().expect("the table was rendered above");
                 reference.floors = Some(floors.clone());
-                s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, s, stop_above)?;
+                s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, s, stop_above, None)?;
             }
             match at {
                 Some(i) => state.1[i].1 = s.clone(),
@@ -746,6 +858,34 @@ mod tests {
                 for (&wo, m) in wos.iter().zip(&many) {
                     assert_eq!(m.map(f64::to_bits), brdf.eval(wi, wo).map(f64::to_bits), "{wi:?} {wo:?}");
                 }
+            }
+        }
+    }
+
+    /// The table and a lobe rendered in one pass, sharing the Fresnel term, are bit for bit each one
+    /// rendered alone as the renderer rendered it before (`render::before`): Smith lobes, the ellipsoid
+    /// and a mixture, in both default scenes, of one conductor and of two.
+    #[test]
+    fn the_table_and_a_lobe_together_render_as_alone() {
+        use crate::render::before::render_before;
+        let (ndf, truth) = cap_ndf();
+        let reg = Regularized::new(&ndf, &truth, 40.0);
+        let area = ProjectedArea::new(&|m| reg.d(m), 24, 12, true).unwrap();
+        let bits = |i: &Image| i.data.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let lobes = [
+            (ggx(0.3), Material::Al),
+            (Model::from_params(ModelId::BeckmannAniso, &[0.2, 0.35, -0.3]).unwrap(), Material::Al),
+            (truth, Material::Al),
+            (Model::from_params(ModelId::Ggx2, &[0.05, 0.05, 0.5, 0.5, 0.0, 0.5]).unwrap(), Material::Al),
+            (ggx(0.2), Material::Au),
+        ];
+        for (model, material) in lobes {
+            let table = ScanBrdf { reg: &reg, area: &area, material: Material::Al };
+            let lobe = AnalyticBrdf { model, material };
+            for s in default_scenes() {
+                let [t, l] = s.scene.render_set(&TableAndLobe { table, lobe }).unwrap();
+                assert_eq!(bits(&t), bits(&render_before(&s.scene, &table)), "{} {model:?}", s.name);
+                assert_eq!(bits(&l), bits(&render_before(&s.scene, &lobe)), "{} {model:?}", s.name);
             }
         }
     }
