@@ -205,7 +205,9 @@ fn cell<const K: usize>(
     let crossed = on_silhouette(at, side);
     let split: [bool; K] = std::array::from_fn(|k| {
         let level = mean[k][0] + mean[k][1] + mean[k][2];
-        active[k] && !(hi[k] - lo[k] <= tol * (level + 3.0 * floor) && !crossed)
+        // Its points agree (a NaN spread does not), and no silhouette crosses it.
+        let settled = hi[k] - lo[k] <= tol * (level + 3.0 * floor) && !crossed;
+        active[k] && !settled
     });
     if !split.contains(&true) {
         return mean;
