@@ -11,6 +11,8 @@
 //! lobes are rendered only until one is within the tolerance.
 
 use std::collections::BTreeMap;
+
+use rayon::prelude::*;
 use std::sync::Mutex;
 
 use nalgebra::Vector3;
@@ -340,8 +342,8 @@ fn score(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[HdrReference]) ->
 }
 
 /// `so_far` with the scenes it lacks rendered in order, stopping once its excess over the `floors`
-/// exceeds `stop_above` (the lobe can then be neither the answer nor the closest). `rendered` holds the
-/// lobe's renders in the scenes when they were made already (with the table's).
+/// exceeds `stop_above` (the lobe can then be neither the answer nor the closest). `known` holds the
+/// lobe's mean FLIP per scene when it was measured already (with the table's renders).
 fn extend(
     lobe: &dyn Brdf,
     scenes: &[NamedScene],
@@ -349,22 +351,21 @@ fn extend(
     floors: &[f64],
     mut so_far: Score,
     stop_above: f64,
-    rendered: Option<Vec<Image>>,
+    known: Option<&[f64]>,
 ) -> Result<Score> {
-    let mut rendered: Vec<Option<Image>> = rendered.map_or_else(Vec::new, |v| v.into_iter().map(Some).collect());
     for (k, (s, r)) in scenes.iter().zip(references).enumerate() {
         if so_far.excess > stop_above {
             break;
         }
         if so_far.per_scene[k].is_nan() {
-            let phase = crate::phases::phase("choice.lobe.render");
-            let img = match rendered.get_mut(k).and_then(Option::take) {
-                Some(img) => img,
-                None => s.scene.render(lobe)?,
+            let v = match known.and_then(|m| m.get(k)) {
+                Some(&v) => v,
+                None => {
+                    let _p = crate::phases::phase("choice.lobe");
+                    let img = s.scene.render(lobe)?;
+                    r.mean(&RgbImage::new(img.width, img.height, img.data)?)?
+                }
             };
-            drop(phase);
-            let _p = crate::phases::phase("choice.lobe.flip");
-            let v = r.mean(&RgbImage::new(img.width, img.height, img.data)?)?;
             so_far.per_scene[k] = v;
             so_far.worst = so_far.worst.max(v);
             so_far.excess = so_far.excess.max(v - floors[k]);
@@ -481,35 +482,55 @@ impl<'a> RenderJudge<'a> {
     }
 
     fn images_of(&self, ndf: &EmpiricalNdf, lobe: &Model, max_theta_deg: f64) -> Result<Vec<Image>> {
-        Ok(self.images_with(ndf, lobe, max_theta_deg, None)?.0)
+        let (reg, area) = self.table_of(ndf, lobe, max_theta_deg)?;
+        let table = ScanBrdf { reg: &reg, area: &area, material: self.options.material };
+        self.options.scenes.par_iter().map(|s| s.scene.render(&table)).collect()
     }
 
-    /// [`RenderJudge::images_of`], and with `also` the renders of that lobe in each scene, made in the
-    /// same passes (the same images as its own renders).
-    fn images_with(
+    /// The table of `ndf` filled by `lobe`: its regularized NDF and its projected area.
+    fn table_of<'n>(&self, ndf: &'n EmpiricalNdf, lobe: &'n Model, max_theta_deg: f64) -> Result<(Regularized<'n>, ProjectedArea)> {
+        let _p = crate::phases::phase("choice.table.area");
+        let reg = Regularized::new(ndf, lobe, max_theta_deg);
+        let area = ProjectedArea::new(&|m| reg.d(m), AREA_QUAD, AREA_RES, true)?;
+        Ok((reg, area))
+    }
+
+    /// The scan's table filled by `lobe`: its renders in each scene and those prepared as FLIP's
+    /// references, and with `also` that lobe's mean FLIP against them per scene (rendered in the
+    /// table's passes). Each scene's work is its own, so the scenes run side by side.
+    #[allow(clippy::type_complexity)]
+    fn reference_with(
         &self,
-        ndf: &EmpiricalNdf,
         lobe: &Model,
         max_theta_deg: f64,
         also: Option<&Model>,
-    ) -> Result<(Vec<Image>, Option<Vec<Image>>)> {
-        let phase = crate::phases::phase("choice.table.area");
-        let reg = Regularized::new(ndf, lobe, max_theta_deg);
-        let area = ProjectedArea::new(&|m| reg.d(m), AREA_QUAD, AREA_RES, true)?;
-        drop(phase);
+    ) -> Result<(Vec<Image>, Vec<HdrReference>, Option<Vec<f64>>)> {
+        let (reg, area) = self.table_of(self.ndf, lobe, max_theta_deg)?;
         let table = ScanBrdf { reg: &reg, area: &area, material: self.options.material };
-        let _p = crate::phases::phase("choice.table.render");
-        let Some(&model) = also else {
-            return Ok((self.options.scenes.iter().map(|s| s.scene.render(&table)).collect::<Result<_>>()?, None));
-        };
-        let pair = TableAndLobe { table, lobe: AnalyticBrdf { model, material: self.options.material } };
-        let (mut tables, mut lobes) = (Vec::new(), Vec::new());
-        for s in &self.options.scenes {
-            let [t, l] = s.scene.render_set(&pair)?;
-            tables.push(t);
-            lobes.push(l);
+        let per_scene: Vec<(Image, HdrReference, Option<f64>)> = self
+            .options
+            .scenes
+            .par_iter()
+            .map(|s| {
+                let _p = crate::phases::phase("choice.scene");
+                let Some(&model) = also else {
+                    let t = s.scene.render(&table)?;
+                    let r = prepare(&t)?;
+                    return Ok((t, r, None));
+                };
+                let [t, l] = s.scene.render_set(&TableAndLobe { table, lobe: AnalyticBrdf { model, material: self.options.material } })?;
+                let r = prepare(&t)?;
+                let v = r.mean(&RgbImage::new(l.width, l.height, l.data)?)?;
+                Ok((t, r, Some(v)))
+            })
+            .collect::<Result<_>>()?;
+        let mut out = (Vec::new(), Vec::new(), also.map(|_| Vec::new()));
+        for (t, r, v) in per_scene {
+            out.0.push(t);
+            out.1.push(r);
+            out.2.iter_mut().zip(v).for_each(|(m, v)| m.push(v));
         }
-        Ok((tables, Some(lobes)))
+        Ok(out)
     }
 
     /// Per scene, the FLIP the table's own counting noise shows: half the FLIP between the tables of the
@@ -520,8 +541,9 @@ impl<'a> RenderJudge<'a> {
         let (Some(a), Some(b)) = (half(self.ndf, true), half(self.ndf, false)) else {
             return Ok(vec![0.0; self.options.scenes.len()]);
         };
-        let (ia, ib) = (self.images_of(&a, lobe, max_theta_deg)?, self.images_of(&b, lobe, max_theta_deg)?);
-        ia.iter().zip(&ib).map(|(x, y)| Ok(0.5 * flip_mean(x, y)?)).collect()
+        let (ia, ib) = rayon::join(|| self.images_of(&a, lobe, max_theta_deg), || self.images_of(&b, lobe, max_theta_deg));
+        let (ia, ib) = (ia?, ib?);
+        ia.par_iter().zip(&ib).map(|(x, y)| Ok(0.5 * flip_mean(x, y)?)).collect()
     }
 
     /// The noise floors of the last decision's table (`None` before any decision).
@@ -684,13 +706,11 @@ impl Decide for RenderJudge<'_> {
         // A new filling lobe (the whole ladder fitted after all) makes a new table: the old scores go.
         // The first lobe the guard supports is always rendered in full against a new table (nothing
         // decided before it can stop it): it is rendered in the table's passes.
-        let mut first: Option<(Model, Vec<Image>)> = None;
+        let mut first: Option<(Model, Vec<f64>)> = None;
         if state.0.as_ref().is_none_or(|r| r.lobe != filler || r.max_theta_deg != max_theta_deg) {
             let also = offered.iter().find(|o| o.supported).map(|o| o.model);
-            let (images, lobe_images) = self.images_with(self.ndf, &filler, max_theta_deg, also.as_ref())?;
-            first = also.zip(lobe_images);
-            let _p = crate::phases::phase("choice.table.prepare");
-            let prepared = images.iter().map(prepare).collect::<Result<_>>()?;
+            let (images, prepared, means) = self.reference_with(&filler, max_theta_deg, also.as_ref())?;
+            first = also.zip(means);
             *state = (Some(Reference { lobe: filler, max_theta_deg, images, prepared, floors: None }), Vec::new());
         }
         let opts = &self.options;
@@ -705,9 +725,9 @@ impl Decide for RenderJudge<'_> {
             let lobe = AnalyticBrdf { model: o.model, material: opts.material };
             let known = reference.floors.clone();
             let floors = known.clone().unwrap_or(vec![0.0; opts.scenes.len()]);
-            let rendered =
-                if at.is_none() && first.as_ref().is_some_and(|(m, _)| *m == o.model) { first.take().map(|(_, i)| i) } else { None };
-            let mut s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, so_far, stop_above, rendered)?;
+            let measured =
+                if at.is_none() && first.as_ref().is_some_and(|(m, _)| *m == o.model) { first.take().map(|(_, v)| v) } else { None };
+            let mut s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, so_far, stop_above, measured.as_deref())?;
             // The first lobe that fails without the floor makes the floor worth measuring; every score so far
             // is then held to it, and this lobe's scenes left out are rendered if it still may pass.
             if known.is_none() && !(s.complete() && s.excess <= opts.tolerance) {
@@ -888,6 +908,32 @@ mod tests {
                 assert_eq!(bits(&l), bits(&render_before(&s.scene, &lobe)), "{} {model:?}", s.name);
             }
         }
+    }
+
+    /// The judge scores the first lobe with the table's renders (the same values as scoring it alone),
+    /// and a later lobe still stops at the first scene that rules it out.
+    #[test]
+    fn the_judge_scores_its_first_lobe_with_the_table_and_stops_the_rest() {
+        let (ndf, truth) = cap_ndf();
+        let judge = RenderJudge::new(&ndf, RenderOptions::default());
+        let (near, far) = (ggx(0.08), ggx(0.03));
+        let offered = [
+            Offered { model: near, supported: true, delta_data: Some(0.5) },
+            Offered { model: far, supported: true, delta_data: Some(0.9) },
+            Offered { model: truth, supported: false, delta_data: Some(0.01) },
+        ];
+        let d = judge.decide(&offered, 40.0).unwrap();
+        assert_eq!(d.answer, None);
+        let first = judge.score_of(&near).unwrap();
+        assert!(first.complete(), "{first:?}");
+        let references: Vec<HdrReference> = judge.table_renders().unwrap().iter().map(|i| prepare(i).unwrap()).collect();
+        let alone = score(&AnalyticBrdf { model: near, material: DEFAULT_MATERIAL }, &default_scenes(), &references).unwrap();
+        assert_eq!(
+            first.per_scene.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            alone.per_scene.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+        let second = judge.score_of(&far).unwrap();
+        assert!(!second.complete() && !second.per_scene[0].is_nan(), "{second:?}");
     }
 
     /// The regularized NDF's cell lookup equals a search of the bins, as it was read before the lookup.
