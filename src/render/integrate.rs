@@ -261,7 +261,8 @@ fn cap_integral(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, half_angle: 
     cap(&[brdf], wi, c, half_angle, &Ring::new(), [true])[0]
 }
 
-/// [`cap_integral`] for each BRDF `k` of `set` with `active[k]`.
+/// `int_cap f_k(wi, wo) max(wo.z, 0) dwo` over the cap of half-angle `delta` about `c` (local frame) for
+/// each BRDF `k` of `set` with `active[k]`, on one set of light points.
 fn cap<const K: usize>(
     set: &dyn BrdfSet<K>,
     wi: Vector3<f64>,
