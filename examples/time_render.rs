@@ -1,6 +1,6 @@
 //! Measurement tool (not a test): the pieces of `auto`'s render choice on one scan, each timed as the
 //! median of `REPEATS` runs (default 7): the table's projected area, the renders of the table and of the
-//! answer's lobe in both default scenes, HDR-FLIP's prepared reference and one score against it. It prints
+//! answer's lobe in both default scenes (alone and in one pass, as the choice renders them), HDR-FLIP's prepared reference and one score against it. It prints
 //! the scores in full so that two builds can be compared for equal values.
 //! `cargo run --release --example time_render -- SCAN` (without SCAN, the scan of
 //! `ndfit bench --process --work-dir bench_out/work`);
@@ -9,7 +9,7 @@
 
 use std::time::Instant;
 
-use ndfit::export::choice::{default_scenes, prepare, RenderJudge, RenderOptions, ScanBrdf, DEFAULT_MATERIAL};
+use ndfit::export::choice::{default_scenes, prepare, RenderJudge, RenderOptions, ScanBrdf, TableAndLobe, DEFAULT_MATERIAL};
 use ndfit::export::rgl::{AnalyticBrdf, ProjectedArea, Regularized};
 use ndfit::flip::RgbImage;
 use ndfit::render::Image;
@@ -88,6 +88,10 @@ fn main() -> ndfit::Result<()> {
         let (t_table, ti) = timed(n, || s.scene.render(&table));
         let (t_lobe, li) = timed(n, || s.scene.render(&analytic));
         let (ti, li) = (ti?, li?);
+        // Both in one pass, as the choice renders the table and its first lobe.
+        let (t_both, both) = timed(n, || s.scene.render_set(&TableAndLobe { table, lobe: analytic }));
+        let [bt, bl] = both?;
+        assert!(bt == ti && bl == li, "the renders in one pass differ from the renders alone");
         if std::env::var("RENDER").is_ok_and(|v| v == s.name) {
             // Profile one scene's renders alone (`RENDER=broad perf record ...`).
             for _ in 0..10 {
@@ -106,7 +110,10 @@ fn main() -> ndfit::Result<()> {
         let (t_prep, reference) = timed(n, || prepare(&ti));
         let reference = reference?;
         let (t_mean, mean) = timed(n, || reference.mean(&rgb(&li)));
-        println!("{:>5}: render table {t_table}, lobe {t_lobe}; FLIP reference {t_prep}, mean {t_mean}; FLIP {:.15}", s.name, mean?);
+        println!(
+            "{:>5}: render table {t_table}, lobe {t_lobe}, both in one pass {t_both}; FLIP reference {t_prep}, mean {t_mean}; FLIP {:.15}",
+            s.name, mean?
+        );
     }
     Ok(())
 }

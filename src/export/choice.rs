@@ -11,6 +11,8 @@
 //! lobes are rendered only until one is within the tolerance.
 
 use std::collections::BTreeMap;
+
+use rayon::prelude::*;
 use std::sync::Mutex;
 
 use nalgebra::Vector3;
@@ -21,7 +23,7 @@ use crate::fit::{Decide, Decision, Offered};
 use crate::flip::{auto_exposures, hdr, HdrOptions, HdrReference, RgbImage, DEFAULT_PPD};
 use crate::models::Model;
 use crate::ndf::EmpiricalNdf;
-use crate::render::{direction, Brdf, Image, Light, Scene};
+use crate::render::{direction, Brdf, BrdfSet, Image, Light, Scene};
 
 /// An exported table as a renderer shows it: `D` read bilinearly from the table's `ndf` grid, Smith's
 /// `G1` from its `sigma` grid, both directions' masking separable (as Mitsuba's `measured` with
@@ -88,6 +90,76 @@ impl Brdf for ScanBrdf<'_> {
             let h = (wi + wo).normalize();
             let bare = self.area.scale * self.reg.d(h) * gi * self.area.g1(wo) / (4.0 * wi.z * wo.z);
             *o = self.material.fresnel_rgb(wi.dot(&h)).map(|f| bare * f);
+        }
+    }
+}
+
+impl ScanBrdf<'_> {
+    /// `f(wi, wo)` as `bare F(c)`, `F` the conductor's Fresnel term, for `wi` and `wo` above the horizon
+    /// (`None` otherwise): `(bare, c)` with `c = wi.normalize(wi + wo)`; `gi` is `G1(wi)`.
+    #[inline]
+    fn unshaded(&self, wi: Vector3<f64>, wo: Vector3<f64>, gi: f64) -> Option<(f64, f64)> {
+        if !(wi.z > 0.0 && wo.z > 0.0) {
+            return None;
+        }
+        let h = (wi + wo).normalize();
+        let bare = self.area.scale * self.reg.d(h) * gi * self.area.g1(wo) / (4.0 * wi.z * wo.z);
+        Some((bare, wi.dot(&h)))
+    }
+}
+
+/// The scan's table and a lobe rendered in one pass ([`Scene::render_set`]): where both are evaluated
+/// at one pair of directions and are of one conductor, the Fresnel term is computed once (both take it
+/// at the same cosine, bit for bit; where the cosines differ each takes its own). Each value is what the
+/// BRDF's own `eval` gives.
+pub struct TableAndLobe<'a> {
+    /// The table.
+    pub table: ScanBrdf<'a>,
+    /// The lobe.
+    pub lobe: AnalyticBrdf,
+}
+
+impl TableAndLobe<'_> {
+    /// Both values from their unshaded forms, one Fresnel term where it is shared.
+    #[inline]
+    fn shade(&self, table: Option<(f64, f64)>, lobe: Option<(f64, f64)>) -> [[f64; 3]; 2] {
+        let material = self.table.material;
+        let ft = table.map(|(bare, c)| (bare, c, material.fresnel_rgb(c)));
+        let t = ft.map_or([0.0; 3], |(bare, _, f)| f.map(|f| bare * f));
+        let l = match (lobe, ft) {
+            (None, _) => [0.0; 3],
+            (Some((bare, c)), Some((_, ct, f))) if c.to_bits() == ct.to_bits() => f.map(|f| bare * f),
+            (Some(_), _) => self.lobe.shaded(lobe),
+        };
+        [t, l]
+    }
+
+    /// Whether the two share their Fresnel term: both are wanted and of one conductor.
+    fn shared(&self, active: [bool; 2]) -> bool {
+        active == [true; 2] && self.table.material == self.lobe.material
+    }
+}
+
+impl BrdfSet<2> for TableAndLobe<'_> {
+    fn eval(&self, wi: Vector3<f64>, wo: Vector3<f64>, active: [bool; 2], out: &mut [[f64; 3]; 2]) {
+        if !self.shared(active) {
+            return [&self.table as &dyn Brdf, &self.lobe].eval(wi, wo, active, out);
+        }
+        // As `ScanBrdf::eval`: `G1(wi)` only above the horizon.
+        let table = if wi.z > 0.0 && wo.z > 0.0 { self.table.unshaded(wi, wo, self.table.area.g1(wi)) } else { None };
+        *out = self.shade(table, self.lobe.unshaded(wi, wo, None));
+    }
+
+    fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], active: [bool; 2], out: &mut [Vec<[f64; 3]>; 2]) {
+        if !self.shared(active) {
+            return [&self.table as &dyn Brdf, &self.lobe].eval_many(wi, wos, active, out);
+        }
+        // As each one's `eval_many`: `G1(wi)` and `Lambda(wi)` once for every light point.
+        let gi = if wi.z > 0.0 { self.table.area.g1(wi) } else { 0.0 };
+        let lambda_i = self.lobe.shared_lambda(wi);
+        let [t, l] = out;
+        for ((&wo, t), l) in wos.iter().zip(t.iter_mut()).zip(l.iter_mut()) {
+            [*t, *l] = self.shade(self.table.unshaded(wi, wo, gi), self.lobe.unshaded(wi, wo, lambda_i));
         }
     }
 }
@@ -266,11 +338,12 @@ pub fn prepare(reference: &Image) -> Result<HdrReference> {
 
 /// The scores of `lobe` against the `references` (the table's renders in `scenes`, prepared, in order).
 fn score(lobe: &dyn Brdf, scenes: &[NamedScene], references: &[HdrReference]) -> Result<Score> {
-    extend(lobe, scenes, references, &vec![0.0; scenes.len()], unscored(scenes.len()), f64::INFINITY)
+    extend(lobe, scenes, references, &vec![0.0; scenes.len()], unscored(scenes.len()), f64::INFINITY, None)
 }
 
 /// `so_far` with the scenes it lacks rendered in order, stopping once its excess over the `floors`
-/// exceeds `stop_above` (the lobe can then be neither the answer nor the closest).
+/// exceeds `stop_above` (the lobe can then be neither the answer nor the closest). `known` holds the
+/// lobe's mean FLIP per scene when it was measured already (with the table's renders).
 fn extend(
     lobe: &dyn Brdf,
     scenes: &[NamedScene],
@@ -278,14 +351,21 @@ fn extend(
     floors: &[f64],
     mut so_far: Score,
     stop_above: f64,
+    known: Option<&[f64]>,
 ) -> Result<Score> {
     for (k, (s, r)) in scenes.iter().zip(references).enumerate() {
         if so_far.excess > stop_above {
             break;
         }
         if so_far.per_scene[k].is_nan() {
-            let img = s.scene.render(lobe)?;
-            let v = r.mean(&RgbImage::new(img.width, img.height, img.data)?)?;
+            let v = match known.and_then(|m| m.get(k)) {
+                Some(&v) => v,
+                None => {
+                    let _p = crate::phases::phase("choice.lobe");
+                    let img = s.scene.render(lobe)?;
+                    r.mean(&RgbImage::new(img.width, img.height, img.data)?)?
+                }
+            };
             so_far.per_scene[k] = v;
             so_far.worst = so_far.worst.max(v);
             so_far.excess = so_far.excess.max(v - floors[k]);
@@ -402,10 +482,55 @@ impl<'a> RenderJudge<'a> {
     }
 
     fn images_of(&self, ndf: &EmpiricalNdf, lobe: &Model, max_theta_deg: f64) -> Result<Vec<Image>> {
+        let (reg, area) = self.table_of(ndf, lobe, max_theta_deg)?;
+        let table = ScanBrdf { reg: &reg, area: &area, material: self.options.material };
+        self.options.scenes.par_iter().map(|s| s.scene.render(&table)).collect()
+    }
+
+    /// The table of `ndf` filled by `lobe`: its regularized NDF and its projected area.
+    fn table_of<'n>(&self, ndf: &'n EmpiricalNdf, lobe: &'n Model, max_theta_deg: f64) -> Result<(Regularized<'n>, ProjectedArea)> {
+        let _p = crate::phases::phase("choice.table.area");
         let reg = Regularized::new(ndf, lobe, max_theta_deg);
         let area = ProjectedArea::new(&|m| reg.d(m), AREA_QUAD, AREA_RES, true)?;
+        Ok((reg, area))
+    }
+
+    /// The scan's table filled by `lobe`: its renders in each scene and those prepared as FLIP's
+    /// references, and with `also` that lobe's mean FLIP against them per scene (rendered in the
+    /// table's passes). Each scene's work is its own, so the scenes run side by side.
+    #[allow(clippy::type_complexity)]
+    fn reference_with(
+        &self,
+        lobe: &Model,
+        max_theta_deg: f64,
+        also: Option<&Model>,
+    ) -> Result<(Vec<Image>, Vec<HdrReference>, Option<Vec<f64>>)> {
+        let (reg, area) = self.table_of(self.ndf, lobe, max_theta_deg)?;
         let table = ScanBrdf { reg: &reg, area: &area, material: self.options.material };
-        self.options.scenes.iter().map(|s| s.scene.render(&table)).collect()
+        let per_scene: Vec<(Image, HdrReference, Option<f64>)> = self
+            .options
+            .scenes
+            .par_iter()
+            .map(|s| {
+                let _p = crate::phases::phase("choice.scene");
+                let Some(&model) = also else {
+                    let t = s.scene.render(&table)?;
+                    let r = prepare(&t)?;
+                    return Ok((t, r, None));
+                };
+                let [t, l] = s.scene.render_set(&TableAndLobe { table, lobe: AnalyticBrdf { model, material: self.options.material } })?;
+                let r = prepare(&t)?;
+                let v = r.mean(&RgbImage::new(l.width, l.height, l.data)?)?;
+                Ok((t, r, Some(v)))
+            })
+            .collect::<Result<_>>()?;
+        let mut out = (Vec::new(), Vec::new(), also.map(|_| Vec::new()));
+        for (t, r, v) in per_scene {
+            out.0.push(t);
+            out.1.push(r);
+            out.2.iter_mut().zip(v).for_each(|(m, v)| m.push(v));
+        }
+        Ok(out)
     }
 
     /// Per scene, the FLIP the table's own counting noise shows: half the FLIP between the tables of the
@@ -416,8 +541,9 @@ impl<'a> RenderJudge<'a> {
         let (Some(a), Some(b)) = (half(self.ndf, true), half(self.ndf, false)) else {
             return Ok(vec![0.0; self.options.scenes.len()]);
         };
-        let (ia, ib) = (self.images_of(&a, lobe, max_theta_deg)?, self.images_of(&b, lobe, max_theta_deg)?);
-        ia.iter().zip(&ib).map(|(x, y)| Ok(0.5 * flip_mean(x, y)?)).collect()
+        let (ia, ib) = rayon::join(|| self.images_of(&a, lobe, max_theta_deg), || self.images_of(&b, lobe, max_theta_deg));
+        let (ia, ib) = (ia?, ib?);
+        ia.par_iter().zip(&ib).map(|(x, y)| Ok(0.5 * flip_mean(x, y)?)).collect()
     }
 
     /// The noise floors of the last decision's table (`None` before any decision).
@@ -446,7 +572,7 @@ impl<'a> RenderJudge<'a> {
             let at = state.1.iter().position(|(m, _)| *m == model);
             let so_far = at.map_or(unscored(self.options.scenes.len()), |i| state.1[i].1.clone());
             let lobe = AnalyticBrdf { model, material: self.options.material };
-            let s = extend(&lobe, &self.options.scenes, &images, &floors, so_far, f64::INFINITY)?;
+            let s = extend(&lobe, &self.options.scenes, &images, &floors, so_far, f64::INFINITY, None)?;
             match at {
                 Some(i) => state.1[i].1 = s.clone(),
                 None => state.1.push((model, s.clone())),
@@ -555,7 +681,7 @@ impl RenderJudge<'_> {
         let so_far = at.map_or(unscored(opts.scenes.len()), |i| state.1[i].1.clone());
         let brdf = AnalyticBrdf { model: *lobe, material: opts.material };
         let floors = known.clone().unwrap_or(vec![0.0; opts.scenes.len()]);
-        let mut s = extend(&brdf, &opts.scenes, &reference.prepared, &floors, so_far, f64::INFINITY)?;
+        let mut s = extend(&brdf, &opts.scenes, &reference.prepared, &floors, so_far, f64::INFINITY, None)?;
         if known.is_none() && s.excess > opts.tolerance {
             let floors = self.noise_floors(&filler, max_theta_deg)?;
             state.1.iter_mut().for_each(|(_, sc)| sc.hold_to(&floors));
@@ -578,9 +704,13 @@ impl Decide for RenderJudge<'_> {
         let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
         let filler = offered[crate::fit::table_lobe(&offered.iter().map(|o| o.delta_data).collect::<Vec<_>>())].model;
         // A new filling lobe (the whole ladder fitted after all) makes a new table: the old scores go.
+        // The first lobe the guard supports is always rendered in full against a new table (nothing
+        // decided before it can stop it): it is rendered in the table's passes.
+        let mut first: Option<(Model, Vec<f64>)> = None;
         if state.0.as_ref().is_none_or(|r| r.lobe != filler || r.max_theta_deg != max_theta_deg) {
-            let images = self.table_images(&filler, max_theta_deg)?;
-            let prepared = images.iter().map(prepare).collect::<Result<_>>()?;
+            let also = offered.iter().find(|o| o.supported).map(|o| o.model);
+            let (images, prepared, means) = self.reference_with(&filler, max_theta_deg, also.as_ref())?;
+            first = also.zip(means);
             *state = (Some(Reference { lobe: filler, max_theta_deg, images, prepared, floors: None }), Vec::new());
         }
         let opts = &self.options;
@@ -595,7 +725,9 @@ impl Decide for RenderJudge<'_> {
             let lobe = AnalyticBrdf { model: o.model, material: opts.material };
             let known = reference.floors.clone();
             let floors = known.clone().unwrap_or(vec![0.0; opts.scenes.len()]);
-            let mut s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, so_far, stop_above)?;
+            let measured =
+                if at.is_none() && first.as_ref().is_some_and(|(m, _)| *m == o.model) { first.take().map(|(_, v)| v) } else { None };
+            let mut s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, so_far, stop_above, measured.as_deref())?;
             // The first lobe that fails without the floor makes the floor worth measuring; every score so far
             // is then held to it, and this lobe's scenes left out are rendered if it still may pass.
             if known.is_none() && !(s.complete() && s.excess <= opts.tolerance) {
@@ -604,7 +736,7 @@ impl Decide for RenderJudge<'_> {
                 s.hold_to(&floors);
                 let reference = state.0.as_mut().expect("the table was rendered above");
                 reference.floors = Some(floors.clone());
-                s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, s, stop_above)?;
+                s = extend(&lobe, &opts.scenes, &reference.prepared, &floors, s, stop_above, None)?;
             }
             match at {
                 Some(i) => state.1[i].1 = s.clone(),
@@ -748,6 +880,60 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The table and a lobe rendered in one pass, sharing the Fresnel term, are bit for bit each one
+    /// rendered alone as the renderer rendered it before (`render::before`): Smith lobes, the ellipsoid
+    /// and a mixture, in both default scenes, of one conductor and of two.
+    #[test]
+    fn the_table_and_a_lobe_together_render_as_alone() {
+        use crate::render::before::render_before;
+        let (ndf, truth) = cap_ndf();
+        let reg = Regularized::new(&ndf, &truth, 40.0);
+        let area = ProjectedArea::new(&|m| reg.d(m), 24, 12, true).unwrap();
+        let bits = |i: &Image| i.data.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let lobes = [
+            (ggx(0.3), Material::Al),
+            (Model::from_params(ModelId::BeckmannAniso, &[0.2, 0.35, -0.3]).unwrap(), Material::Al),
+            (truth, Material::Al),
+            (Model::from_params(ModelId::Ggx2, &[0.05, 0.05, 0.5, 0.5, 0.0, 0.5]).unwrap(), Material::Al),
+            (ggx(0.2), Material::Au),
+        ];
+        for (model, material) in lobes {
+            let table = ScanBrdf { reg: &reg, area: &area, material: Material::Al };
+            let lobe = AnalyticBrdf { model, material };
+            for s in default_scenes() {
+                let [t, l] = s.scene.render_set(&TableAndLobe { table, lobe }).unwrap();
+                assert_eq!(bits(&t), bits(&render_before(&s.scene, &table)), "{} {model:?}", s.name);
+                assert_eq!(bits(&l), bits(&render_before(&s.scene, &lobe)), "{} {model:?}", s.name);
+            }
+        }
+    }
+
+    /// The judge scores the first lobe with the table's renders (the same values as scoring it alone),
+    /// and a later lobe still stops at the first scene that rules it out.
+    #[test]
+    fn the_judge_scores_its_first_lobe_with_the_table_and_stops_the_rest() {
+        let (ndf, truth) = cap_ndf();
+        let judge = RenderJudge::new(&ndf, RenderOptions::default());
+        let (near, far) = (ggx(0.08), ggx(0.03));
+        let offered = [
+            Offered { model: near, supported: true, delta_data: Some(0.5) },
+            Offered { model: far, supported: true, delta_data: Some(0.9) },
+            Offered { model: truth, supported: false, delta_data: Some(0.01) },
+        ];
+        let d = judge.decide(&offered, 40.0).unwrap();
+        assert_eq!(d.answer, None);
+        let first = judge.score_of(&near).unwrap();
+        assert!(first.complete(), "{first:?}");
+        let references: Vec<HdrReference> = judge.table_renders().unwrap().iter().map(|i| prepare(i).unwrap()).collect();
+        let alone = score(&AnalyticBrdf { model: near, material: DEFAULT_MATERIAL }, &default_scenes(), &references).unwrap();
+        assert_eq!(
+            first.per_scene.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            alone.per_scene.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+        let second = judge.score_of(&far).unwrap();
+        assert!(!second.complete() && !second.per_scene[0].is_nan(), "{second:?}");
     }
 
     /// The regularized NDF's cell lookup equals a search of the bins, as it was read before the lookup.

@@ -20,7 +20,9 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use super::quadrature::gauss_legendre;
-use super::{sphere_frame, to_local, Brdf, Image, Light, PixelRule, Scene};
+#[cfg(test)]
+use super::Brdf;
+use super::{sphere_frame, to_local, BrdfSet, Image, Light, PixelRule, Scene};
 
 /// The innermost ring's radius about the mirror direction (radians): a quarter of the angular width of
 /// the narrowest lobe (alpha 0.01, about 2 alpha wide in reflected directions) the rule resolves.
@@ -72,29 +74,37 @@ impl Ring {
     }
 }
 
-/// Render every pixel of `scene` (validated) with `brdf`.
-pub(super) fn render(scene: &Scene, brdf: &dyn Brdf) -> Image {
+/// Render every pixel of `scene` (validated) with every BRDF of `set`: image `k` is, bit for bit, what
+/// rendering `set`'s BRDF `k` alone gives. The shading points, their frames and the cap's light points
+/// are found once for all of them; each image still takes its own refinements where its own values
+/// disagree (a BRDF is evaluated only at the points its image needs).
+pub(super) fn render<const K: usize>(scene: &Scene, set: &dyn BrdfSet<K>) -> [Image; K] {
     let rules = Rules { pixel: gauss_legendre(scene.camera.points), ring: Ring::new() };
     let c = &scene.camera;
     let n = c.size;
     let ext = c.extent;
     let side = 2.0 * ext / n as f64;
     let floor = 1e-3 * scene.light.white_radiance();
-    let shade = |x: f64, y: f64| scene.normal_at(x, y).map_or([0.0; 3], |nrm| radiance(scene, brdf, nrm, &rules));
+    let axes = scene.image_axes();
+    let all = [true; K];
+    let shade = |x: f64, y: f64, active: [bool; K]| {
+        normal_at(scene, axes, x, y).map_or([[0.0; 3]; K], |nrm| radiance(scene, set, nrm, &rules, active))
+    };
     // The lower-left corner of pixel (i, j), row j from the top.
     let corner = |i: usize, j: usize| [-ext + i as f64 * side, ext - (j + 1) as f64 * side];
-    let gauss = |i: usize, j: usize| cell(&shade, corner(i, j), side, c.refine, c.tolerance, floor, &rules.pixel);
+    let gauss =
+        |i: usize, j: usize, active: [bool; K]| cell(&shade, corner(i, j), side, c.refine, c.tolerance, floor, &rules.pixel, active);
     // A pixel of the centre rule whose image is not smooth: the Gauss rule as it is (refining it would
     // cost as much as the rest of the image; its points still resolve a highlight's edge to a half pixel).
-    let rough = |i: usize, j: usize| cell(&shade, corner(i, j), side, 0, c.tolerance, floor, &rules.pixel);
-    let mut data = vec![[0f32; 3]; n * n];
+    let rough = |i: usize, j: usize, active: [bool; K]| cell(&shade, corner(i, j), side, 0, c.tolerance, floor, &rules.pixel, active);
+    let mut data = vec![[[0f32; 3]; K]; n * n];
     if c.rule == PixelRule::Centre && c.refine > 0 {
-        // Each centre's value, `None` off the sphere.
+        // Each centre's values, `None` off the sphere.
         let mut centres = vec![None; n * n];
         centres.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
             for (i, v) in row.iter_mut().enumerate() {
                 let [x, y] = corner(i, j).map(|a| a + side / 2.0);
-                *v = scene.normal_at(x, y).map(|nrm| radiance(scene, brdf, nrm, &rules));
+                *v = normal_at(scene, axes, x, y).map(|nrm| radiance(scene, set, nrm, &rules, all));
             }
         });
         let at = |i: isize, j: isize| {
@@ -108,74 +118,109 @@ pub(super) fn render(scene: &Scene, brdf: &dyn Brdf) -> Image {
         data.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
             for (i, out) in row.iter_mut().enumerate() {
                 let v = if on_silhouette(corner(i, j), side) {
-                    gauss(i, j)
+                    gauss(i, j, all)
                 } else {
                     let (ii, jj) = (i as isize, j as isize);
                     match [at(ii, jj), at(ii - 1, jj), at(ii + 1, jj), at(ii, jj - 1), at(ii, jj + 1)] {
                         // Off the sphere and not on the silhouette: the whole square is background.
-                        [None, ..] => [0.0; 3],
+                        [None, ..] => [[0.0; 3]; K],
                         [Some(m), Some(l), Some(r), Some(d), Some(u)] => {
-                            let fix = [0, 1, 2].map(|k| (l[k] + r[k] + d[k] + u[k] - 4.0 * m[k]) / 24.0);
-                            let level = m[0] + m[1] + m[2];
-                            let size = fix[0].abs() + fix[1].abs() + fix[2].abs();
-                            // Where the correction is large the image is not smooth at the pixel's scale.
-                            if size <= 0.1 * c.tolerance * (level + 3.0 * floor) {
-                                [0, 1, 2].map(|k| m[k] + fix[k])
-                            } else {
-                                rough(i, j)
+                            let mut v = [[0.0; 3]; K];
+                            let mut rougher = [false; K];
+                            for k in 0..K {
+                                let (m, l, r, d, u) = (m[k], l[k], r[k], d[k], u[k]);
+                                let fix = [0, 1, 2].map(|q| (l[q] + r[q] + d[q] + u[q] - 4.0 * m[q]) / 24.0);
+                                let level = m[0] + m[1] + m[2];
+                                let size = fix[0].abs() + fix[1].abs() + fix[2].abs();
+                                // Where the correction is large the image is not smooth at the pixel's scale.
+                                if size <= 0.1 * c.tolerance * (level + 3.0 * floor) {
+                                    v[k] = [0, 1, 2].map(|q| m[q] + fix[q]);
+                                } else {
+                                    rougher[k] = true;
+                                }
                             }
+                            if rougher.contains(&true) {
+                                let g = rough(i, j, rougher);
+                                (0..K).filter(|&k| rougher[k]).for_each(|k| v[k] = g[k]);
+                            }
+                            v
                         }
                         // A neighbour off the sphere: no second difference across the silhouette.
-                        _ => gauss(i, j),
+                        _ => gauss(i, j, all),
                     }
                 };
-                *out = v.map(|x| x as f32);
+                *out = v.map(|v| v.map(|x| x as f32));
             }
         });
     } else {
         data.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
             for (i, out) in row.iter_mut().enumerate() {
-                *out = gauss(i, j).map(|x| x as f32);
+                *out = gauss(i, j, all).map(|v| v.map(|x| x as f32));
             }
         });
     }
-    Image { width: n, height: n, data }
+    std::array::from_fn(|k| Image { width: n, height: n, data: data.iter().map(|p| p[k]).collect() })
+}
+
+/// [`Scene::normal_at`] with the image's axes found once.
+fn normal_at(scene: &Scene, [right, up]: [Vector3<f64>; 2], x: f64, y: f64) -> Option<Vector3<f64>> {
+    let r2 = x * x + y * y;
+    if r2 >= 1.0 {
+        return None;
+    }
+    Some(right * x + up * y + scene.camera.view * (1.0 - r2).sqrt())
 }
 
 /// The mean of `shade` over the square of side `side` with lower-left corner `at`, split where its
-/// points disagree.
-fn cell(
-    shade: &dyn Fn(f64, f64) -> [f64; 3],
+/// points disagree, for each image `k` with `active[k]` (each split where its own points disagree; the
+/// values of the others are left at 0).
+#[allow(clippy::too_many_arguments)]
+fn cell<const K: usize>(
+    shade: &dyn Fn(f64, f64, [bool; K]) -> [[f64; 3]; K],
     at: [f64; 2],
     side: f64,
     depth: usize,
     tol: f64,
     floor: f64,
     rule: &[(f64, f64)],
-) -> [f64; 3] {
-    let mut mean = [0.0; 3];
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    active: [bool; K],
+) -> [[f64; 3]; K] {
+    let mut mean = [[0.0; 3]; K];
+    let (mut lo, mut hi) = ([f64::INFINITY; K], [f64::NEG_INFINITY; K]);
     for &(gy, wy) in rule {
         for &(gx, wx) in rule {
-            let v = shade(at[0] + gx * side, at[1] + gy * side);
-            (0..3).for_each(|c| mean[c] += wx * wy * v[c]);
-            let s = v[0] + v[1] + v[2];
-            (lo, hi) = (lo.min(s), hi.max(s));
+            let v = shade(at[0] + gx * side, at[1] + gy * side, active);
+            for k in (0..K).filter(|&k| active[k]) {
+                (0..3).for_each(|c| mean[k][c] += wx * wy * v[k][c]);
+                let s = v[k][0] + v[k][1] + v[k][2];
+                (lo[k], hi[k]) = (lo[k].min(s), hi[k].max(s));
+            }
         }
     }
-    let level = mean[0] + mean[1] + mean[2];
     // One point cannot disagree with itself; a rule of one point is never refined. A cell the silhouette
     // crosses is split even when its points agree (all on or all off the sphere).
-    if depth == 0 || rule.len() < 2 || (hi - lo <= tol * (level + 3.0 * floor) && !on_silhouette(at, side)) {
+    if depth == 0 || rule.len() < 2 {
+        return mean;
+    }
+    let crossed = on_silhouette(at, side);
+    let split: [bool; K] = std::array::from_fn(|k| {
+        let level = mean[k][0] + mean[k][1] + mean[k][2];
+        // Its points agree (a NaN spread does not), and no silhouette crosses it.
+        let settled = hi[k] - lo[k] <= tol * (level + 3.0 * floor) && !crossed;
+        active[k] && !settled
+    });
+    if !split.contains(&true) {
         return mean;
     }
     let h = side / 2.0;
-    let mut sum = [0.0; 3];
+    let mut sum = [[0.0; 3]; K];
     for (dx, dy) in [(0.0, 0.0), (h, 0.0), (0.0, h), (h, h)] {
-        let v = cell(shade, [at[0] + dx, at[1] + dy], h, depth - 1, tol, floor, rule);
-        (0..3).for_each(|c| sum[c] += 0.25 * v[c]);
+        let v = cell(shade, [at[0] + dx, at[1] + dy], h, depth - 1, tol, floor, rule, split);
+        for k in (0..K).filter(|&k| split[k]) {
+            (0..3).for_each(|c| sum[k][c] += 0.25 * v[k][c]);
+        }
     }
-    sum
+    std::array::from_fn(|k| if split[k] { sum[k] } else { mean[k] })
 }
 
 /// Whether the unit circle (the sphere's outline) crosses the square of side `side` at `at`.
@@ -187,8 +232,9 @@ fn on_silhouette(at: [f64; 2], side: f64) -> bool {
     nx * nx + ny * ny < 1.0 && far(at[0]).powi(2) + far(at[1]).powi(2) > 1.0
 }
 
-/// The radiance toward the camera from the point of the sphere with normal `n` (world frame).
-fn radiance(scene: &Scene, brdf: &dyn Brdf, n: Vector3<f64>, rules: &Rules) -> [f64; 3] {
+/// The radiance toward the camera from the point of the sphere with normal `n` (world frame), for each
+/// BRDF `k` of `set` with `active[k]`.
+fn radiance<const K: usize>(scene: &Scene, set: &dyn BrdfSet<K>, n: Vector3<f64>, rules: &Rules, active: [bool; K]) -> [[f64; 3]; K] {
     let frame = sphere_frame(n);
     let wi = to_local(&frame, scene.camera.view);
     match scene.light {
@@ -196,11 +242,15 @@ fn radiance(scene: &Scene, brdf: &dyn Brdf, n: Vector3<f64>, rules: &Rules) -> [
             let wo = to_local(&frame, dir);
             // Below the horizon the sphere hides the light.
             if wo.z <= 0.0 {
-                return [0.0; 3];
+                return [[0.0; 3]; K];
             }
-            brdf.eval(wi, wo).map(|f| f * irradiance * wo.z)
+            let mut f = [[0.0; 3]; K];
+            set.eval(wi, wo, active, &mut f);
+            f.map(|f| f.map(|f| f * irradiance * wo.z))
         }
-        Light::Cap { dir, half_angle, radiance } => cap(brdf, wi, to_local(&frame, dir), half_angle, &rules.ring).map(|v| v * radiance),
+        Light::Cap { dir, half_angle, radiance } => {
+            cap(set, wi, to_local(&frame, dir), half_angle, &rules.ring, active).map(|v| v.map(|v| v * radiance))
+        }
     }
 }
 
@@ -208,13 +258,22 @@ fn radiance(scene: &Scene, brdf: &dyn Brdf, n: Vector3<f64>, rules: &Rules) -> [
 /// rings about the mirror direction of the module's documentation.
 #[cfg(test)]
 fn cap_integral(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, half_angle: f64) -> [f64; 3] {
-    cap(brdf, wi, c, half_angle, &Ring::new())
+    cap(&[brdf], wi, c, half_angle, &Ring::new(), [true])[0]
 }
 
-fn cap(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, delta: f64, rules: &Ring) -> [f64; 3] {
+/// `int_cap f_k(wi, wo) max(wo.z, 0) dwo` over the cap of half-angle `delta` about `c` (local frame) for
+/// each BRDF `k` of `set` with `active[k]`, on one set of light points.
+fn cap<const K: usize>(
+    set: &dyn BrdfSet<K>,
+    wi: Vector3<f64>,
+    c: Vector3<f64>,
+    delta: f64,
+    rules: &Ring,
+    active: [bool; K],
+) -> [[f64; 3]; K] {
     // The whole cap below the horizon: the sphere hides it.
     if c.z <= -delta.sin() {
-        return [0.0; 3];
+        return [[0.0; 3]; K];
     }
     let r = Vector3::new(-wi.x, -wi.y, wi.z);
     let cos_d = r.dot(&c).clamp(-1.0, 1.0);
@@ -283,13 +342,15 @@ fn cap(brdf: &dyn Brdf, wi: Vector3<f64>, c: Vector3<f64>, delta: f64, rules: &R
             }
         }
     }
-    let mut f = vec![[0.0; 3]; dirs.len()];
-    brdf.eval_many(wi, &dirs, &mut f);
-    let mut acc = [0.0; 3];
-    for ((l, w), f) in dirs.iter().zip(&weights).zip(&f) {
-        (0..3).for_each(|k| acc[k] += w * f[k] * l.z);
-    }
-    acc
+    let mut f: [Vec<[f64; 3]>; K] = std::array::from_fn(|k| if active[k] { vec![[0.0; 3]; dirs.len()] } else { Vec::new() });
+    set.eval_many(wi, &dirs, active, &mut f);
+    std::array::from_fn(|k| {
+        let mut acc = [0.0; 3];
+        for ((l, w), f) in dirs.iter().zip(&weights).zip(&f[k]) {
+            (0..3).for_each(|q| acc[q] += w * f[q] * l.z);
+        }
+        acc
+    })
 }
 
 /// A unit vector perpendicular to the unit vector `v`.
@@ -360,5 +421,37 @@ mod tests {
             }
         }
         assert!(worst < 0.01, "worst relative error {worst}");
+    }
+
+    /// Images rendered together in one pass are, bit for bit, the images the renderer gave one BRDF at a
+    /// time before it could render several (`render::before`): in both default scenes and with the other
+    /// pixel rule in each, for lobes from near-mirror to rough, a BRDF with its own `eval_many` or not,
+    /// and the same BRDF twice.
+    #[test]
+    fn rendering_together_gives_each_image_as_alone() {
+        use super::super::before::render_before;
+        use super::super::Camera;
+        let (a, b, c) = (ggx(0.3, 0.3), ggx(0.05, 0.02), ggx(0.6, 0.2));
+        let many = |wi: Vector3<f64>, wo: Vector3<f64>| ggx(0.15, 0.15)(wi, wo).map(|v| v * 0.5);
+        let mut scenes = vec![Scene::point(), Scene::broad()];
+        let centre = Camera { size: 48, refine: 1, rule: PixelRule::Centre, ..Camera::default() };
+        let gauss = Camera { size: 32, refine: 1, rule: PixelRule::Gauss, ..Camera::default() };
+        scenes.push(Scene { camera: centre, ..Scene::point() });
+        scenes.push(Scene { camera: gauss, ..Scene::broad() });
+        let bits = |i: &Image| i.data.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+        for scene in &scenes {
+            let [x, y] = integrate_pair(scene, [&a, &b]);
+            assert_eq!(bits(&x), bits(&render_before(scene, &a)), "{scene:?}");
+            assert_eq!(bits(&y), bits(&render_before(scene, &b)), "{scene:?}");
+            let [z] = render(scene, &[&c as &dyn Brdf]);
+            assert_eq!(bits(&z), bits(&render_before(scene, &c)), "{scene:?}");
+            let [u, v] = integrate_pair(scene, [&many, &many]);
+            let alone = render_before(scene, &many);
+            assert_eq!((bits(&u), bits(&v)), (bits(&alone), bits(&alone)), "{scene:?}");
+        }
+    }
+
+    fn integrate_pair(scene: &Scene, pair: [&dyn Brdf; 2]) -> [Image; 2] {
+        render(scene, &pair)
     }
 }

@@ -9,6 +9,8 @@
 //! evaluated in that local frame. The scenes, their defaults and the quadrature's measured accuracy are
 //! in `data_formats/render.md`.
 
+#[cfg(test)]
+pub(crate) mod before;
 mod image;
 mod integrate;
 mod quadrature;
@@ -31,6 +33,34 @@ pub trait Brdf: Sync {
     fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], out: &mut [[f64; 3]]) {
         for (o, &wo) in out.iter_mut().zip(wos) {
             *o = self.eval(wi, wo);
+        }
+    }
+}
+
+/// `K` BRDFs rendered together at the same shading points ([`Scene::render_set`]): each value is what
+/// the BRDF's own [`Brdf::eval`] gives, and work the BRDFs share at one pair of directions (a Fresnel
+/// term of one conductor) may be done once. `active[k]` says which of them a point needs; the values of
+/// the others are not read.
+pub trait BrdfSet<const K: usize>: Sync {
+    /// `f_k(wi, wo)` into `out[k]` for every `k` with `active[k]`.
+    fn eval(&self, wi: Vector3<f64>, wo: Vector3<f64>, active: [bool; K], out: &mut [[f64; 3]; K]);
+
+    /// `f_k(wi, wo)` for every `wo` of `wos` into `out[k]` (as long as `wos`) for every `k` with
+    /// `active[k]`, as [`Brdf::eval_many`].
+    fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], active: [bool; K], out: &mut [Vec<[f64; 3]>; K]);
+}
+
+/// BRDFs rendered together that share nothing but the geometry.
+impl<const K: usize> BrdfSet<K> for [&dyn Brdf; K] {
+    fn eval(&self, wi: Vector3<f64>, wo: Vector3<f64>, active: [bool; K], out: &mut [[f64; 3]; K]) {
+        for k in (0..K).filter(|&k| active[k]) {
+            out[k] = self[k].eval(wi, wo);
+        }
+    }
+
+    fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], active: [bool; K], out: &mut [Vec<[f64; 3]>; K]) {
+        for k in (0..K).filter(|&k| active[k]) {
+            self[k].eval_many(wi, wos, &mut out[k]);
         }
     }
 }

@@ -6,7 +6,7 @@ use std::f64::consts::PI;
 
 use nalgebra::Vector3;
 
-use super::{direction, Brdf, Image};
+use super::{direction, Brdf, BrdfSet, Image};
 use crate::error::{Error, Result};
 
 /// The orthographic camera and the pixel quadrature.
@@ -177,7 +177,14 @@ impl Scene {
 
     /// Render `brdf`: linear RGB radiance per pixel, rows from the top.
     pub fn render(&self, brdf: &dyn Brdf) -> Result<Image> {
+        let [image] = self.render_set(&[brdf])?;
+        Ok(image)
+    }
+
+    /// Render every BRDF of `set` in one pass over the shading points: image `k` is, bit for bit,
+    /// [`Scene::render`] of BRDF `k` alone.
+    pub fn render_set<const K: usize>(&self, set: &dyn BrdfSet<K>) -> Result<[Image; K]> {
         self.validate()?;
-        Ok(super::integrate::render(self, brdf))
+        Ok(super::integrate::render(self, set))
     }
 }

@@ -298,44 +298,65 @@ pub struct AnalyticBrdf {
     pub material: Material,
 }
 
-impl Brdf for AnalyticBrdf {
-    fn eval(&self, wi: Vector3<f64>, wo: Vector3<f64>) -> [f64; 3] {
-        let bare = MicrofacetBrdf { model: self.model, eta: None, masking: MaskingShadowing::Separable }.eval(wi, wo);
-        // Nothing reflected (below the horizon or masked): no half vector to take.
-        if bare == 0.0 {
-            return [0.0; 3];
-        }
-        let c = wi.dot(&(wi + wo).normalize());
-        self.material.fresnel_rgb(c).map(|f| bare * f)
-    }
-
-    fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], out: &mut [[f64; 3]]) {
-        use crate::models::Ndf;
-        // A Smith lobe's `G1(wi, h)` is `X+(wi.h) / (1 + Lambda(wi))`: `Lambda(wi)` once for every light
-        // point. Other lobes (the ellipsoid's masking, mixtures), and `wi` below the horizon, point by point.
+impl AnalyticBrdf {
+    /// `Lambda(wi)` when [`AnalyticBrdf::unshaded`] may take it once for many light points: a Smith
+    /// lobe's `G1(wi, h)` is `X+(wi.h) / (1 + Lambda(wi))`. `None` for other lobes (the ellipsoid's
+    /// masking, mixtures) and for `wi` below the horizon, which are evaluated point by point.
+    pub fn shared_lambda(&self, wi: Vector3<f64>) -> Option<f64> {
         let smith = matches!(
             self.model,
             Model::Ggx(_) | Model::GgxAniso(_) | Model::Beckmann(_) | Model::BeckmannAniso(_) | Model::Student(_) | Model::StudentAniso(_)
         );
-        if !(smith && wi.z > 0.0) {
-            for (o, &wo) in out.iter_mut().zip(wos) {
-                *o = self.eval(wi, wo);
+        (smith && wi.z > 0.0).then(|| self.model.lambda(wi))
+    }
+
+    /// `f(wi, wo)` as `bare F(c)`, `F` the conductor's Fresnel term: `None` where `f` is 0 (below the
+    /// horizon, masked), else `(bare, c)` with `c = wi.normalize(wi + wo)`. `lambda_i` is
+    /// [`AnalyticBrdf::shared_lambda`] of `wi` (`None`: the pair's own masking, point by point).
+    #[inline]
+    pub fn unshaded(&self, wi: Vector3<f64>, wo: Vector3<f64>, lambda_i: Option<f64>) -> Option<(f64, f64)> {
+        use crate::models::Ndf;
+        let bare = match lambda_i {
+            None => MicrofacetBrdf { model: self.model, eta: None, masking: MaskingShadowing::Separable }.eval(wi, wo),
+            Some(lambda_i) => {
+                // `MicrofacetBrdf::eval` with the separable masking and no Fresnel term, step by step.
+                if !(wo.z > 0.0) {
+                    return None;
+                }
+                let h = wi + wo;
+                let h = h / h.norm();
+                let g = crate::models::smith_g1(lambda_i, wi, h) * self.model.g1(wo, h);
+                if g == 0.0 {
+                    0.0
+                } else {
+                    self.model.d(h) * g / (4.0 * wi.z * wo.z)
+                }
             }
-            return;
+        };
+        // Nothing reflected (below the horizon or masked): no half vector to take.
+        (bare != 0.0).then(|| (bare, wi.dot(&(wi + wo).normalize())))
+    }
+
+    /// `bare F(c)` of [`AnalyticBrdf::unshaded`], 0 for `None`.
+    #[inline]
+    pub fn shaded(&self, unshaded: Option<(f64, f64)>) -> [f64; 3] {
+        match unshaded {
+            None => [0.0; 3],
+            Some((bare, c)) => self.material.fresnel_rgb(c).map(|f| bare * f),
         }
-        let lambda_i = self.model.lambda(wi);
+    }
+}
+
+impl Brdf for AnalyticBrdf {
+    fn eval(&self, wi: Vector3<f64>, wo: Vector3<f64>) -> [f64; 3] {
+        self.shaded(self.unshaded(wi, wo, None))
+    }
+
+    fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], out: &mut [[f64; 3]]) {
+        // `Lambda(wi)` once for every light point where it can be shared.
+        let lambda_i = self.shared_lambda(wi);
         for (o, &wo) in out.iter_mut().zip(wos) {
-            // `MicrofacetBrdf::eval` with the separable masking and no Fresnel term, step by step.
-            if !(wo.z > 0.0) {
-                *o = [0.0; 3];
-                continue;
-            }
-            let h = wi + wo;
-            let h = h / h.norm();
-            let g = crate::models::smith_g1(lambda_i, wi, h) * self.model.g1(wo, h);
-            let bare = if g == 0.0 { 0.0 } else { self.model.d(h) * g / (4.0 * wi.z * wo.z) };
-            // Nothing reflected: no half vector to take.
-            *o = if bare == 0.0 { [0.0; 3] } else { self.material.fresnel_rgb(wi.dot(&(wi + wo).normalize())).map(|f| bare * f) };
+            *o = self.shaded(self.unshaded(wi, wo, lambda_i));
         }
     }
 }
