@@ -317,6 +317,20 @@ impl Model {
         }
     }
 
+    /// Whether [`Model::g1`] is the Smith form `X+(u.m) / (1 + Lambda(u))`, so that `Lambda(u)` can be
+    /// taken once for many `m`: not the ellipsoid's (Walter et al. eq. 6) nor a mixture's.
+    pub fn smith_masking(&self) -> bool {
+        match self {
+            Model::Ggx(_)
+            | Model::GgxAniso(_)
+            | Model::Beckmann(_)
+            | Model::BeckmannAniso(_)
+            | Model::Student(_)
+            | Model::StudentAniso(_) => true,
+            Model::Ellipsoid(_) | Model::Mixture(_) => false,
+        }
+    }
+
     /// The Smith `Lambda(u)` (Heitz eq. 72/86 for GGX, 69/83 for Beckmann). For the ellipsoid, whose masking
     /// has no closed-form Smith integral, it is the `Lambda` implied by Walter et al. eq. 32,
     /// `1/G1 - 1 = max(0, A_l(u,n) / (A_e(n) |u.n|) - 1)`, exact Smith when `theta_x = theta_y = 0`.

@@ -303,11 +303,7 @@ impl AnalyticBrdf {
     /// lobe's `G1(wi, h)` is `X+(wi.h) / (1 + Lambda(wi))`. `None` for other lobes (the ellipsoid's
     /// masking, mixtures) and for `wi` below the horizon, which are evaluated point by point.
     pub fn shared_lambda(&self, wi: Vector3<f64>) -> Option<f64> {
-        let smith = matches!(
-            self.model,
-            Model::Ggx(_) | Model::GgxAniso(_) | Model::Beckmann(_) | Model::BeckmannAniso(_) | Model::Student(_) | Model::StudentAniso(_)
-        );
-        (smith && wi.z > 0.0).then(|| self.model.lambda(wi))
+        (self.model.smith_masking() && wi.z > 0.0).then(|| self.model.lambda(wi))
     }
 
     /// `f(wi, wo)` as `bare F(c)`, `F` the conductor's Fresnel term: `None` where `f` is 0 (below the
