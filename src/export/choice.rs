@@ -11,11 +11,10 @@
 //! lobes are rendered only until one is within the tolerance.
 
 use std::collections::BTreeMap;
-
-use rayon::prelude::*;
 use std::sync::Mutex;
 
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 use super::rgl::{AnalyticBrdf, Material, NdfGrids, ProjectedArea, Regularized};
 use crate::error::{Error, Result};

@@ -215,7 +215,7 @@ const TEMPER: f64 = 0.125;
 
 /// How far below the horizon (degrees of outgoing elevation) the tempered VNDF reaches: the warp's density
 /// does not end at the masking's cliff, so the nodes on either side of it lie close and its bilinear
-/// reading spans a fraction of a cell (the 99th percentile of the error halves, data_formats/rgl.md).
+/// reading spans a fraction of a cell (data_formats/rgl.md, "The tails").
 const HORIZON_MARGIN_DEG: f64 = 5.0;
 
 /// A quadrature point whose weight is below this share of the total is dropped from the projected area's
