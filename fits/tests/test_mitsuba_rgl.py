@@ -340,8 +340,14 @@ TAIL_LOBES = [
     ("student-aniso", {"alpha_x": 0.3, "alpha_y": 0.2, "theta_z": -0.4, "gamma": 3.0}, None),
     ("ggx2", {"alpha_x1": 0.08, "alpha_y1": 0.06, "alpha_x2": 0.4, "alpha_y2": 0.3, "theta_z": 0.3, "weight": 0.7}, None),
 ]
+# Lobes the default resolution was not chosen on: narrower and rougher, other frames and tails.
+HELD_OUT_LOBES = [
+    ("ggx-aniso", {"alpha_x": 0.12, "alpha_y": 0.05, "theta_z": 1.2}, "ggx"),
+    ("student-aniso", {"alpha_x": 0.5, "alpha_y": 0.25, "theta_z": -1.0, "gamma": 2.0}, None),
+    ("ggx2", {"alpha_x1": 0.15, "alpha_y1": 0.1, "alpha_x2": 0.6, "alpha_y2": 0.35, "theta_z": 0.9, "weight": 0.5}, None),
+]
 TAIL_INCIDENCES = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0]
-# Incident azimuths between the table's nodes (every 22.5 degrees), so the renderer interpolates.
+# Incident azimuths between the table's nodes (every 15 degrees at the default), so the renderer interpolates.
 TAIL_AZIMUTHS = [0.3, 1.9, -2.4]
 
 
@@ -367,7 +373,8 @@ def ndfit_smith_brdf(fit, pairs):
     return vals[:, 0, 0] * vals[:, 0, 1] * vals[:, 1, 1] / (4.0 * wi_z)
 
 
-@pytest.mark.parametrize("model,params,dist", TAIL_LOBES, ids=[m for m, _, _ in TAIL_LOBES])
+@pytest.mark.parametrize("model,params,dist", TAIL_LOBES + HELD_OUT_LOBES,
+                         ids=[m for m, _, _ in TAIL_LOBES] + [f"held-out-{m}" for m, _, _ in HELD_OUT_LOBES])
 def test_table_tails(tmp_path, model, params, dist):
     fit = tmp_path / "fit.json"
     fit.write_text(json.dumps({"model": model, "params": params}))
