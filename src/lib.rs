@@ -84,6 +84,9 @@ pub mod synth;
 /// Geometric optics on the scan's own microgeometry (two triangles per cell, specular bounces), and the
 /// microfacet model measured against it: does microfacet theory hold for this scan?
 pub mod trace;
+/// Wave optics on the scan's own heights: the scalar-diffraction BRDF averaged over coherence patches,
+/// split into the mirror share and the diffuse BRDF (docs/WAVE.md).
+pub mod wave;
 
 pub use error::{Error, ErrorKind, Result};
 pub use models::ModelChoice;

@@ -27,6 +27,8 @@ mod scan_args;
 mod synth;
 mod trace;
 mod trace_rgl;
+mod wave;
+mod wave_rgl;
 
 /// Measured microgeometry to microfacet parameters: empirical NDFs of heightfield scans and fits of the
 /// Ellipsoid, GGX and Beckmann NDFs.
@@ -135,6 +137,9 @@ enum Command {
     /// Will a renderer show the difference? Every lobe `auto` fitted rendered against the scan's own table,
     /// scored by FLIP: the answer (a lobe or the table) and the pictures.
     Compare(compare::Args),
+    /// Wave optics on the scan's own heights: the mirror share and the diffuse BRDF by scalar diffraction,
+    /// per wavelength and incidence; with `--to rgl`, the diffuse BRDF as a tabulated material.
+    Wave(wave::Args),
     /// The FLIP difference of two renders (HDR-FLIP, or LDR-FLIP with --ldr): the mean and a magma map.
     Flip(flip::Args),
 }
@@ -164,6 +169,7 @@ pub fn main() -> ExitCode {
         Command::Render(a) => render::run(a),
         Command::Flip(a) => flip::run(a),
         Command::Compare(a) => compare::run(a),
+        Command::Wave(a) => wave::run(a),
     };
     progress::finish();
     print_phases();

@@ -40,6 +40,26 @@ struct Header {
     data: usize,
 }
 
+/// A C-ordered little-endian `float64` array of `shape` as an `.npy` file (format version 1.0).
+pub fn npy_f64_bytes(shape: &[usize], data: &[f64]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    // A one-element tuple needs its trailing comma.
+    let tuple = if dims.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
+    let dict = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {tuple}, }}");
+    // The header (magic, version, length, dict, newline) is padded with spaces to a multiple of 64.
+    let unpadded = 10 + dict.len() + 1;
+    let len = dict.len() + 1 + (unpadded.next_multiple_of(64) - unpadded);
+    let mut out = Vec::with_capacity(10 + len + 8 * data.len());
+    out.extend_from_slice(NPY_MAGIC);
+    out.extend_from_slice(&[1, 0]);
+    out.extend_from_slice(&(len as u16).to_le_bytes());
+    out.extend_from_slice(dict.as_bytes());
+    out.resize(10 + len - 1, b' ');
+    out.push(b'\n');
+    out.extend(data.iter().flat_map(|v| v.to_le_bytes()));
+    out
+}
+
 /// The grid `[nx, ny]` an NPY file declares, if `bytes` hold a valid NPY header.
 pub(crate) fn grid_of(bytes: &[u8]) -> Option<[usize; 2]> {
     bytes.starts_with(NPY_MAGIC).then(|| parse_header(bytes).ok()).flatten().map(|h| [h.nx, h.ny])

@@ -1,0 +1,252 @@
+//! The coherence patches: tiling, the window, each patch's plane, and the patch-averaged spectra of the
+//! diffuse field at every level of `v_z`.
+//!
+//! Patch `p` holds `P_x x P_y` samples; its window is `w = sin^2(pi (j + 1/2) / P)` along each axis
+//! (Hann) times the validity mask `m`. With `u = (w m)^2` and `r = h - <h>_u` (heights about the
+//! patch's weighted mean, so that no offset meets a phase), at a level `v_z`:
+//! - the patch's mean field `chi = sum u exp(i v_z r) / sum u`: its reflection into the mirror direction
+//!   within the patch's angular resolution, `|chi|^2` its share of the light (a patch tilted by more than
+//!   that resolution sends its light elsewhere: into the diffuse part);
+//! - the diffuse field `g = w m (exp(i v_z r) - chi)` and its spectrum `|FFT g|^2`, summed over patches.
+//!
+//! The patch's least-squares plane (weights `u`) is fitted only to report the patches' tilts.
+//!
+//! `chi` is the `u`-weighted mean, so the coherent and diffuse energies add up exactly (Parseval): a
+//! masked point (weight 0) reflects the patch's mean field, adding no diffuse light.
+
+use rayon::prelude::*;
+use rustfft::num_complex::Complex;
+use rustfft::{Fft, FftPlanner};
+use std::sync::Arc;
+
+use super::levels::Levels;
+use crate::scan::Scan;
+
+/// A patch with fewer valid samples than this share is skipped (counted in the report).
+pub(crate) const MIN_VALID_SHARE: f64 = 0.9;
+/// Patches per unit of parallel work; the sum runs in patch order whatever the thread count.
+const CHUNK: usize = 4;
+
+/// The tiling of the scan into patches.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Tiling {
+    pub px: usize,
+    pub py: usize,
+    pub cols: usize,
+    pub rows: usize,
+    /// First column and row of the tiling (the patches are centred on the grid).
+    pub j0: usize,
+    pub i0: usize,
+}
+
+impl Tiling {
+    pub fn new(nx: usize, ny: usize, px: usize, py: usize) -> Tiling {
+        let (cols, rows) = (nx / px, ny / py);
+        Tiling { px, py, cols, rows, j0: (nx - cols * px) / 2, i0: (ny - rows * py) / 2 }
+    }
+}
+
+/// What the patches add up to.
+#[derive(Debug, Clone)]
+pub(crate) struct Sums {
+    /// Per level: `sum_p |FFT g_p|^2`, stored with the x frequency outer: `[kx * P_y + ky]`.
+    pub spectra: Vec<Vec<f64>>,
+    /// Per level: `sum_p |chi_p|^2 sum u_p`.
+    pub coherent: Vec<f64>,
+    /// `sum_p sum u_p`.
+    pub weight: f64,
+    pub used: usize,
+    pub skipped: usize,
+    /// Sum over used patches of `u`-weighted squared tilt `tan^2` of the patch's plane, and its weight.
+    pub tilt2: f64,
+}
+
+impl Sums {
+    fn zero(levels: usize, bins: usize) -> Sums {
+        Sums { spectra: vec![vec![0.0; bins]; levels], coherent: vec![0.0; levels], weight: 0.0, used: 0, skipped: 0, tilt2: 0.0 }
+    }
+
+    fn add(&mut self, o: &Sums) {
+        for (a, b) in self.spectra.iter_mut().zip(&o.spectra) {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+        }
+        self.coherent.iter_mut().zip(&o.coherent).for_each(|(x, y)| *x += y);
+        self.weight += o.weight;
+        self.used += o.used;
+        self.skipped += o.skipped;
+        self.tilt2 += o.tilt2;
+    }
+}
+
+/// The Hann window of `n` samples, never zero (sampled at the cell centres).
+pub(crate) fn hann(n: usize) -> Vec<f64> {
+    (0..n).map(|j| (std::f64::consts::PI * (j as f64 + 0.5) / n as f64).sin().powi(2)).collect()
+}
+
+/// Per-thread FFT plans and buffers.
+struct Work {
+    row: Arc<dyn Fft<f64>>,
+    col: Arc<dyn Fft<f64>>,
+    buf: Vec<Complex<f64>>,
+    tr: Vec<Complex<f64>>,
+    scratch: Vec<Complex<f64>>,
+    r: Vec<f64>,
+    u: Vec<f64>,
+    wm: Vec<f64>,
+}
+
+impl Work {
+    fn new(px: usize, py: usize) -> Work {
+        let mut planner = FftPlanner::new();
+        // The inverse transform: sum g exp(+i v_t . x), the sign of the phase v_z h (see mod.rs).
+        let row = planner.plan_fft_inverse(px);
+        let col = planner.plan_fft_inverse(py);
+        let s = row.get_inplace_scratch_len().max(col.get_inplace_scratch_len());
+        let n = px * py;
+        Work {
+            row,
+            col,
+            buf: vec![Complex::default(); n],
+            tr: vec![Complex::default(); n],
+            scratch: vec![Complex::default(); s],
+            r: vec![0.0; n],
+            u: vec![0.0; n],
+            wm: vec![0.0; n],
+        }
+    }
+}
+
+/// Sum every patch of `scan` at every level (rayon over chunks of patches, summed in order).
+pub(crate) fn accumulate(scan: &Scan<'_>, tiling: Tiling, levels: &Levels, progress: Option<&(dyn Fn(usize, usize) + Sync)>) -> Sums {
+    let n_patches = tiling.cols * tiling.rows;
+    let bins = tiling.px * tiling.py;
+    let chunks: Vec<usize> = (0..n_patches.div_ceil(CHUNK)).collect();
+    let wave = (rayon::current_num_threads() * 2).max(1);
+    let mut total = Sums::zero(levels.len(), bins);
+    let (wx, wy) = (hann(tiling.px), hann(tiling.py));
+    for group in chunks.chunks(wave) {
+        let parts: Vec<Sums> = group
+            .par_iter()
+            .map(|&c| {
+                let mut work = Work::new(tiling.px, tiling.py);
+                let mut sums = Sums::zero(levels.len(), bins);
+                for p in c * CHUNK..((c + 1) * CHUNK).min(n_patches) {
+                    patch(scan, tiling, p, levels, &wx, &wy, &mut work, &mut sums);
+                }
+                sums
+            })
+            .collect();
+        for part in &parts {
+            total.add(part);
+        }
+        if let Some(f) = progress {
+            f(((group[group.len() - 1] + 1) * CHUNK).min(n_patches), n_patches);
+        }
+    }
+    total
+}
+
+/// Add patch `p` (row-major over the tiling) to `sums`.
+#[allow(clippy::too_many_arguments)]
+fn patch(scan: &Scan<'_>, t: Tiling, p: usize, levels: &Levels, wx: &[f64], wy: &[f64], work: &mut Work, sums: &mut Sums) {
+    let (px, py) = (t.px, t.py);
+    let (pi, pj) = (p / t.cols, p % t.cols);
+    let (i0, j0) = (t.i0 + pi * py, t.j0 + pj * px);
+    // Coordinates from the patch centre, so that a huge height offset or position never meets a phase.
+    let xc = |j: usize| (j as f64 - 0.5 * (px as f64 - 1.0)) * scan.dx;
+    let yc = |i: usize| (i as f64 - 0.5 * (py as f64 - 1.0)) * scan.dy;
+    let mut valid = 0usize;
+    // Weighted plane fit: normal equations of (x, y, 1) with weights u, heights relative to the first
+    // valid one (a huge offset cancels before any square is taken).
+    let mut href = f64::NAN;
+    let (mut sxx, mut sxy, mut syy, mut sx, mut sy, mut s1, mut sxz, mut syz, mut sz) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for i in 0..py {
+        let row = scan.row(i0 + i);
+        for j in 0..px {
+            let h = row[j0 + j];
+            let k = i * px + j;
+            if h.is_finite() {
+                valid += 1;
+                if href.is_nan() {
+                    href = h;
+                }
+                let (x, y, z) = (xc(j), yc(i), h - href);
+                let w = wx[j] * wy[i];
+                let u = w * w;
+                work.wm[k] = w;
+                work.u[k] = u;
+                work.r[k] = z;
+                sxx += u * x * x;
+                sxy += u * x * y;
+                syy += u * y * y;
+                sx += u * x;
+                sy += u * y;
+                s1 += u;
+                sxz += u * x * z;
+                syz += u * y * z;
+                sz += u * z;
+            } else {
+                work.wm[k] = 0.0;
+                work.u[k] = 0.0;
+                work.r[k] = 0.0;
+            }
+        }
+    }
+    if (valid as f64) < MIN_VALID_SHARE * (px * py) as f64 {
+        sums.skipped += 1;
+        return;
+    }
+    // The tilt is reported, not removed: a patch tilted by more than the angular resolution reflects
+    // its light away from the mirror direction, into the diffuse part.
+    let m = nalgebra::Matrix3::new(sxx, sxy, sx, sxy, syy, sy, sx, sy, s1);
+    let rhs = nalgebra::Vector3::new(sxz, syz, sz);
+    let (a, b) = match m.lu().solve(&rhs) {
+        Some(v) if v.iter().all(|x| x.is_finite()) => (v[0], v[1]),
+        _ => (0.0, 0.0),
+    };
+    let mean = sz / s1;
+    for k in 0..px * py {
+        if work.u[k] > 0.0 {
+            work.r[k] -= mean;
+        }
+    }
+    sums.used += 1;
+    sums.weight += s1;
+    sums.tilt2 += s1 * (a * a + b * b);
+    let n = px * py;
+    for (l, &vz) in levels.vz.iter().enumerate() {
+        // The mean field chi and the diffuse field g.
+        let (mut cr, mut ci) = (0.0, 0.0);
+        for k in 0..n {
+            let u = work.u[k];
+            work.buf[k] = if u > 0.0 {
+                let (s, c) = (vz * work.r[k]).sin_cos();
+                cr += u * c;
+                ci += u * s;
+                Complex::new(c, s)
+            } else {
+                Complex::default()
+            };
+        }
+        let chi = Complex::new(cr / s1, ci / s1);
+        sums.coherent[l] += chi.norm_sqr() * s1;
+        for k in 0..n {
+            let w = work.wm[k];
+            if w > 0.0 {
+                work.buf[k] = (work.buf[k] - chi) * w;
+            }
+        }
+        // Rows, then the transpose's rows (the columns).
+        work.row.process_with_scratch(&mut work.buf, &mut work.scratch);
+        for i in 0..py {
+            for j in 0..px {
+                work.tr[j * py + i] = work.buf[i * px + j];
+            }
+        }
+        work.col.process_with_scratch(&mut work.tr, &mut work.scratch);
+        let acc = &mut sums.spectra[l];
+        for (a, v) in acc.iter_mut().zip(&work.tr) {
+            *a += v.norm_sqr();
+        }
+    }
+}
