@@ -15,9 +15,9 @@
 //!   patch reflects all its light (Parseval). `Q` and `v` are symmetric in `w_i`, `w_o`: the BRDF is
 //!   reciprocal.
 //! - **Coherence**: the light is coherent over a patch of side `coherence` (default: sunlight,
-//!   [`default_coherence_m`]); the scan is tiled into such patches, each windowed (Hann) and its plane
-//!   removed, and their intensities averaged.
-//! - **Split**: a patch's mean field `chi = <exp(i v_z r)>` (its heights `r` about its plane) is its
+//!   [`default_coherence_m`]); the scan is tiled into such patches, each windowed (Hann), and their
+//!   intensities averaged.
+//! - **Split**: a patch's mean field `chi = <exp(i v_z r)>` (its heights `r` about their mean) is its
 //!   mirror reflection; `specular` is `<|chi|^2>` over the patches at `v_z = 2 k cos_i`, the rest is the
 //!   diffuse BRDF. Both exclude Fresnel; `albedo` includes the material's at the half vector.
 //! - **What the scan cannot tell**: its spacing bounds the directions, `|sin t_o - sin t_i| <= lambda /
@@ -282,6 +282,12 @@ impl Diffraction {
             }
         }
         out
+    }
+
+    /// The diffuse light scattered from `wi` at `lambda_nm`: each propagating FFT bin's outgoing direction
+    /// and its share of the incident power (Fresnel excluded). Their sum is the `diffuse_albedo`.
+    pub fn scattered(&self, lambda_nm: f64, wi: [f64; 3]) -> Vec<([f64; 3], f64)> {
+        self.bins(lambda_nm, wi).into_iter().filter_map(|b| b.wo.map(|(wo, q)| (wo, q * b.share))).collect()
     }
 
     /// The patch-summed intensity of bin `b` at `vz`, never negative.

@@ -27,4 +27,5 @@ mod tails;
 mod tiled_info;
 mod trace;
 mod trace_rgl;
+mod wave;
 mod zerocopy;
