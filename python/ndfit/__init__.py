@@ -13,6 +13,7 @@ without the GIL.
     >>> f.d(m)                                     # D of the fit at unit directions m, shape (n, 3)
     >>> e = ndfit.ndf(scan)                        # the empirical NDF: e.m, e.d, e.count, e.stderr, ...
     >>> t = ndfit.trace(scan, incidence=[0, 40])   # geometric optics on the scan: t.to_json() as `ndfit trace`
+    >>> w = ndfit.wave(scan, grid=64)              # wave optics: w.records, w.grid (wavelengths, incidences, 64, 64)
 
 Units are metres and radians; the frame is the scan's (row index along +y, column along +x, macro normal
 +z). For the anisotropic models the alpha_x axis lies at azimuth -theta_z, along (cos theta_z,
@@ -25,6 +26,6 @@ Many scans at once, on one machine or a cluster: :func:`ndfit.dask.fit_many` (ne
 pandas: ``pip install "ndfit[dask]"``).
 """
 
-from ._ndfit import Fit, Ndf, NdfitError, Scan, Trace, __version__, fit, ndf, read, trace
+from ._ndfit import Fit, Ndf, NdfitError, Scan, Trace, Wave, __version__, fit, ndf, read, trace, wave
 
-__all__ = ["Fit", "Ndf", "NdfitError", "Scan", "Trace", "fit", "ndf", "read", "trace", "__version__"]
+__all__ = ["Fit", "Ndf", "NdfitError", "Scan", "Trace", "Wave", "fit", "ndf", "read", "trace", "wave", "__version__"]

@@ -1,7 +1,7 @@
 """Type stubs of the compiled core of ndfit (see the docstrings in the module for the details)."""
 
 from os import PathLike
-from typing import Any, Dict, List, Literal, Optional, Tuple, Union
+from typing import Any, Dict, List, Literal, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -119,6 +119,25 @@ class Trace:
     def to_json(self) -> str: ...
     def __len__(self) -> int: ...
 
+class Wave:
+    """A scan's scalar-diffraction BRDF: the ``ndfit.wave/1`` document of ``ndfit wave`` and, with ``grid``,
+    the diffuse BRDF grid that ``--grid-out`` writes."""
+
+    @property
+    def records(self) -> List[Dict[str, Any]]:
+        """One per wavelength and incidence, wavelengths outer."""
+    @property
+    def patches(self) -> Dict[str, Any]: ...
+    @property
+    def warnings(self) -> List[str]: ...
+    @property
+    def grid(self) -> Optional[npt.NDArray[np.float64]]:
+        """``(wavelengths, incidences, N, N)`` float64, read-only: the diffuse BRDF (1/sr) per cell of the
+        projected outgoing disk; None without ``grid``."""
+    def to_dict(self) -> Dict[str, Any]: ...
+    def to_json(self) -> str: ...
+    def __len__(self) -> int: ...
+
 def read(
     path: _Path, *, dx: Optional[float] = None, dy: Optional[float] = None, z_scale: Optional[float] = None, format: Optional[str] = None
 ) -> Scan: ...
@@ -188,3 +207,23 @@ def trace(
     despike: Literal["median", "none"] = "median",
     threads: Optional[int] = None,
 ) -> Trace: ...
+def wave(
+    source: _Source,
+    wavelength_nm: Union[float, Sequence[float], None] = None,
+    incidence_deg: Union[float, Sequence[float], None] = None,
+    azimuth_deg: float = 0.0,
+    coherence_um: Optional[float] = None,
+    material: Literal["none", "Al", "Ag", "Au", "Cu", "Cr"] = "none",
+    grid: Optional[int] = None,
+    level_ratio: float = 1.1,
+    *,
+    form: _Form = "plane",
+    dx: Optional[float] = None,
+    dy: Optional[float] = None,
+    z_scale: Optional[float] = None,
+    format: Optional[str] = None,
+    crop: Optional[str] = None,
+    subsample: int = 1,
+    despike: Literal["median", "none"] = "median",
+    threads: Optional[int] = None,
+) -> Wave: ...

@@ -23,6 +23,7 @@ use ndfit::models::{Model, Ndf as _};
 use ndfit::ndf::{EmpiricalNdf, NdfOptions, NormalScheme};
 use ndfit::pipeline::check::{self, Spelling};
 use ndfit::preprocess::{Crop, Despike, FormRemoval, Preprocess};
+use ndfit::wave::WaveOptions;
 use ndfit::{Heightfield, ModelChoice, Options, Pipeline, Preset};
 
 create_exception!(
@@ -271,6 +272,14 @@ impl<'py> Source<'py> {
             let ty = obj.get_type().name().map(|n| n.to_string()).unwrap_or_default();
             invalid(format!("expected an ndfit.Scan or a path, got {ty}"))
         })
+    }
+
+    /// The label of errors: the file's path, or the scan's own label (its file, or `<array>`).
+    fn label(&self) -> String {
+        match self {
+            Source::File(p) => p.display().to_string(),
+            Source::Scan(s) => s.get().label(),
+        }
     }
 
     /// Run `f` on the pipeline's input: the file's path, or the scan (borrowed) and its label.
@@ -833,6 +842,176 @@ fn trace(
     Ok(Trace { report })
 }
 
+/// A number or a sequence of numbers as a list (`None`: `default`).
+fn numbers(v: Option<&Bound<'_, PyAny>>, default: &[f64], what: &str) -> PyResult<Vec<f64>> {
+    match v {
+        None => Ok(default.to_vec()),
+        Some(v) => match v.extract::<f64>() {
+            Ok(x) => Ok(vec![x]),
+            Err(_) => v.extract::<Vec<f64>>().map_err(|_| invalid(format!("{what} must be a number or a sequence of numbers"))),
+        },
+    }
+}
+
+/// The scalar-diffraction BRDF of a scan: the `ndfit.wave/1` document of `ndfit wave`, and with `grid=N`
+/// the diffuse BRDF on the N x N grid of the projected outgoing disk that `--grid-out` writes.
+#[pyclass(module = "ndfit", name = "Wave", frozen)]
+pub struct Wave {
+    report: ndfit::wave::WaveReport,
+    /// float64 (wavelengths, incidences, N, N), read-only; `None` without `grid`.
+    grid: Option<Py<PyAny>>,
+}
+
+#[pymethods]
+impl Wave {
+    /// One dict per wavelength and incidence, wavelengths outer (`wavelength_nm`, `theta_deg`, `phi_deg`,
+    /// `specular`, `diffuse_albedo`, `albedo`, `evanescent`, `band_limit`, `beyond_band`,
+    /// `angular_step_deg`).
+    #[getter]
+    fn records<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.to_dict(py)?.get_item("records")
+    }
+    /// The coherence patches (`coherence_m`, `coherence_source`, `samples`, `used`, `skipped`,
+    /// `tilt_rms_deg`).
+    #[getter]
+    fn patches<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.to_dict(py)?.get_item("patches")
+    }
+    /// What the scan cannot tell, one line each (few patches, light beyond the band).
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.report.warnings.clone()
+    }
+    /// The diffuse BRDF (1/sr, Fresnel excluded) averaged over each cell of the N x N grid on the projected
+    /// outgoing disk, float64 of shape (wavelengths, incidences, N, N), read-only: what `ndfit wave --grid N
+    /// --grid-out PREFIX` writes to `PREFIX.npy`. Row `i` is `y = -1 + (2i+1)/N`, column `j` is `x = -1 +
+    /// (2j+1)/N`; 0 outside the unit disk. `None` unless `ndfit.wave` was given `grid`.
+    #[getter]
+    fn grid<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        self.grid.as_ref().map(|g| g.bind(py).clone())
+    }
+    /// The whole `ndfit.wave/1` document as a dict.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.to_json()?)
+    }
+    /// The `ndfit.wave/1` JSON text, byte for byte what `ndfit wave -o` writes for the same scan and
+    /// options.
+    fn to_json(&self) -> PyResult<String> {
+        let mut s = serde_json::to_string_pretty(&self.report).map_err(|e| invalid(format!("cannot serialize the wave report ({e})")))?;
+        s.push('\n');
+        Ok(s)
+    }
+    fn __len__(&self) -> usize {
+        self.report.records.len()
+    }
+    fn __repr__(&self) -> String {
+        let p = &self.report.patches;
+        format!(
+            "<ndfit.Wave {} records, {}x{} grid, {} patches of {:.1} um>",
+            self.report.records.len(),
+            self.report.grid[0],
+            self.report.grid[1],
+            p.used,
+            p.coherence_m * 1e6
+        )
+    }
+}
+
+/// The report of `scan` under `opts`, and with `grid = Some(n)` the grids of every wavelength and
+/// incidence (wavelengths outer), flattened as [`ndfit::wave::write_grid_npy`] writes them.
+fn wave_of(scan: &ndfit::Scan<'_>, opts: &WaveOptions, grid: Option<usize>) -> ndfit::Result<(ndfit::wave::WaveReport, Option<Vec<f64>>)> {
+    let (report, d) = ndfit::wave::wave(scan, opts, None)?;
+    let grid = grid.map(|n| ndfit::wave::grids(&d, &opts.wavelengths_nm, &opts.incidences_deg, opts.azimuth_deg, n)).transpose()?;
+    Ok((report, grid))
+}
+
+/// `ndfit.wave(scan_or_path, wavelength_nm=None, incidence_deg=None, azimuth_deg=0.0, coherence_um=None,
+/// material="none", grid=None, level_ratio=1.1, *, ...) -> Wave`: the scan's scalar-diffraction BRDF
+/// (docs/WAVE.md), as `ndfit wave` computes it with the same options (`Wave.to_json()` is the document it
+/// writes; `Wave.grid` the array `--grid N --grid-out` writes).
+///
+/// - `wavelength_nm`: wavelengths in nm (a number or a sequence; default [450, 550, 650]);
+///   `incidence_deg`: elevations in degrees (each in [0, 89.9]; default [0, 30, 45, 60, 75]); `azimuth_deg`
+///   (0 = the scan's +x); `coherence_um`: side of the coherence patch in micrometres (default: sunlight's
+///   coherence area at 550 nm, 18.9 um); `material` (none|Al|Ag|Au|Cu|Cr: the Fresnel factor of `albedo`);
+///   `grid`: cells per side of the diffuse BRDF grid (1-4096; `None`: no grid); `level_ratio`: largest ratio
+///   between neighbouring v_z levels, in (1, 2].
+/// - reading (files only): `dx`, `dy` (m), `z_scale` (m per stored unit), `format`.
+/// - preprocessing: `form` (none|plane|poly2|poly3|cylinder, default plane), `crop`, `subsample`,
+///   `despike` (median|none).
+/// - `threads`: threads for this call (default: all cores, as the CLI).
+// The signature spells `level_ratio`'s default as a literal so that `help()` shows it: keep it the CLI's.
+const _: () = assert!(ndfit::wave::DEFAULT_LEVEL_RATIO == 1.1);
+
+#[pyfunction]
+#[pyo3(signature = (source, wavelength_nm=None, incidence_deg=None, azimuth_deg=0.0, coherence_um=None, material="none", grid=None,
+    level_ratio=1.1, *, form="plane", dx=None, dy=None, z_scale=None, format=None, crop=None, subsample=1,
+    despike="median", threads=None))]
+#[allow(clippy::too_many_arguments)]
+fn wave(
+    py: Python<'_>,
+    source: &Bound<'_, PyAny>,
+    wavelength_nm: Option<&Bound<'_, PyAny>>,
+    incidence_deg: Option<&Bound<'_, PyAny>>,
+    azimuth_deg: f64,
+    coherence_um: Option<f64>,
+    material: &str,
+    grid: Option<i64>,
+    level_ratio: f64,
+    form: &str,
+    dx: Option<f64>,
+    dy: Option<f64>,
+    z_scale: Option<f64>,
+    format: Option<String>,
+    crop: Option<&str>,
+    subsample: usize,
+    despike: &str,
+    threads: Option<usize>,
+) -> PyResult<Wave> {
+    let src = Source::from_py(source)?;
+    let so = ScanOpts::new(&src, dx, dy, z_scale, format, form, crop, subsample, despike)?;
+    let label = src.label();
+    let opts = WaveOptions {
+        wavelengths_nm: numbers(wavelength_nm, &ndfit::wave::DEFAULT_WAVELENGTHS_NM, "wavelength_nm")?,
+        incidences_deg: numbers(incidence_deg, &ndfit::wave::DEFAULT_INCIDENCES_DEG, "incidence_deg")?,
+        azimuth_deg,
+        // As `--coherence UM`, to the same bits.
+        coherence_m: coherence_um.map(|um| um * 1e-6),
+        material: material.parse().map_err(to_py)?,
+        level_ratio,
+    };
+    // Every option is checked before the scan is read, as `ndfit wave` does.
+    opts.validate().map_err(|e| to_py(e.with_path(&label)))?;
+    let grid = match grid {
+        None => None,
+        Some(n) if (1..=4096).contains(&n) => Some(n as usize),
+        Some(n) => return Err(invalid(format!("{label}: grid {n} is outside 1..=4096"))),
+    };
+    let (report, cells) = src.run(
+        py,
+        threads,
+        |p| {
+            let scan = ndfit::pipeline::read_preprocessed(p, &so.read, &so.pre)?;
+            wave_of(&scan, &opts, grid).map_err(|e| e.with_path(p))
+        },
+        |scan, label| {
+            let scan = ndfit::preprocess::apply(scan, &so.pre).map_err(|e| e.with_path(label))?;
+            wave_of(&scan, &opts, grid).map_err(|e| e.with_path(label))
+        },
+    )?;
+    let grid = match (cells, grid) {
+        (Some(cells), Some(n)) => {
+            let arr = cells.into_pyarray(py).reshape([opts.wavelengths_nm.len(), opts.incidences_deg.len(), n, n])?.into_any();
+            let kw = PyDict::new(py);
+            kw.set_item("write", false)?;
+            arr.call_method("setflags", (), Some(&kw))?;
+            Some(arr.unbind())
+        }
+        _ => None,
+    };
+    Ok(Wave { report, grid })
+}
+
 /// The compiled part of `ndfit`; import `ndfit`, not this.
 #[pymodule]
 fn _ndfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -841,10 +1020,12 @@ fn _ndfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Ndf>()?;
     m.add_class::<Fit>()?;
     m.add_class::<Trace>()?;
+    m.add_class::<Wave>()?;
     m.add_function(wrap_pyfunction!(read, m)?)?;
     m.add_function(wrap_pyfunction!(ndf, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
     m.add_function(wrap_pyfunction!(trace, m)?)?;
+    m.add_function(wrap_pyfunction!(wave, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

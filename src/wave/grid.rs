@@ -63,15 +63,20 @@ impl Diffraction {
     }
 }
 
-/// Write the grids of every wavelength and incidence (wavelengths outer) as one `float64` `.npy` of shape
-/// `(wavelengths, incidences, n, n)`, atomically.
-pub fn write_grid_npy(path: &Path, d: &Diffraction, wavelengths_nm: &[f64], incidences_deg: &[f64], phi_deg: f64, n: usize) -> Result<()> {
+/// The grids of every wavelength and incidence (wavelengths outer): a C-ordered array of shape
+/// `(wavelengths, incidences, n, n)`, what `ndfit wave --grid-out` writes. `n` must be in `1..=4096`.
+pub fn grids(d: &Diffraction, wavelengths_nm: &[f64], incidences_deg: &[f64], phi_deg: f64, n: usize) -> Result<Vec<f64>> {
     if n == 0 || n > 4096 {
         return Err(Error::invalid(format!("grid {n} is outside 1..=4096")));
     }
     let pairs: Vec<(f64, f64)> = wavelengths_nm.iter().flat_map(|&l| incidences_deg.iter().map(move |&t| (l, t))).collect();
     let grids: Vec<Vec<f64>> = pairs.par_iter().map(|&(l, t)| d.grid(l, t, phi_deg, n)).collect();
-    let data: Vec<f64> = grids.into_iter().flatten().collect();
+    Ok(grids.into_iter().flatten().collect())
+}
+
+/// Write [`grids`] as one `float64` `.npy`, atomically.
+pub fn write_grid_npy(path: &Path, d: &Diffraction, wavelengths_nm: &[f64], incidences_deg: &[f64], phi_deg: f64, n: usize) -> Result<()> {
+    let data = grids(d, wavelengths_nm, incidences_deg, phi_deg, n)?;
     let bytes = crate::io::npy_f64_bytes(&[wavelengths_nm.len(), incidences_deg.len(), n, n], &data);
     crate::io::write_bytes_atomic(path, &bytes)
 }

@@ -36,7 +36,7 @@ mod patches;
 
 use serde::Serialize;
 
-pub use grid::write_grid_npy;
+pub use grid::{grids, write_grid_npy};
 
 use crate::error::{Error, Result};
 use crate::export::rgl::Material;
@@ -243,6 +243,13 @@ impl Diffraction {
         (self.sums.tilt2 / self.sums.weight).sqrt().atan().to_degrees()
     }
 
+    /// The mirror share of patches whose heights are uncorrelated over many wavelengths:
+    /// `<sum u^2 / (sum u)^2>`, the diffuse light that falls within a patch's own mirror lobe. A `specular`
+    /// near it is no mirror.
+    pub fn incoherent_floor(&self) -> f64 {
+        self.sums.floor / self.sums.weight
+    }
+
     /// The band limit: the largest `|sin t_o - sin t_i|` along x and y that the spacing resolves at
     /// `lambda_nm`.
     pub fn band(&self, lambda_nm: f64) -> [f64; 2] {
@@ -445,6 +452,8 @@ pub struct PatchReport {
     pub skipped: usize,
     /// RMS tilt of the patches' planes (degrees).
     pub tilt_rms_deg: f64,
+    /// The mirror share that patches of uncorrelated heights show ([`Diffraction::incoherent_floor`]).
+    pub incoherent_floor: f64,
 }
 
 /// `ndfit wave`'s report (`ndfit.wave/1`, shared/CONTRACT.md "Wave optics").
@@ -517,6 +526,7 @@ pub fn wave(scan: &Scan<'_>, opts: &WaveOptions, progress: Option<&(dyn Fn(usize
             used,
             skipped,
             tilt_rms_deg: d.patch_tilt_rms_deg(),
+            incoherent_floor: d.incoherent_floor(),
         },
         levels: d.levels(),
         level_ratio: opts.level_ratio,

@@ -59,11 +59,13 @@ pub(crate) struct Sums {
     pub skipped: usize,
     /// Sum over used patches of `u`-weighted squared tilt `tan^2` of the patch's plane, and its weight.
     pub tilt2: f64,
+    /// Sum over used patches of `sum u^2 / sum u`: with `weight`, the mirror share of incoherent patches.
+    pub floor: f64,
 }
 
 impl Sums {
     fn zero(levels: usize, bins: usize) -> Sums {
-        Sums { spectra: vec![vec![0.0; bins]; levels], coherent: vec![0.0; levels], weight: 0.0, used: 0, skipped: 0, tilt2: 0.0 }
+        Sums { spectra: vec![vec![0.0; bins]; levels], coherent: vec![0.0; levels], weight: 0.0, used: 0, skipped: 0, tilt2: 0.0, floor: 0.0 }
     }
 
     fn add(&mut self, o: &Sums) {
@@ -75,6 +77,7 @@ impl Sums {
         self.used += o.used;
         self.skipped += o.skipped;
         self.tilt2 += o.tilt2;
+        self.floor += o.floor;
     }
 }
 
@@ -161,9 +164,8 @@ fn patch(scan: &Scan<'_>, t: Tiling, p: usize, levels: &Levels, wx: &[f64], wy: 
     let mut href = f64::NAN;
     let (mut sxx, mut sxy, mut syy, mut sx, mut sy, mut s1, mut sxz, mut syz, mut sz) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for i in 0..py {
-        let row = scan.row(i0 + i);
-        for j in 0..px {
-            let h = row[j0 + j];
+        let row = &scan.row(i0 + i)[j0..j0 + px];
+        for (j, &h) in row.iter().enumerate() {
             let k = i * px + j;
             if h.is_finite() {
                 valid += 1;
@@ -213,6 +215,7 @@ fn patch(scan: &Scan<'_>, t: Tiling, p: usize, levels: &Levels, wx: &[f64], wy: 
     sums.used += 1;
     sums.weight += s1;
     sums.tilt2 += s1 * (a * a + b * b);
+    sums.floor += work.u.iter().map(|u| u * u).sum::<f64>() / s1;
     let n = px * py;
     for (l, &vz) in levels.vz.iter().enumerate() {
         // The mean field chi and the diffuse field g.
