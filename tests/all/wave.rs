@@ -358,3 +358,20 @@ fn the_command_refuses_bad_input_in_one_line_and_writes_nothing() {
         assert!(records.iter().all(|r| r[key].is_number()), "{key} missing");
     }
 }
+
+#[test]
+fn a_flat_scan_far_from_zero_is_a_mirror_with_the_conductors_fresnel() {
+    // Heights 1 km up with 5% masked points: every patch reflects as a mirror, and `albedo` is the
+    // conductor's Fresnel factor at the incidence.
+    let n = 256;
+    let z: Vec<f64> = (0..n * n).map(|i| if (i * 7919) % 20 == 3 { f64::NAN } else { 1e3 }).collect();
+    let hf = Heightfield::new(n, n, 1e-7, 1e-7, z).unwrap();
+    let o = WaveOptions { material: Material::Au, ..opts(&[450.0, 650.0], &[0.0, 60.0], Some(6.4e-6)) };
+    let (report, _) = wave(&hf, &o, None).unwrap();
+    for r in &report.records {
+        assert!((r.specular - 1.0).abs() < 1e-9 && r.diffuse_albedo < 1e-9, "{r:?}");
+        let f = Material::Au.fresnel(r.theta_deg.to_radians().cos(), r.wavelength_nm);
+        assert!((r.albedo - f).abs() < 1e-9, "{} nm, {} deg: albedo {} against Fresnel {f}", r.wavelength_nm, r.theta_deg, r.albedo);
+    }
+    assert_eq!(report.patches.skipped, 0);
+}
