@@ -8,7 +8,8 @@
 //! parameter errors). [`analysis`] extracts the Pareto front of time against error and the cost model
 //! (log-log exponents), [`plot`] draws the front, `presets` holds the presets picked from it, and
 //! [`numpy`] runs the reference numpy + nlopt pipeline in the same run for the speed-up ratios; [`report`] renders the tables of `docs/PERFORMANCE.md` from a run; [`trace`](mod@trace) measures the
-//! tracer's throughput (`ndfit bench --trace`).
+//! tracer's throughput (`ndfit bench --trace`); [`wave`](mod@wave) times `ndfit wave` against the numpy
+//! `ndfitpy.wave` and the accuracy cost of its level ratio (`ndfit bench --wave`).
 
 pub mod accuracy;
 pub mod analysis;
@@ -24,6 +25,7 @@ pub mod report;
 pub mod scene;
 pub mod sweep;
 pub mod trace;
+pub mod wave;
 
 pub use knobs::{Binning, Knobs, Storage};
 pub use presets::Preset;

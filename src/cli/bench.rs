@@ -78,6 +78,23 @@ pub struct Args {
     /// incidences with `ndfit trace`'s defaults; writes trace.json and trace.md (--quick: small scans).
     #[arg(long)]
     pub trace: bool,
+    /// Wave optics instead of the sweep (`ndfit::bench::wave`): `ndfit wave` against the numpy
+    /// `ndfitpy.wave` (Python: --numpy, else fits/.venv) as whole processes on a 4096^2 synthetic scan
+    /// (0.1 um spacing) and the shared real scans, ndfit's peak memory against the heights' bytes, and the
+    /// accuracy cost of `--level-ratio` (2048^2 and one real scan); writes wave.json and wave.md
+    /// (--quick: 2048^2, one run each).
+    #[arg(long)]
+    pub wave: bool,
+    /// With --wave: side of the synthetic speed scan (default 4096, quick 2048).
+    #[arg(long)]
+    pub wave_size: Option<usize>,
+    /// With --wave: side of the synthetic scan of the level-ratio sweep (default 2048).
+    #[arg(long)]
+    pub wave_level_size: Option<usize>,
+    /// With --wave: the real scans, comma-separated, or `none` (default: ../shared/data/scans/st_x3p-2.x3p
+    /// and st_plu-1.plu; missing ones are skipped with a note).
+    #[arg(long, value_delimiter = ',')]
+    pub wave_scans: Option<Vec<PathBuf>>,
     /// Internal: measure one point (JSON) and print its row as JSON (how the isolated sweep runs).
     #[arg(long, hide = true)]
     pub child_point: Option<String>,
@@ -152,6 +169,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     if args.trace {
         return trace(&args);
+    }
+    if args.wave {
+        return wave(&args);
     }
     let started = std::time::Instant::now();
     let load0 = loadavg();
@@ -410,5 +430,42 @@ fn trace(args: &Args) -> anyhow::Result<ExitCode> {
     ndfit::io::write_bytes_atomic(&args.out.join("trace.md"), md.as_bytes())?;
     eprint!("{md}");
     eprintln!("wrote {} and {}", args.out.join("trace.json").display(), args.out.join("trace.md").display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--wave`: `ndfit wave` against numpy and the level ratio's trade (`ndfit::bench::wave`).
+fn wave(args: &Args) -> anyhow::Result<ExitCode> {
+    use ndfit::bench::wave as wb;
+    let exe = std::env::current_exe().context("cannot find the ndfit executable")?;
+    let python = args.numpy.clone().or_else(wb::default_python);
+    let mut plan = if args.quick { wb::WavePlan::quick(exe, python) } else { wb::WavePlan::full(exe, python) };
+    if let Some(n) = args.wave_size {
+        plan.size = n;
+    }
+    if let Some(n) = args.wave_level_size {
+        plan.level_size = n;
+    }
+    if let Some(r) = args.repeats {
+        plan.repeats = r;
+    }
+    if let Some(s) = &args.wave_scans {
+        plan.scans = s.iter().filter(|p| p.as_os_str() != "none" && !p.as_os_str().is_empty()).cloned().collect();
+    }
+    plan.check()?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create the output folder", args.out.display()))?;
+    let tmp;
+    let work = match &args.work_dir {
+        Some(d) => d.clone(),
+        None => {
+            tmp = tempfile::Builder::new().prefix(".bench-wave.").tempdir_in(&args.out).context("cannot create a temporary folder")?;
+            tmp.path().to_path_buf()
+        }
+    };
+    let b = wb::run(&plan, &work, |l| eprintln!("{l}"))?;
+    let md = wb::markdown(&b);
+    ndfit::io::write_bytes_atomic(&args.out.join("wave.json"), serde_json::to_string_pretty(&b).context("JSON")?.as_bytes())?;
+    ndfit::io::write_bytes_atomic(&args.out.join("wave.md"), md.as_bytes())?;
+    eprint!("{md}");
+    eprintln!("wrote {} and {}", args.out.join("wave.json").display(), args.out.join("wave.md").display());
     Ok(ExitCode::SUCCESS)
 }

@@ -82,19 +82,19 @@ pub fn write_grid_npy(path: &Path, d: &Diffraction, wavelengths_nm: &[f64], inci
 }
 
 /// The share of the light that single specular reflection on the scan's facets (central-difference
-/// slopes) sends from `wi` beyond `band` (`|x_o + x_i|`, `|y_o + y_i|`), each facet weighted by the
-/// projected area it shows the light, `(w_i . m) / (m_z cos_i)`.
-pub(crate) fn geometric_beyond_band(scan: &Scan<'_>, wi: [f64; 3], band: [f64; 2]) -> f64 {
+/// slopes) sends from each `(w_i, band)` of `cases` beyond its band (`|x_o + x_i|`, `|y_o + y_i|`), each facet
+/// weighted by the projected area it shows the light, `(w_i . m) / (m_z cos_i)`. One pass over the heights;
+/// rows summed in order (the same bits on any thread count).
+pub(crate) fn geometric_beyond_band(scan: &Scan<'_>, cases: &[([f64; 3], [f64; 2])]) -> Vec<f64> {
     let (nx, ny) = (scan.nx, scan.ny);
     if nx < 3 || ny < 3 {
-        return 0.0;
+        return vec![0.0; cases.len()];
     }
-    // Rows summed in order: the same bits on any thread count.
-    let rows: Vec<(f64, f64)> = (1..ny - 1)
+    let rows: Vec<Vec<(f64, f64)>> = (1..ny - 1)
         .into_par_iter()
         .map(|i| {
             let (up, row, down) = (scan.row(i - 1), scan.row(i), scan.row(i + 1));
-            let (mut all, mut beyond) = (0.0, 0.0);
+            let mut sums = vec![(0.0, 0.0); cases.len()];
             for j in 1..nx - 1 {
                 let sx = (row[j + 1] - row[j - 1]) / (2.0 * scan.dx);
                 let sy = (down[j] - up[j]) / (2.0 * scan.dy);
@@ -103,24 +103,30 @@ pub(crate) fn geometric_beyond_band(scan: &Scan<'_>, wi: [f64; 3], band: [f64; 2
                 }
                 let norm = (sx * sx + sy * sy + 1.0).sqrt();
                 let m = [-sx / norm, -sy / norm, 1.0 / norm];
-                let c = wi[0] * m[0] + wi[1] * m[1] + wi[2] * m[2];
-                if !(c > 0.0) {
-                    continue;
-                }
-                let w = c / m[2];
-                all += w;
-                let wo = [2.0 * c * m[0] - wi[0], 2.0 * c * m[1] - wi[1]];
-                if (wo[0] + wi[0]).abs() > band[0] || (wo[1] + wi[1]).abs() > band[1] {
-                    beyond += w;
+                for ((wi, band), sum) in cases.iter().zip(sums.iter_mut()) {
+                    let c = wi[0] * m[0] + wi[1] * m[1] + wi[2] * m[2];
+                    if !(c > 0.0) {
+                        continue;
+                    }
+                    let w = c / m[2];
+                    sum.0 += w;
+                    let wo = [2.0 * c * m[0] - wi[0], 2.0 * c * m[1] - wi[1]];
+                    if (wo[0] + wi[0]).abs() > band[0] || (wo[1] + wi[1]).abs() > band[1] {
+                        sum.1 += w;
+                    }
                 }
             }
-            (all, beyond)
+            sums
         })
         .collect();
-    let (all, beyond) = rows.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
-    if all > 0.0 {
-        beyond / all
-    } else {
-        0.0
-    }
+    (0..cases.len())
+        .map(|k| {
+            let (all, beyond) = rows.iter().fold((0.0, 0.0), |a, r| (a.0 + r[k].0, a.1 + r[k].1));
+            if all > 0.0 {
+                beyond / all
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }

@@ -15,7 +15,7 @@
 //!   patch reflects all its light (Parseval). `Q` and `v` are symmetric in `w_i`, `w_o`: the BRDF is
 //!   reciprocal.
 //! - **Coherence**: the light is coherent over a patch of side `coherence` (default: sunlight,
-//!   [`default_coherence_m`]); the scan is tiled into such patches, each windowed (Hann), and their
+//!   [`default_coherence_m`](crate::wave::default_coherence_m)); the scan is tiled into such patches, each windowed (Hann), and their
 //!   intensities averaged.
 //! - **Split**: a patch's mean field `chi = <exp(i v_z r)>` (its heights `r` about their mean) is its
 //!   mirror reflection; `specular` is `<|chi|^2>` over the patches at `v_z = 2 k cos_i`, the rest is the
@@ -484,13 +484,14 @@ pub struct WaveReport {
 /// Compute the report of `scan` under `opts`, and the diffraction itself (for the grid and the table).
 pub fn wave(scan: &Scan<'_>, opts: &WaveOptions, progress: Option<&(dyn Fn(usize, usize) + Sync)>) -> Result<(WaveReport, Diffraction)> {
     let d = Diffraction::new(scan, opts, progress)?;
+    let pairs: Vec<(f64, f64)> = opts.wavelengths_nm.iter().flat_map(|&l| opts.incidences_deg.iter().map(move |&t| (l, t))).collect();
+    let cases: Vec<([f64; 3], [f64; 2])> = pairs.iter().map(|&(l, t)| (direction(t, opts.azimuth_deg), d.band(l))).collect();
+    let beyond = grid::geometric_beyond_band(scan, &cases);
     let mut records = Vec::new();
-    for &l in &opts.wavelengths_nm {
-        for &t in &opts.incidences_deg {
-            let mut r = d.record(l, t, opts.azimuth_deg, opts.material);
-            r.beyond_band = grid::geometric_beyond_band(scan, direction(t, opts.azimuth_deg), d.band(l));
-            records.push(r);
-        }
+    for (&(l, t), b) in pairs.iter().zip(beyond) {
+        let mut r = d.record(l, t, opts.azimuth_deg, opts.material);
+        r.beyond_band = b;
+        records.push(r);
     }
     let (used, skipped) = d.patches();
     let mut warnings = Vec::new();
@@ -498,6 +499,13 @@ pub fn wave(scan: &Scan<'_>, opts: &WaveOptions, progress: Option<&(dyn Fn(usize
         warnings.push(format!(
             "only {used} coherence patches: the diffuse BRDF carries speckle of about {:.0}% per bin",
             100.0 / (used as f64).sqrt()
+        ));
+    }
+    let floor = d.incoherent_floor();
+    let low = records.iter().filter(|r| r.theta_deg <= 45.0).map(|r| r.specular).fold(f64::NAN, f64::max);
+    if low < 2.0 * floor {
+        warnings.push(format!(
+            "the mirror share up to 45 deg ({low:.3} at most) is within twice what patches of uncorrelated heights show ({floor:.3}): no mirror, the light within each patch's own mirror lobe"
         ));
     }
     let worst = records.iter().map(|r| r.beyond_band).fold(0.0, f64::max);

@@ -163,7 +163,7 @@ fn patch(scan: &Scan<'_>, t: Tiling, p: usize, levels: &Levels, wx: &[f64], wy: 
     // valid one (a huge offset cancels before any square is taken).
     let mut href = f64::NAN;
     let (mut sxx, mut sxy, mut syy, mut sx, mut sy, mut s1, mut sxz, mut syz, mut sz) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for i in 0..py {
+    for (i, &wyi) in wy.iter().enumerate() {
         let row = &scan.row(i0 + i)[j0..j0 + px];
         for (j, &h) in row.iter().enumerate() {
             let k = i * px + j;
@@ -173,7 +173,7 @@ fn patch(scan: &Scan<'_>, t: Tiling, p: usize, levels: &Levels, wx: &[f64], wy: 
                     href = h;
                 }
                 let (x, y, z) = (xc(j), yc(i), h - href);
-                let w = wx[j] * wy[i];
+                let w = wx[j] * wyi;
                 let u = w * w;
                 work.wm[k] = w;
                 work.u[k] = u;

@@ -176,3 +176,57 @@ fn fit_cli_presets_recover_truth() {
     }
     assert!(starts[2] > starts[1], "accurate tries more starts than balanced: {starts:?}");
 }
+
+#[test]
+fn wave_bench_on_a_tiny_scan_writes_every_field() {
+    // `--wave` in its quickest form: a 256^2 synthetic scan (one coherence patch), no real scans, one run
+    // each. Never timing: the JSON's shape and what it must say about the scan.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = Command::new(ndfit_bin())
+        .args(["bench", "--wave", "--quick", "--wave-size", "256", "--wave-level-size", "256", "--wave-scans", "none", "-o"])
+        .arg(dir.path())
+        .output()
+        .expect("ndfit runs");
+    assert!(o.status.success(), "ndfit bench --wave failed: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("wave.json")).expect("wave.json")).expect("JSON");
+    assert_eq!(v["schema"], "ndfit.bench.wave/1");
+    assert!(dir.path().join("wave.md").is_file());
+    let speed = v["speed"].as_array().expect("speed rows");
+    assert_eq!(speed.len(), 1, "the synthetic scan alone");
+    let s = &speed[0];
+    assert_eq!(s["scan"], "synthetic");
+    assert_eq!(s["grid"], serde_json::json!([256, 256]));
+    assert_eq!(s["heights_bytes"], 256 * 256 * 8);
+    // 0.1 um spacing, default coherence 18.9 um: one patch of 189 samples.
+    assert_eq!(s["patch_samples"], serde_json::json!([189, 189]));
+    assert_eq!(s["patches"], 1);
+    assert!(s["levels"].as_u64().expect("levels") > 1);
+    assert!(s["ndfit"]["median_ms"].as_f64().expect("time") > 0.0);
+    assert_eq!(s["ndfit"]["samples"].as_array().expect("samples").len(), 1);
+    // Not the judged size: reported, not judged.
+    assert!(s["ratio_met"].is_null() && s["memory_met"].is_null());
+    if cfg!(target_os = "linux") {
+        let peak = s["ndfit_peak_rss"].as_u64().expect("peak from --report-memory");
+        assert!(peak > 256 * 256 * 8, "the peak {peak} holds at least the heights");
+        assert!(s["memory_over_heights"].as_f64().expect("ratio") > 1.0);
+    }
+    // With a Python (fits/.venv) the numpy peer ran on the same scan: a time, a ratio and the agreement.
+    if !s["numpy"].is_null() {
+        assert!(s["ratio"].as_f64().expect("ratio") > 0.0);
+        assert!(s["numpy_diffuse_rel_diff"].as_f64().expect("agreement").is_finite());
+    } else {
+        assert!(s["ratio"].is_null());
+    }
+    let sweeps = v["level_ratio"].as_array().expect("level sweeps");
+    assert_eq!(sweeps.len(), 1);
+    let pts = sweeps[0]["points"].as_array().expect("points");
+    let ratios: Vec<f64> = pts.iter().map(|p| p["level_ratio"].as_f64().expect("ratio")).collect();
+    assert_eq!(ratios, vec![1.02, 1.05, 1.1, 1.2, 1.4]);
+    // The reference against itself differs by nothing; coarser ratios need fewer levels.
+    for k in ["diffuse_rel_diff", "specular_abs_diff", "grid_rel_diff"] {
+        assert_eq!(pts[0][k].as_f64(), Some(0.0), "{k}");
+        assert!(pts.iter().all(|p| p[k].as_f64().is_some_and(|x| x.is_finite() && x >= 0.0)), "{k}");
+    }
+    let levels: Vec<u64> = pts.iter().map(|p| p["levels"].as_u64().expect("levels")).collect();
+    assert!(levels.windows(2).all(|w| w[0] > w[1]), "{levels:?}");
+}

@@ -246,7 +246,7 @@ fn a_rough_surface_scatters_as_the_tracers_first_bounce() {
     let model = Beckmann::new(0.2 * std::f64::consts::SQRT_2, 0.2 * std::f64::consts::SQRT_2, 0.0).unwrap();
     let wi = direction(0.0, 0.0);
     let li = model.lambda(nalgebra::Vector3::new(wi[0], wi[1], wi[2]));
-    let mut waved = vec![0.0; 4];
+    let mut waved = [0.0; 4];
     waved[0] += report.records[0].specular;
     for (wo, e) in d.scattered(550.0, wi) {
         if let Some(b) = table.bin(wo) {
