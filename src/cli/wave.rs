@@ -54,6 +54,8 @@ pub struct Args {
     /// No summary line on standard error.
     #[arg(long)]
     pub quiet: bool,
+    #[command(flatten, next_help_heading = "The diffuse BRDF as a material (--to rgl)")]
+    pub rgl: super::wave_rgl::RglArgs,
 }
 
 impl Args {
@@ -129,16 +131,7 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
 /// One line: the mirror share at each incidence of the middle wavelength, and the patches.
 fn summary(r: &ndfit::wave::WaveReport) -> String {
     let mid = r.records[r.records.len() / 2].wavelength_nm;
-    let shares: Vec<String> = r
-        .records
-        .iter()
-        .filter(|x| x.wavelength_nm == mid)
-        .map(|x| format!("{:.3} at {} deg", x.specular, x.theta_deg))
-        .collect();
-    format!(
-        "mirror share at {mid} nm {} ({} patches of {:.1} um)",
-        shares.join(", "),
-        r.patches.used,
-        r.patches.coherence_m * 1e6
-    )
+    let shares: Vec<String> =
+        r.records.iter().filter(|x| x.wavelength_nm == mid).map(|x| format!("{:.3} at {} deg", x.specular, x.theta_deg)).collect();
+    format!("mirror share at {mid} nm {} ({} patches of {:.1} um)", shares.join(", "), r.patches.used, r.patches.coherence_m * 1e6)
 }

@@ -33,10 +33,10 @@ use crate::scan::Heightfield;
 
 pub use atomic::{check_output, protect_input};
 pub use atomic::{write_atomic, write_bytes_atomic};
+pub use npy::npy_f64_bytes;
 pub use x3p::MAX_POINT_MD5;
 pub use x3p_write::write_x3p;
 pub use x3p_write::{write_x3p_repeated, x3p_bytes};
-pub use npy::npy_f64_bytes;
 
 /// Options for formats that do not carry everything themselves (CONTRACT.md: `--dx`, `--dy`, `--z-scale`).
 #[derive(Debug, Clone, Default, PartialEq)]

@@ -65,7 +65,15 @@ pub(crate) struct Sums {
 
 impl Sums {
     fn zero(levels: usize, bins: usize) -> Sums {
-        Sums { spectra: vec![vec![0.0; bins]; levels], coherent: vec![0.0; levels], weight: 0.0, used: 0, skipped: 0, tilt2: 0.0, floor: 0.0 }
+        Sums {
+            spectra: vec![vec![0.0; bins]; levels],
+            coherent: vec![0.0; levels],
+            weight: 0.0,
+            used: 0,
+            skipped: 0,
+            tilt2: 0.0,
+            floor: 0.0,
+        }
     }
 
     fn add(&mut self, o: &Sums) {

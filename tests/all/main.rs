@@ -28,4 +28,5 @@ mod tiled_info;
 mod trace;
 mod trace_rgl;
 mod wave;
+mod wave_rgl;
 mod zerocopy;

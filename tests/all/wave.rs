@@ -306,7 +306,13 @@ fn energy_is_conserved_up_to_40_degrees_on_fresh_surfaces() {
             if name == "smooth" {
                 // The mirror of the heights themselves (holes excluded), within 0.01.
                 let heights = mean_field2(hf, 2.0 * k_of(r.wavelength_nm) * r.theta_deg.to_radians().cos());
-                assert!((r.specular - heights).abs() < 0.01, "{} nm, {} deg: {} against {heights}", r.wavelength_nm, r.theta_deg, r.specular);
+                assert!(
+                    (r.specular - heights).abs() < 0.01,
+                    "{} nm, {} deg: {} against {heights}",
+                    r.wavelength_nm,
+                    r.theta_deg,
+                    r.specular
+                );
             }
         }
         // Bluer haze: the diffuse share grows as the wavelength shrinks on the smooth surface.
@@ -323,14 +329,7 @@ fn the_command_refuses_bad_input_in_one_line_and_writes_nothing() {
     let scan = crate::common::synth_small_gaussian(dir.path(), &["--dx", "1e-6"]);
     let out = dir.path().join("w.json");
     let run = |args: &[&str]| {
-        std::process::Command::new(crate::common::ndfit_bin())
-            .arg("wave")
-            .arg(&scan)
-            .args(args)
-            .arg("-o")
-            .arg(&out)
-            .output()
-            .unwrap()
+        std::process::Command::new(crate::common::ndfit_bin()).arg("wave").arg(&scan).args(args).arg("-o").arg(&out).output().unwrap()
     };
     for (args, what) in [
         (vec!["--wavelength", "0"], "wavelength"),

@@ -232,9 +232,16 @@ impl Measured {
     /// Mitsuba's `Measured::eval` in its `f32` arithmetic: `f(wi, wo) cos(theta_o)` per channel, `wi`
     /// toward the camera and `wo` toward the light (local frame); 0 unless both are above the horizon.
     pub fn eval_cos(&self, wi: [f32; 3], wo: [f32; 3]) -> [f32; 3] {
+        self.eval_cos_at(wi, wo, self.channels)
+    }
+
+    /// [`Measured::eval_cos`] at the channel parameters `channels`: wavelengths (nm) of a spectral table,
+    /// channel indices (0 red, 1 green, 2 blue) of an `rgb` one; blended linearly between the table's
+    /// nodes and held beyond its ends, as the renderer reads a spectrum.
+    pub fn eval_cos_at<const N: usize>(&self, wi: [f32; 3], wo: [f32; 3], channels: [f32; N]) -> [f32; N] {
         let (mut wi, mut wo) = (wi, wo);
         if !(wi[2] > 0.0 && wo[2] > 0.0) {
-            return [0.0; 3];
+            return [0.0; N];
         }
         if self.reduction >= 2 {
             // Fold into the quadrant the table covers: x, y made negative (Dr.Jit's mulsign_neg).
@@ -256,7 +263,7 @@ impl Measured {
         let sample = self.vndf.invert(u_m, incident);
         let none = self.ndf.weights(&[]);
         let scale = if self.jacobian { self.ndf.eval(u_m, none) / (4.0 * self.sigma.eval(u_wi, none)) } else { 1.0 };
-        self.channels.map(|c| self.spectra.eval(sample, self.spectra.weights_from(&[phi_i, theta_i, c], 2, incident)) * scale)
+        channels.map(|c| self.spectra.eval(sample, self.spectra.weights_from(&[phi_i, theta_i, c], 2, incident)) * scale)
     }
 }
 

@@ -547,13 +547,37 @@ pub(crate) fn tabulate_with(
     renormalize: bool,
     reflectance: &Reflectance<'_>,
 ) -> Result<Table> {
+    tabulate_at(d, guide, description, opts, renormalize, opts.wavelengths(), reflectance)
+}
+
+/// [`tabulate_with`] at the reflectance's wavelengths `lambdas` (nm, increasing): a spectral table's
+/// `wavelengths` (an `rgb` table takes exactly three, its channels, [`RGB_NM`] by default).
+pub(crate) fn tabulate_at(
+    d: &(dyn Fn(Vector3<f64>) -> f64 + Sync),
+    guide: &(dyn Fn(Vector3<f64>) -> f64 + Sync),
+    description: &str,
+    opts: &RglOptions,
+    renormalize: bool,
+    lambdas: &[f64],
+    reflectance: &Reflectance<'_>,
+) -> Result<Table> {
     opts.check()?;
+    let ok = match opts.flavour {
+        Flavour::Rgb => lambdas.len() == 3,
+        Flavour::Spectral => {
+            !lambdas.is_empty() && lambdas.iter().all(|l| l.is_finite() && *l > 0.0) && lambdas.windows(2).all(|p| p[0] < p[1])
+        }
+    };
+    if !ok {
+        return Err(Error::invalid(format!(
+            "the table's wavelengths {lambdas:?} nm are not three rgb channels or positive and increasing"
+        )));
+    }
     let grids = NdfGrids::new(d, guide, opts.ndf_res, renormalize)?;
     let NdfGrids { ref ndf, n, ref sigma, ns, normalization, ndf_error, scale } = grids;
 
     let theta_i: Vec<f64> = (0..opts.theta_i).map(|k| k as f64 * FRAC_PI_2 / (opts.theta_i - 1) as f64).collect();
     let phi_i: Vec<f64> = (0..opts.phi_i).map(|k| -PI + k as f64 * 2.0 * PI / (opts.phi_i - 1) as f64).collect();
-    let lambdas = opts.wavelengths();
     let w = opts.warp_res;
     let wstep = 1.0 / (w - 1) as f64;
     let slices: Vec<(f64, f64)> = phi_i.iter().flat_map(|&p| theta_i.iter().map(move |&t| (p, t))).collect();
