@@ -94,19 +94,8 @@ pub fn run(a: Args) -> anyhow::Result<ExitCode> {
     });
     a.scan.check_outputs(a.out.as_deref().into_iter().chain(npy.as_deref()))?;
     let scan = a.scan.load()?;
-    let bar = (std::io::stderr().is_terminal() && !a.quiet).then(|| {
-        let b = indicatif::ProgressBar::new(0);
-        if let Ok(style) = indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} coherence patches ({eta} left)") {
-            b.set_style(style);
-        }
-        b
-    });
-    let progress = |done: usize, total: usize| {
-        if let Some(b) = &bar {
-            b.set_length(total as u64);
-            b.set_position(done as u64);
-        }
-    };
+    let bar = patch_bar(a.quiet);
+    let progress = |done: usize, total: usize| show(&bar, done, total);
     let (report, d) = wave(&scan, &opts, Some(&progress)).with_context(|| name.clone())?;
     if let Some(b) = &bar {
         b.finish_and_clear();
@@ -134,4 +123,23 @@ fn summary(r: &ndfit::wave::WaveReport) -> String {
     let shares: Vec<String> =
         r.records.iter().filter(|x| x.wavelength_nm == mid).map(|x| format!("{:.3} at {} deg", x.specular, x.theta_deg)).collect();
     format!("mirror share at {mid} nm {} ({} patches of {:.1} um)", shares.join(", "), r.patches.used, r.patches.coherence_m * 1e6)
+}
+
+/// The coherence patches' progress bar, on standard error when it is a terminal and not `quiet`.
+pub(super) fn patch_bar(quiet: bool) -> Option<indicatif::ProgressBar> {
+    (std::io::stderr().is_terminal() && !quiet).then(|| {
+        let b = indicatif::ProgressBar::new(0);
+        if let Ok(style) = indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} coherence patches ({eta} left)") {
+            b.set_style(style);
+        }
+        b
+    })
+}
+
+/// Show `done` of `total` patches on `bar`.
+pub(super) fn show(bar: &Option<indicatif::ProgressBar>, done: usize, total: usize) {
+    if let Some(b) = bar {
+        b.set_length(total as u64);
+        b.set_position(done as u64);
+    }
 }

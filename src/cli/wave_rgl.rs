@@ -3,7 +3,6 @@
 //! `ndfit.wave/1` report at the table's incidences with the mirror share a renderer adds as a conductor
 //! (`ndfit::wave::wave_rgl`; data_formats/rgl.md, "The wave BRDF's table").
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -44,19 +43,8 @@ pub fn run(a: &super::wave::Args) -> anyhow::Result<ExitCode> {
     a.scan.check_outputs([out.as_path(), sidecar.as_path()])?;
     let scan = a.scan.load()?;
     let name = a.scan.scan.file_name().map_or(path.clone(), |n| n.to_string_lossy().into_owned());
-    let bar = (std::io::stderr().is_terminal() && !a.quiet).then(|| {
-        let b = indicatif::ProgressBar::new(0);
-        if let Ok(style) = indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} coherence patches ({eta} left)") {
-            b.set_style(style);
-        }
-        b
-    });
-    let progress = |done: usize, total: usize| {
-        if let Some(b) = &bar {
-            b.set_length(total as u64);
-            b.set_position(done as u64);
-        }
-    };
+    let bar = super::wave::patch_bar(a.quiet);
+    let progress = |done: usize, total: usize| super::wave::show(&bar, done, total);
     let t = wave_rgl(&scan, &opts, &format!("the scan {name}"), Some(&progress)).map_err(|e| anyhow!("{path}: {}", e.message()))?;
     if let Some(b) = &bar {
         b.finish_and_clear();
