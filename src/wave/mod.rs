@@ -209,6 +209,10 @@ impl Diffraction {
             .filter_map(|(l, t)| vz_interval(tiling, scan.dx, scan.dy, l, direction(t, opts.azimuth_deg)))
             .collect();
         let levels = Levels::covering(&intervals, opts.level_ratio);
+        // The patch sums held at once: one per chunk in flight and the total, each a spectrum per level.
+        let held = (2 * rayon::current_num_threads() + 1) as u64;
+        let bytes = held.saturating_mul(levels.len() as u64).saturating_mul((tiling.px * tiling.py) as u64).saturating_mul(8);
+        crate::budget::check_bytes(bytes, &format!("the spectra of {} levels of {px} x {py}-sample coherence patches", levels.len()))?;
         let sums = patches::accumulate(scan, tiling, &levels, progress);
         if sums.used == 0 {
             return Err(Error::invalid(format!(
