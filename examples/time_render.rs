@@ -9,7 +9,7 @@
 
 use std::time::Instant;
 
-use ndfit::export::choice::{default_scenes, prepare, RenderJudge, RenderOptions, ScanBrdf, TableAndLobe, DEFAULT_MATERIAL};
+use ndfit::answer::choice::{default_scenes, prepare, RenderJudge, RenderOptions, ScanBrdf, TableAndLobe, DEFAULT_MATERIAL};
 use ndfit::export::rgl::{AnalyticBrdf, ProjectedArea, Regularized};
 use ndfit::flip::RgbImage;
 use ndfit::render::Image;

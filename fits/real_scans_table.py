@@ -46,6 +46,16 @@ def flip(sel, key):
     return "-" if v is None else f"{v:.4f}"
 
 
+def mirror(o):
+    """The mirror share at 550 nm at 0 and 60 degrees, and the haze lobe where there is one."""
+    s = {(x["theta_deg"], x["wavelength_nm"]): x["weight"] for x in o.get("specular", [])}
+    if not s:
+        return "-"
+    h = o.get("haze")
+    haze = f"; haze {h['model']} {h['params']['alpha']:.3f} ({100 * h['albedo']:.2f}%)" if h else ""
+    return f"{s.get((0.0, 550.0), float('nan')):.3f} / {s.get((60.0, 550.0), float('nan')):.3f}{haze}"
+
+
 def pct(v):
     return "-" if v is None else f"{100 * v:.1f}%"
 
@@ -66,7 +76,7 @@ def main():
             if rep is None:
                 failed.append(f"{s.name}: exit {rc}: {err[0]}")
                 continue
-            q, sel = rep["quality"], rep.get("selection") or {}
+            q, sel, o = rep["quality"], rep.get("selection") or {}, rep.get("optics") or {}
             by_ndf, _, _ = fit(a.ndfit, s, Path(tmp) / "ndf.json", "--scene", "none")
             old = None
             if a.before:
@@ -82,13 +92,13 @@ def main():
                 then.append(old_de)
             effects = ", ".join(rung(c) for c in sel.get("candidates", []) if c.get("parent") is not None)
             rows.append(
-                f"| {s.name} | {sel.get('answer', '-')} | {rep['model']} | {q['verdict']} | {flip(sel, 'point')} | "
+                f"| {s.name} | {sel.get('answer', '-')} | {o.get('regime', '-')} | {mirror(o)} | {rep['model']} | {q['verdict']} | {flip(sel, 'point')} | "
                 f"{flip(sel, 'broad')} | {flip(sel, 'worst')} | {pct(de)} | {by_ndf['model'] if by_ndf else '-'} | "
                 + (f"{old['model']} | {pct(old_de)} | " if a.before else "")
                 + f"{effects or '-'} | {', '.join(sel.get('not_fitted', [])) or '-'} |"
             )
             print(rows[-1], file=sys.stderr)
-    head = "| scan | answer | lobe | verdict | FLIP point | FLIP broad | FLIP worst | delta_excess | NDF alone chose | "
+    head = "| scan | answer | regime | mirror share at 550 nm, 0 / 60 deg | lobe | verdict | FLIP point | FLIP broad | FLIP worst | delta_excess | NDF alone chose | "
     head += "before: chosen | before: delta_excess | " if a.before else ""
     head += "effect of each rung (change of delta_excess over its parent) [worst FLIP] | not fitted |\n"
     head += "|" + " --- |" * (head.count("|") - 1) + "\n"
@@ -99,8 +109,11 @@ def main():
         "Made by `python3 fits/real_scans_table.py" + (" --before OLD_NDFIT" if a.before else "") + "` (default options: the",
         "render choice in the default scenes with its default tolerance, data_formats/render.md, \"The choice\"; the NDF",
         "tolerance of data_formats/objective.md, \"The tolerance\" and \"Mixtures and the ladder\"). `answer` is what a",
-        "renderer should use (`measured`: the scan's own table, `ndfit export SCAN --to rgl`); `lobe` is the report's",
-        "`model` (the answer, or the closest lobe); the FLIP columns are that lobe's mean HDR-FLIP against the table's",
+        "renderer should use (`measured`: the scan's own table, `ndfit export SCAN --to rgl`; `mirror`, `mirror+ggx`:",
+        "a mirror term, docs/ANSWER.md); `regime` is what light sees (`optics.regime`: geometric, mixed or wave), with",
+        "the mirror share (`optics.specular`) and a mirror answer's haze lobe (`optics.haze`: alpha, its share of the",
+        "light at normal incidence); `lobe` is the report's `model` (the answer, or the closest lobe; for a mirror",
+        "answer, the ladder's fit of the slopes); the FLIP columns are that lobe's mean HDR-FLIP against the table's",
         "render; `NDF alone chose` is `--scene none` (the ladder's choice by the NDF error beyond counting noise). A",
         "rung's effect is the change of that NDF error over its parent (negative: it lowers the error), with the",
         "rung's worst FLIP where it was rendered in every scene (the choice stops at its answer, and a lobe already",

@@ -15,7 +15,7 @@ and each sample count N it prints
 - FLIP(N, N'):   the mean HDR-FLIP between two N-spp renders with different seeds, i.e. the difference
   between two production renders of one material.
 
-Both use ndfit's exposure rule (src/export/choice.rs, `exposures`): start = FLIP's automatic start, stop =
+Both use ndfit's exposure rule (src/answer/choice.rs, `exposures`): start = FLIP's automatic start, stop =
 min(FLIP's automatic stop, start + log2(1000)), taken from the converged render (in ndfit the reference is
 the noise-free render of the table), at FLIP's default 67 pixels per degree.
 

@@ -57,6 +57,7 @@
 // `!(x > 0.0)` guards are deliberate throughout: unlike `x <= 0.0` they also catch NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod answer;
 #[cfg(feature = "cli")]
 pub mod batch;
 #[cfg(feature = "cli")]

@@ -17,13 +17,14 @@ from typing import Any, Dict, Iterable, List, Optional, Union
 # Every parameter of every model (ndfit models): the single lobes, then the mixtures' own names.
 PARAM_COLUMNS = ["alpha", "alpha_x", "alpha_y", "theta_x", "theta_y", "theta_z", "alpha_x1", "alpha_y1", "alpha_x2", "alpha_y2", "alpha2", "weight", "gamma"]
 #: Every column of :func:`fit_many`'s DataFrame, in order.
-COLUMNS = ["path", "status", "model", *PARAM_COLUMNS, "verdict", "reduced_chi2", "n_samples", "error_kind", "error"]
+COLUMNS = ["path", "status", "model", *PARAM_COLUMNS, "verdict", "answer", "regime", "reduced_chi2", "n_samples", "error_kind", "error"]
 
 
 def fit_row(path: str, model: str = "auto", options: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
     """Fit one scan; a plain dict row (the task :func:`fit_many` submits per scan).
 
-    ``status`` is ``ok`` with ``model``, the parameters (NaN for those the model lacks), ``verdict``, ``reduced_chi2`` and ``n_samples``, or
+    ``status`` is ``ok`` with ``model``, the parameters (NaN for those the model lacks), ``verdict``, ``answer`` and ``regime``
+    (``auto``; None for one model), ``reduced_chi2`` and ``n_samples``, or
     ``error`` with ``error`` (one line naming the file and the problem) and ``error_kind``.
     """
     import ndfit
@@ -39,7 +40,8 @@ def fit_row(path: str, model: str = "auto", options: Optional[Dict[str, Any]] = 
         row.update(status="error", error=str(e), error_kind=getattr(e, "kind", ""))
         return row
     q = f.quality
-    row.update(status="ok", model=f.model, verdict=q["verdict"], reduced_chi2=q["reduced_chi2"], n_samples=q["n_samples_total"])
+    row.update(status="ok", model=f.model, verdict=q["verdict"], answer=f.answer, regime=f.regime,
+               reduced_chi2=q["reduced_chi2"], n_samples=q["n_samples_total"])
     row.update(f.params)
     return row
 

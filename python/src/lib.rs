@@ -552,6 +552,23 @@ impl Fit {
     fn warnings(&self) -> Vec<String> {
         self.report.warnings.clone()
     }
+    /// `auto`'s answer (`selection.answer`): a model id, `measured`, `mirror` or `mirror+ggx`; None for
+    /// one model.
+    #[getter]
+    fn answer(&self) -> Option<String> {
+        self.report.selection.as_ref().and_then(|s| s.answer.clone())
+    }
+    /// `auto`'s regime (`optics.regime`): `geometric`, `mixed` or `wave`; None for one model.
+    #[getter]
+    fn regime(&self) -> Option<String> {
+        self.report.optics.as_ref().map(|o| o.regime.clone())
+    }
+    /// `auto`'s optics (the JSON's `optics`: regime, wavelength_nm, coherence_m, specular, haze, ...)
+    /// as a dict; None for one model.
+    #[getter]
+    fn optics<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        self.report.optics.as_ref().map(|o| json_to_py(py, &serde_json::to_string(o).map_err(|e| invalid(e.to_string()))?)).transpose()
+    }
     /// The whole `ndfit.fit/1` document as a dict.
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         json_to_py(py, &self.to_json()?)

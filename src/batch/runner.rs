@@ -66,6 +66,10 @@ pub struct Brief {
     pub reduced_chi2: Option<f64>,
     /// The fit's verdict (`quality.verdict`: ok, misfit, unresolved), when it reports one.
     pub fit_verdict: Option<String>,
+    /// `auto`'s answer (`selection.answer`: a model id, `measured`, `mirror`, `mirror+ggx`).
+    pub answer: Option<String>,
+    /// `auto`'s regime (`optics.regime`: geometric, mixed, wave).
+    pub regime: Option<String>,
     /// Whether this result was reused from an earlier run (`--resume`).
     pub reused: bool,
 }
@@ -448,7 +452,9 @@ pub fn brief_of(mut entry: Entry, reused: bool) -> Brief {
     let evaluations = find(&["solver.evaluations", "evaluations"]).and_then(Value::as_u64);
     let reduced_chi2 = find(&["quality.reduced_chi2", "reduced_chi2"]).and_then(Value::as_f64);
     let fit_verdict = find(&["quality.verdict"]).and_then(Value::as_str).map(str::to_string);
-    Brief { entry, model, params, stderr, termination, evaluations, reduced_chi2, fit_verdict, reused }
+    let answer = find(&["selection.answer"]).and_then(Value::as_str).map(str::to_string);
+    let regime = find(&["optics.regime"]).and_then(Value::as_str).map(str::to_string);
+    Brief { entry, model, params, stderr, termination, evaluations, reduced_chi2, fit_verdict, answer, regime, reused }
 }
 
 /// Remove temporary files an interrupted run left (write_atomic names them `.<name>.<random>.tmp`).

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{anyhow, bail};
-use ndfit::export::choice::{picture, RenderJudge};
+use ndfit::answer::choice::{picture, RenderJudge};
 use ndfit::export::rgl::AnalyticBrdf;
 use ndfit::models::Model;
 

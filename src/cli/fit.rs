@@ -88,10 +88,26 @@ pub fn summary_line(report: &ndfit::fit::FitReport) -> String {
     let disp = q.dispersion.map_or(String::new(), |d| format!(" (data's own dispersion {d:.3})"));
     // Walter et al. eq. 2-3: A = S Rz(theta_z) puts the alpha_x axis along (cos theta_z, -sin theta_z).
     let axis = report.params.get("theta_z").map_or(String::new(), |t| format!(" (alpha_x axis at azimuth {:.4} rad from +x)", -t));
-    // auto's render choice: the answer (a lobe, or the table) and the lobe's worst FLIP against the table.
+    // auto's answer: a mirror with its share and haze, or the render choice (a lobe, or the table) and the
+    // lobe's worst FLIP against the table.
     let answer = report.selection.as_ref().and_then(|s| {
+        let a = s.answer.as_deref()?;
+        if let Some(o) = report.optics.as_ref().filter(|_| a.contains("mirror")) {
+            return Some(format!(": answer {a} ({})", mirror_text(o, a.contains('+'))));
+        }
         let worst = s.render_error.as_ref()?.get("worst")?;
-        Some(format!(": answer {} (worst FLIP {worst:.4} against the scan's table)", s.answer.as_deref()?))
+        Some(format!(": answer {a} (worst FLIP {worst:.4} against the scan's table)"))
     });
-    format!("{} {}{axis}{chi}{disp}{}: verdict {}", report.model, params.join(" "), answer.unwrap_or_default(), q.verdict)
+    let optics = report.optics.as_ref().map_or(String::new(), |o| format!(": optics {}", o.regime));
+    format!("{} {}{axis}{chi}{disp}{optics}{}: verdict {}", report.model, params.join(" "), answer.unwrap_or_default(), q.verdict)
+}
+
+/// A mirror answer in a few words: its share at 550 nm by incidence, and its haze where it has one.
+fn mirror_text(o: &ndfit::fit::Optics, with_haze: bool) -> String {
+    let shares: Vec<String> =
+        o.specular.iter().filter(|s| s.wavelength_nm == 550.0).map(|s| format!("{:.3} at {} deg", s.weight, s.theta_deg)).collect();
+    let haze = o.haze.as_ref().filter(|_| with_haze).map_or(String::new(), |h| {
+        format!("; haze {} alpha {:.4} carrying {:.2}%", h.model, h.params.get("alpha").copied().unwrap_or(f64::NAN), h.albedo * 100.0)
+    });
+    format!("mirror share at 550 nm {}{haze}", shares.join(", "))
 }

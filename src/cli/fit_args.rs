@@ -31,7 +31,7 @@ pub struct RenderArgs {
     pub scene: String,
     /// The largest mean FLIP beyond the scan table's own noise floor, in every scene, at which a lobe is
     /// the answer (data_formats/render.md, "The tolerance").
-    #[arg(long = "render-tolerance", default_value_t = ndfit::export::choice::DEFAULT_RENDER_TOLERANCE)]
+    #[arg(long = "render-tolerance", default_value_t = ndfit::answer::choice::DEFAULT_RENDER_TOLERANCE)]
     pub render_tolerance: f64,
     /// The conductor of the renders: none (F = 1), Al, Ag, Au, Cu or Cr.
     #[arg(long, default_value = "Al")]
@@ -40,7 +40,7 @@ pub struct RenderArgs {
 
 impl RenderArgs {
     /// The render choice these flags ask for (`None` for `--scene none`), refused naming the flag.
-    pub fn options(&self) -> ndfit::Result<Option<ndfit::export::choice::RenderOptions>> {
+    pub fn options(&self) -> ndfit::Result<Option<ndfit::answer::choice::RenderOptions>> {
         check::render(&self.scene, self.render_tolerance, &self.material, Spelling::Flag)
     }
 }

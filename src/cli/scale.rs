@@ -57,7 +57,7 @@ pub struct Args {
     pub render_scene: String,
     /// The largest mean FLIP beyond a footprint table's own noise, in every scene, at which a model passes
     /// (data_formats/render.md, "The tolerance").
-    #[arg(long = "render-tolerance", default_value_t = ndfit::export::choice::DEFAULT_RENDER_TOLERANCE)]
+    #[arg(long = "render-tolerance", default_value_t = ndfit::answer::choice::DEFAULT_RENDER_TOLERANCE)]
     pub render_tolerance: f64,
     /// The conductor of the renders: none (F = 1), Al, Ag, Au, Cu or Cr.
     #[arg(long, default_value = "Al")]

@@ -35,7 +35,6 @@ use crate::fit::metric::RefNodes;
 use crate::models::{LobeAxes, Model, ModelId, Ndf};
 use crate::ndf::SlopeFrame;
 
-pub mod choice;
 pub(crate) mod mixture;
 pub mod rgl;
 pub(crate) mod snippet;

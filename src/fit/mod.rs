@@ -49,7 +49,7 @@ pub use objective::{FitData, Objective};
 pub use options::MAX_EXTRA_STARTS;
 #[cfg(feature = "plot")]
 pub use plot::plot_fit;
-pub use report::{Candidate, FitReport, Quality, Selection, SolverInfo, Timings};
+pub use report::{Candidate, FitReport, Haze, Optics, Quality, Selection, SolverInfo, SpecularShare, Timings};
 pub use solve::{Solver, Tolerances};
 pub use synthetic::{binned_ndf, expected, Grid};
 pub use tail::{tail_cut, usable, TailCut, TailRule, MIN_ALONE_SHARE};
@@ -543,6 +543,7 @@ fn build_report(ndf: &EmpiricalNdf, s: &Session, fit: Fitted, opts: &FitOptions,
         },
         timings: Timings { read_ms: None, ndf_ms: None, fit_ms },
         selection: None,
+        optics: None,
         warnings,
     })
 }
@@ -608,7 +609,7 @@ pub struct Decision {
     pub reported: usize,
 }
 
-/// What decides `auto`'s answer among the fitted lobes (the render choice, `export::choice`): called with
+/// What decides `auto`'s answer among the fitted lobes (the render choice, `answer::choice`): called with
 /// the ladder's lobes simplest first (rung, parameters, NDF error).
 pub trait Decide: Sync {
     /// The answer among `offered` (never empty), for an NDF whose bins the fit trusted up to

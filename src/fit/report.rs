@@ -201,6 +201,53 @@ pub struct Selection {
     pub table_lobe: Option<ModelId>,
 }
 
+/// The mirror share at one incidence and wavelength.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SpecularShare {
+    /// Incidence (degrees from the normal).
+    pub theta_deg: f64,
+    /// Wavelength (nm).
+    pub wavelength_nm: f64,
+    /// The coherent share of the incident light: reflected as a mirror, Fresnel excluded.
+    pub weight: f64,
+}
+
+/// The haze lobe of a mirror answer: a lobe fitted to the diffuse part of the wave BRDF.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Haze {
+    /// The lobe's model.
+    pub model: ModelId,
+    /// Its parameters by name.
+    pub params: BTreeMap<String, f64>,
+    /// Share of the light it carries at normal incidence and the middle wavelength (Fresnel excluded).
+    pub albedo: f64,
+}
+
+/// What light sees of the scan ([`crate::answer`]): the regime and the mirror share by incidence and
+/// wavelength (wave optics on the scan's coherence patches).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Optics {
+    /// `geometric`, `mixed` or `wave`.
+    pub regime: String,
+    /// The wavelengths of `specular` (nm).
+    pub wavelength_nm: Vec<f64>,
+    /// The side of the coherence patch (m).
+    pub coherence_m: f64,
+    /// The mirror share at each incidence and wavelength.
+    pub specular: Vec<SpecularShare>,
+    /// The regime's reason, in one sentence.
+    pub why: String,
+    /// The haze of a mirror answer.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub haze: Option<Haze>,
+    /// The patches: used, skipped, tilt and slope RMS (degrees), incoherent floor, light beyond the band.
+    #[serde(default)]
+    pub patches: BTreeMap<String, f64>,
+    /// What the scan does not resolve (a coherence patch under its spacing or over its size).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub note: Option<String>,
+}
+
 /// A fit result (`ndfit.fit/1`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FitReport {
@@ -247,6 +294,10 @@ pub struct FitReport {
     /// For `--model auto`: every candidate and the criterion.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub selection: Option<Selection>,
+    /// For `auto`: what light sees of the scan, geometric or wave optics (shared/CONTRACT.md "Wave
+    /// optics"; [`crate::answer`]).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub optics: Option<Optics>,
     /// Anything the user should know (non-convergence, undetermined parameters, specular data).
     pub warnings: Vec<String>,
 }

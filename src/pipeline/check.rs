@@ -82,10 +82,10 @@ pub fn tolerance(t: Option<f64>, s: Spelling) -> Result<f64> {
 }
 
 /// The render choice of `auto` from `scene` (`none`, or the specs of
-/// [`crate::export::choice::parse_scenes`]), `render_tolerance` (a positive mean FLIP) and `material`
+/// [`crate::answer::choice::parse_scenes`]), `render_tolerance` (a positive mean FLIP) and `material`
 /// (the conductor of the renders); `None` for `scene = "none"`.
-pub fn render(scene: &str, render_tolerance: f64, material: &str, s: Spelling) -> Result<Option<crate::export::choice::RenderOptions>> {
-    use crate::export::choice::{parse_scenes, RenderOptions};
+pub fn render(scene: &str, render_tolerance: f64, material: &str, s: Spelling) -> Result<Option<crate::answer::choice::RenderOptions>> {
+    use crate::answer::choice::{parse_scenes, RenderOptions};
     if scene.trim() == "none" {
         return Ok(None);
     }

@@ -14,8 +14,9 @@ pub mod scale;
 use std::path::Path;
 use std::time::Instant;
 
+use crate::answer::choice::{RenderJudge, RenderOptions};
 use crate::error::Result;
-use crate::export::choice::{RenderJudge, RenderOptions};
+use crate::fit::Optics;
 use crate::fit::{FitOptions, FitReport};
 use crate::io::ReadOptions;
 use crate::models::ModelChoice;
@@ -44,7 +45,7 @@ pub struct Options {
     pub model: ModelChoice,
     /// How to fit (objective, solver, tolerances, fitted region `max_theta`).
     pub fit: FitOptions,
-    /// `auto`'s render choice (`export::choice`): the answer is the simplest lobe whose render is within
+    /// `auto`'s render choice (`answer::choice`): the answer is the simplest lobe whose render is within
     /// the tolerance of the scan's table in every scene. `None`: the NDF error alone decides, and the
     /// report has no `selection.answer`.
     pub render: Option<RenderOptions>,
@@ -150,8 +151,9 @@ impl Pipeline {
         let ndf_opts = self.ndf_options_of(&scan);
         let read_ms = ms(t0);
         let (ndf, input, ndf_ms) = self.ndf_timed(&scan, ndf_opts, path)?;
+        let optics = self.optics_of(&scan);
         release(scan);
-        self.finish(ndf, input, path, read_ms, ndf_ms)
+        self.finish(ndf, input, path, read_ms, ndf_ms, optics)
     }
 
     /// [`Pipeline::run_path`] for a scan in memory (preprocessing included); `label` stands for the path
@@ -164,8 +166,9 @@ impl Pipeline {
         let ndf_opts = self.ndf_options_of(&scan);
         let read_ms = ms(t0);
         let (ndf, input, ndf_ms) = self.ndf_timed(&scan, ndf_opts, path)?;
+        let optics = self.optics_of(&scan);
         drop(scan);
-        self.finish(ndf, input, path, read_ms, ndf_ms)
+        self.finish(ndf, input, path, read_ms, ndf_ms, optics)
     }
 
     /// Read `path`, preprocess and build the NDF only (`ndfit ndf`); the scan is described by the
@@ -198,9 +201,25 @@ impl Pipeline {
         Ok((ndf, scan.input_info(path), ndf_ms))
     }
 
-    fn finish(&self, ndf: EmpiricalNdf, input: InputInfo, path: &Path, read_ms: f64, ndf_ms: f64) -> Result<Outcome> {
+    /// What light sees of the scan, for `auto` with its answer (`None` otherwise).
+    fn optics_of(&self, scan: &Prepared) -> Option<Optics> {
+        let _p = crate::phases::phase("optics");
+        (self.options.render.is_some() && self.options.model == ModelChoice::Auto).then(|| crate::answer::optics_with_haze(scan))
+    }
+
+    fn finish(
+        &self,
+        ndf: EmpiricalNdf,
+        input: InputInfo,
+        path: &Path,
+        read_ms: f64,
+        ndf_ms: f64,
+        optics: Option<Optics>,
+    ) -> Result<Outcome> {
         let mut report = match (&self.options.render, self.options.model) {
-            (Some(render), ModelChoice::Auto) => fit_rendered(&ndf, &self.options.fit_options(), render, &path.display().to_string()),
+            (Some(render), ModelChoice::Auto) => {
+                fit_answered(&ndf, &self.options.fit_options(), render, &path.display().to_string(), optics)
+            }
             _ => fit(&ndf, self.options.model, &self.options.fit_options()),
         }
         .map_err(|e| e.with_path(path))?;
@@ -287,8 +306,43 @@ pub fn fit(ndf: &EmpiricalNdf, model: ModelChoice, opts: &FitOptions) -> Result<
     }
 }
 
+/// Stage 3 for `auto` with its answer: where light sees a mirror ([`crate::answer::answer_mirror`]), the
+/// ladder by the NDF alone and the mirror answer; elsewhere the render choice ([`fit_rendered`]), or the
+/// ladder by the NDF alone with a warning if the renders cannot be made. `optics` goes into the report.
+pub fn fit_answered(
+    ndf: &EmpiricalNdf,
+    opts: &FitOptions,
+    render: &RenderOptions,
+    scan: &str,
+    optics: Option<Optics>,
+) -> Result<FitReport> {
+    let t0 = Instant::now();
+    let mirror = optics.as_ref().is_some_and(|o| o.regime != crate::answer::Regime::Geometric.as_str());
+    let mut report = if mirror {
+        crate::fit::fit_auto(ndf, opts)?
+    } else {
+        match fit_rendered(ndf, opts, render, scan) {
+            Ok(r) => r,
+            Err(e) => {
+                let mut r = crate::fit::fit_auto(ndf, opts)?;
+                let id = r.model.as_str().to_string();
+                r.warnings.push(format!("the render choice could not run ({}): the answer is the NDF's choice, {id}", e.message()));
+                if let Some(sel) = r.selection.as_mut() {
+                    sel.answer = Some(id);
+                }
+                r
+            }
+        }
+    };
+    if let Some(o) = optics {
+        crate::answer::answer_mirror(&mut report, o);
+    }
+    report.timings.fit_ms = ms(t0);
+    Ok(report)
+}
+
 /// Stage 3 for `auto` with its render choice: the ladder, its answer decided by the renders
-/// ([`crate::export::choice::RenderJudge`]), the choice written into the report (`scan` names the scan
+/// ([`crate::answer::choice::RenderJudge`]), the choice written into the report (`scan` names the scan
 /// in the command that writes its table).
 pub fn fit_rendered(ndf: &EmpiricalNdf, opts: &FitOptions, render: &RenderOptions, scan: &str) -> Result<FitReport> {
     let judge = RenderJudge::new(ndf, render.clone());

@@ -1,12 +1,12 @@
 //! `ndfit scale`'s answer by the render: at every footprint the NDF a renderer sees there is made a
 //! table (as `auto` makes the scan's), each candidate fitted there is rendered against it in the render
-//! choice's scenes (`export::choice`), and the answer is the simplest candidate within the render
+//! choice's scenes (`answer::choice`), and the answer is the simplest candidate within the render
 //! tolerance at every footprint, or the measured NDF when none is (data_formats/scale.md sec. 9).
 
 use serde::Serialize;
 
+use crate::answer::choice::{RenderJudge, RenderOptions, Score};
 use crate::error::Result;
-use crate::export::choice::{RenderJudge, RenderOptions, Score};
 use crate::fit::{Decide, Offered};
 use crate::models::{Model, ModelId};
 use crate::ndf::EmpiricalNdf;

@@ -32,12 +32,14 @@
 
 mod grid;
 mod levels;
+mod optics;
 mod patches;
 mod to_rgl;
 
 use serde::Serialize;
 
 pub use grid::{grids, write_grid_npy};
+pub use optics::{mirror_shares, MirrorShares};
 pub use to_rgl::{wave_rgl, WaveRglOptions, WaveTable, DEFAULT_NDF_RES, FLOOR, LIFT_DEG, WIDE_SHARE};
 
 use crate::error::{Error, Result};

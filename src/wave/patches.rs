@@ -163,67 +163,16 @@ fn patch(scan: &Scan<'_>, t: Tiling, p: usize, levels: &Levels, wx: &[f64], wy: 
     let (px, py) = (t.px, t.py);
     let (pi, pj) = (p / t.cols, p % t.cols);
     let (i0, j0) = (t.i0 + pi * py, t.j0 + pj * px);
-    // Coordinates from the patch centre, so that a huge height offset or position never meets a phase.
-    let xc = |j: usize| (j as f64 - 0.5 * (px as f64 - 1.0)) * scan.dx;
-    let yc = |i: usize| (i as f64 - 0.5 * (py as f64 - 1.0)) * scan.dy;
-    let mut valid = 0usize;
-    // Weighted plane fit: normal equations of (x, y, 1) with weights u, heights relative to the first
-    // valid one (a huge offset cancels before any square is taken).
-    let mut href = f64::NAN;
-    let (mut sxx, mut sxy, mut syy, mut sx, mut sy, mut s1, mut sxz, mut syz, mut sz) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for (i, &wyi) in wy.iter().enumerate() {
-        let row = &scan.row(i0 + i)[j0..j0 + px];
-        for (j, &h) in row.iter().enumerate() {
-            let k = i * px + j;
-            if h.is_finite() {
-                valid += 1;
-                if href.is_nan() {
-                    href = h;
-                }
-                let (x, y, z) = (xc(j), yc(i), h - href);
-                let w = wx[j] * wyi;
-                let u = w * w;
-                work.wm[k] = w;
-                work.u[k] = u;
-                work.r[k] = z;
-                sxx += u * x * x;
-                sxy += u * x * y;
-                syy += u * y * y;
-                sx += u * x;
-                sy += u * y;
-                s1 += u;
-                sxz += u * x * z;
-                syz += u * y * z;
-                sz += u * z;
-            } else {
-                work.wm[k] = 0.0;
-                work.u[k] = 0.0;
-                work.r[k] = 0.0;
-            }
-        }
-    }
-    if (valid as f64) < MIN_VALID_SHARE * (px * py) as f64 {
+    let row = |i: usize| &scan.row(i0 + i)[j0..j0 + px];
+    let Some(c) = centre(row, px, [scan.dx, scan.dy], wx, wy, &mut work.r, &mut work.u, &mut work.wm) else {
         sums.skipped += 1;
         return;
-    }
-    // The tilt is reported, not removed: a patch tilted by more than the angular resolution reflects
-    // its light away from the mirror direction, into the diffuse part.
-    let m = nalgebra::Matrix3::new(sxx, sxy, sx, sxy, syy, sy, sx, sy, s1);
-    let rhs = nalgebra::Vector3::new(sxz, syz, sz);
-    let (a, b) = match m.lu().solve(&rhs) {
-        Some(v) if v.iter().all(|x| x.is_finite()) => (v[0], v[1]),
-        _ => (0.0, 0.0),
     };
-    let mean = sz / s1;
-    for k in 0..px * py {
-        if work.u[k] > 0.0 {
-            work.r[k] -= mean;
-        }
-    }
     sums.used += 1;
-    sums.weight += s1;
-    sums.tilt2 += s1 * (a * a + b * b);
-    sums.floor += work.u.iter().map(|u| u * u).sum::<f64>() / s1;
+    sums.weight += c.s1;
+    sums.tilt2 += c.s1 * c.tan2;
+    sums.floor += work.u.iter().map(|u| u * u).sum::<f64>() / c.s1;
+    let s1 = c.s1;
     let n = px * py;
     for (l, &vz) in levels.vz.iter().enumerate() {
         // The mean field chi and the diffuse field g.
@@ -260,4 +209,85 @@ fn patch(scan: &Scan<'_>, t: Tiling, p: usize, levels: &Levels, wx: &[f64], wy: 
             *a += v.norm_sqr();
         }
     }
+}
+
+/// A patch's heights about their `u`-weighted mean, and its plane.
+pub(crate) struct Centred {
+    /// `sum u`.
+    pub s1: f64,
+    /// The squared tilt `tan^2` of its `u`-weighted least-squares plane.
+    pub tan2: f64,
+}
+
+/// Fill `r` (heights about the `u`-weighted mean), `u = (w m)^2` and `wm = w m` for the patch whose row
+/// `i` is `row(i)` (`px` samples, `py = wy.len()` rows, spacing `d`); `None` when fewer than
+/// [`MIN_VALID_SHARE`] of its points are valid.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn centre<'r>(
+    row: impl Fn(usize) -> &'r [f64],
+    px: usize,
+    d: [f64; 2],
+    wx: &[f64],
+    wy: &[f64],
+    r: &mut [f64],
+    u: &mut [f64],
+    wm: &mut [f64],
+) -> Option<Centred> {
+    let py = wy.len();
+    // Coordinates from the patch centre, so that a huge height offset or position never meets a phase.
+    let xc = |j: usize| (j as f64 - 0.5 * (px as f64 - 1.0)) * d[0];
+    let yc = |i: usize| (i as f64 - 0.5 * (py as f64 - 1.0)) * d[1];
+    let mut valid = 0usize;
+    // Weighted plane fit: normal equations of (x, y, 1) with weights u, heights relative to the first
+    // valid one (a huge offset cancels before any square is taken).
+    let mut href = f64::NAN;
+    let (mut sxx, mut sxy, mut syy, mut sx, mut sy, mut s1, mut sxz, mut syz, mut sz) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for (i, &wyi) in wy.iter().enumerate() {
+        for (j, &h) in row(i)[..px].iter().enumerate() {
+            let k = i * px + j;
+            if h.is_finite() {
+                valid += 1;
+                if href.is_nan() {
+                    href = h;
+                }
+                let (x, y, z) = (xc(j), yc(i), h - href);
+                let w = wx[j] * wyi;
+                let uk = w * w;
+                wm[k] = w;
+                u[k] = uk;
+                r[k] = z;
+                sxx += uk * x * x;
+                sxy += uk * x * y;
+                syy += uk * y * y;
+                sx += uk * x;
+                sy += uk * y;
+                s1 += uk;
+                sxz += uk * x * z;
+                syz += uk * y * z;
+                sz += uk * z;
+            } else {
+                wm[k] = 0.0;
+                u[k] = 0.0;
+                r[k] = 0.0;
+            }
+        }
+    }
+    if (valid as f64) < MIN_VALID_SHARE * (px * py) as f64 {
+        return None;
+    }
+    // The tilt is reported, not removed: a patch tilted by more than the angular resolution reflects
+    // its light away from the mirror direction, into the diffuse part.
+    let m = nalgebra::Matrix3::new(sxx, sxy, sx, sxy, syy, sy, sx, sy, s1);
+    let rhs = nalgebra::Vector3::new(sxz, syz, sz);
+    let (a, b) = match m.lu().solve(&rhs) {
+        Some(v) if v.iter().all(|x| x.is_finite()) => (v[0], v[1]),
+        _ => (0.0, 0.0),
+    };
+    let mean = sz / s1;
+    for (rk, &uk) in r[..px * py].iter_mut().zip(&u[..px * py]) {
+        if uk > 0.0 {
+            *rk -= mean;
+        }
+    }
+    Some(Centred { s1, tan2: a * a + b * b })
 }

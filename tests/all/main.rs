@@ -2,6 +2,7 @@
 
 mod common;
 
+mod answer;
 mod batch;
 mod bench;
 mod cli;

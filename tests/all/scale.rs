@@ -345,7 +345,7 @@ mod routes {
         // wrong shape) visibly not. A random field of 1024^2 samples (`synth`'s, as `auto`'s held-out
         // Gaussian truth): a surface of a few hundred fixed modes deviates from Gaussian alike in both
         // halves, so the halves' split would not measure it.
-        use ndfit::export::choice::{flip_mean, RenderJudge, RenderOptions};
+        use ndfit::answer::choice::{flip_mean, RenderJudge, RenderOptions};
         use ndfit::fit::{Decide, Offered};
         use ndfit::render::Brdf;
         use ndfit::synth::{gaussian_surface, GaussianParams, SynthSettings};

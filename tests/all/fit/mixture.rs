@@ -250,7 +250,7 @@ fn ggx2_of_one_lobe_is_its_parent() {
 /// tolerance in both default scenes, and is `ok`.
 #[test]
 fn the_render_choice_keeps_held_out_truths() {
-    use ndfit::export::choice::RenderOptions;
+    use ndfit::answer::choice::RenderOptions;
     let render = RenderOptions::default();
     let check = |ndf: &ndfit::ndf::EmpiricalNdf, what: &str| {
         let rep = ndfit::pipeline::fit_rendered(ndf, &FitOptions::default(), &render, what).expect("auto");

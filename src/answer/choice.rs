@@ -16,8 +16,8 @@ use std::sync::Mutex;
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
-use super::rgl::{AnalyticBrdf, Material, NdfGrids, ProjectedArea, Regularized};
 use crate::error::{Error, Result};
+use crate::export::rgl::{AnalyticBrdf, Material, NdfGrids, ProjectedArea, Regularized};
 use crate::fit::{Decide, Decision, Offered};
 use crate::flip::{auto_exposures, hdr, HdrOptions, HdrReference, RgbImage, DEFAULT_PPD};
 use crate::models::Model;
@@ -26,7 +26,7 @@ use crate::render::{direction, Brdf, BrdfSet, Image, Light, Scene};
 
 /// An exported table as a renderer shows it: `D` read bilinearly from the table's `ndf` grid, Smith's
 /// `G1` from its `sigma` grid, both directions' masking separable (as Mitsuba's `measured` with
-/// `jacobian`), and the conductor's Fresnel term at the [`RGB_NM`](super::rgl::RGB_NM) wavelengths.
+/// `jacobian`), and the conductor's Fresnel term at the [`RGB_NM`](crate::export::rgl::RGB_NM) wavelengths.
 #[derive(Debug, Clone, Copy)]
 pub struct TableBrdf<'a> {
     /// The table's NDF and projected-area grids.

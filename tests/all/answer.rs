@@ -1,0 +1,199 @@
+//! `auto`'s optics and mirror answers (`ndfit::answer`) against closed forms: a sinusoidal grating (the
+//! mirror share J0^2, the haze at the first order's half vector), white Gaussian heights (the mean field of
+//! a Gaussian), the wave engine's own specular on real scans (a second algorithm: FFT levels and a cubic
+//! between them), and the answers the real scans must get. Every expected value is computed here.
+
+use std::f64::consts::PI;
+
+use ndfit::answer::{haze, optics, Regime};
+use ndfit::synth::{gaussian_surface, GaussianParams, SynthSettings};
+use ndfit::wave::{default_coherence_m, mirror_shares, wave, WaveOptions, DEFAULT_INCIDENCES_DEG, DEFAULT_WAVELENGTHS_NM};
+use ndfit::{Heightfield, Options, Pipeline};
+
+use crate::common::shared_scans;
+
+/// `J_n(x)` by its power series (|x| < 2 here: 30 terms are exact to rounding).
+fn bessel_j(n: u32, x: f64) -> f64 {
+    let mut term = (x / 2.0).powi(n as i32) / (1..=n).map(f64::from).product::<f64>();
+    let mut sum = term;
+    for m in 1..30 {
+        term *= -(x * x / 4.0) / (m as f64 * (m + n) as f64);
+        sum += term;
+    }
+    sum
+}
+
+fn k_of(lambda_nm: f64) -> f64 {
+    2.0 * PI / (lambda_nm * 1e-9)
+}
+
+/// `h = A sin(2 pi x / L)`, A = 20 nm, L = 5.12 um, 512 x 512 samples of 0.1 um.
+fn grating() -> (Heightfield, f64, f64) {
+    let (n, dx, a, l) = (512, 1e-7, 20e-9, 5.12e-6);
+    let z: Vec<f64> = (0..n * n).map(|i| a * (2.0 * PI * ((i % n) as f64 * dx) / l).sin()).collect();
+    (Heightfield::new(n, n, dx, dx, z).unwrap(), a, l)
+}
+
+/// White Gaussian heights of RMS `sigma` (Box-Muller on a fixed LCG), `n` x `n` samples of `dx`.
+fn white(n: usize, dx: f64, sigma: f64, seed: u64) -> Heightfield {
+    let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    let mut uniform = || {
+        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((s >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let z = (0..n * n).map(|_| sigma * (-2.0 * uniform().ln()).sqrt() * (2.0 * PI * uniform()).cos()).collect();
+    Heightfield::new(n, n, dx, dx, z).unwrap()
+}
+
+/// `sum u^2 / (sum u)^2` of a separable Hann-squared window of `p` x `p` samples.
+fn window_floor(p: usize) -> f64 {
+    let w: Vec<f64> = (0..p).map(|j| (PI * (j as f64 + 0.5) / p as f64).sin().powi(2)).collect();
+    let (s2, s4) = (w.iter().map(|x| x * x).sum::<f64>(), w.iter().map(|x| x.powi(4)).sum::<f64>());
+    (s4 / (s2 * s2)).powi(2)
+}
+
+#[test]
+fn the_mirror_share_of_a_grating_is_j0_squared_at_every_incidence() {
+    // Patches of exactly five periods: the Hann-squared window's few frequencies never meet the grating's,
+    // so the weighted mean field is J0(v_z A) to rounding.
+    let (hf, a, _) = grating();
+    let m = mirror_shares(&hf, &DEFAULT_WAVELENGTHS_NM, &DEFAULT_INCIDENCES_DEG, 25.6e-6);
+    assert_eq!((m.used, m.skipped, m.samples), (4, 0, [256, 256]));
+    for (l, &lambda) in DEFAULT_WAVELENGTHS_NM.iter().enumerate() {
+        for (t, &theta) in DEFAULT_INCIDENCES_DEG.iter().enumerate() {
+            let want = bessel_j(0, 2.0 * k_of(lambda) * a * theta.to_radians().cos()).powi(2);
+            assert!((m.share(l, t) - want).abs() < 1e-9, "{lambda} nm {theta} deg: {} against J0^2 {want}", m.share(l, t));
+        }
+    }
+}
+
+#[test]
+fn a_gratings_haze_is_its_first_order_and_carries_the_rest_of_the_light() {
+    // Normal incidence at 550 nm: the orders leave at sin t_m = m lambda / L; the first two hold 99% of
+    // the diffuse light, so the median half vector is the first order's, tan(t_1 / 2).
+    let (hf, a, l) = grating();
+    let h = haze(&hf, &[25.6e-6]).unwrap();
+    let j0 = bessel_j(0, 2.0 * k_of(550.0) * a).powi(2);
+    assert!((h.albedo - (1.0 - j0)).abs() < 1e-3, "haze albedo {} against 1 - J0^2 = {}", h.albedo, 1.0 - j0);
+    let want = ((550e-9 / l).asin() / 2.0).tan();
+    assert!((h.params["alpha"] / want - 1.0).abs() < 1e-6, "haze alpha {} against tan(t_1 / 2) = {want}", h.params["alpha"]);
+}
+
+#[test]
+fn white_gaussian_heights_give_the_gaussian_mean_field_and_their_regime() {
+    // |chi|^2 of u-weighted iid Gaussian heights: exp(-v^2 s^2) (1 - f) + f, f = sum u^2 / (sum u)^2.
+    let (n, dx) = (512, 0.5e-6);
+    let p = (default_coherence_m() / dx).round() as usize;
+    let f = window_floor(p);
+    for (sigma, regime) in [(1e-9, Regime::Wave), (35e-9, Regime::Mixed)] {
+        let hf = white(n, dx, sigma, 7);
+        let m = mirror_shares(&hf, &DEFAULT_WAVELENGTHS_NM, &DEFAULT_INCIDENCES_DEG, default_coherence_m());
+        assert_eq!(m.samples, [p, p]);
+        assert!((m.incoherent_floor - f).abs() < 1e-12, "floor {} against {f}", m.incoherent_floor);
+        for (l, &lambda) in DEFAULT_WAVELENGTHS_NM.iter().enumerate() {
+            for (t, &theta) in DEFAULT_INCIDENCES_DEG.iter().enumerate() {
+                let v = 2.0 * k_of(lambda) * theta.to_radians().cos();
+                let want = (-(v * sigma).powi(2)).exp() * (1.0 - f) + f;
+                assert!((m.share(l, t) - want).abs() < 0.01, "sigma {sigma}: {lambda} nm {theta} deg: {} against {want}", m.share(l, t));
+            }
+        }
+        let o = optics(&hf);
+        assert_eq!(o.regime, regime.as_str(), "sigma {sigma}: {}", o.why);
+        assert_eq!(o.specular.len(), 15);
+    }
+}
+
+#[test]
+fn a_rough_surface_is_geometric_and_keeps_its_render_answer() {
+    let s = SynthSettings { nx: 256, ny: 256, dx: 1e-6, dy: 1e-6, seed: 3, ..Default::default() };
+    let hf = gaussian_surface(&s, &GaussianParams { sigma_x: 0.2, sigma_y: 0.2, theta_z: 0.0, corr_length: 8e-6 }).unwrap().0;
+    let o = optics(&hf);
+    assert_eq!(o.regime, "geometric", "{}", o.why);
+    let out = Pipeline::new(Options::default()).run(hf, "rough").unwrap();
+    let answer = out.fit.selection.as_ref().and_then(|s| s.answer.clone()).unwrap();
+    assert!(!answer.contains("mirror"), "a rough surface answers {answer}");
+    assert!(out.fit.selection.unwrap().render_error.is_some(), "the render choice ran");
+    assert_eq!(out.fit.optics.unwrap().regime, "geometric");
+}
+
+#[test]
+fn polished_scans_answer_a_mirror_never_an_error() {
+    // Gaussian heights of 0.03 and 0.1 nm RMS at 0.5 um spacing, and a flat scan with one 1 um spike.
+    let mut spike = vec![0.0; 256 * 256];
+    spike[100 * 256 + 150] = 1e-6;
+    let scans = [
+        ("3e-11", white(256, 0.5e-6, 3e-11, 1)),
+        ("1e-10", white(256, 0.5e-6, 1e-10, 2)),
+        ("spike", Heightfield::new(256, 256, 0.5e-6, 0.5e-6, spike).unwrap()),
+    ];
+    for (name, hf) in scans {
+        let out = Pipeline::new(Options::default()).run(hf, name).unwrap_or_else(|e| panic!("{name}: {}", e.message()));
+        let sel = out.fit.selection.as_ref().unwrap();
+        assert_eq!(sel.answer.as_deref(), Some("mirror"), "{name}");
+        assert_eq!(out.fit.quality.verdict, ndfit::fit::Verdict::Ok, "{name}");
+        let o = out.fit.optics.as_ref().unwrap();
+        assert_eq!(o.regime, "wave", "{name}: {}", o.why);
+        assert!(o.specular.iter().all(|s| s.weight > 0.99), "{name}: {:?}", o.specular);
+    }
+}
+
+#[test]
+fn real_scans_regimes_and_mirror_answers_needs_shared() {
+    const TEST: &str = "real_scans_regimes_and_mirror_answers_needs_shared";
+    let Some(dir) = shared_scans(TEST) else { return };
+    // The near-mirrors: a mirror term of at least 0.8 at normal incidence and 550 nm.
+    for name in ["st_metropro-1.dat", "st_opd-1.opd", "st_plu-1.plu", "st_sur-2.sur"] {
+        let out = Pipeline::new(Options::default()).run_path(&dir.join(name)).unwrap();
+        let answer = out.fit.selection.as_ref().and_then(|s| s.answer.clone()).unwrap();
+        assert!(answer.starts_with("mirror"), "{name} answers {answer}");
+        let o = out.fit.optics.as_ref().unwrap();
+        assert_eq!(o.regime, "wave", "{name}: {}", o.why);
+        let s0 = o.specular.iter().find(|s| s.theta_deg == 0.0 && s.wavelength_nm == 550.0).unwrap().weight;
+        assert!(s0 >= 0.8, "{name}: mirror share {s0} at 0 deg");
+    }
+    // st_x3p-2: a mirror term with a share at 60 degrees in [0.35, 0.85].
+    let out = Pipeline::new(Options::default()).run_path(&dir.join("st_x3p-2.x3p")).unwrap();
+    assert!(out.fit.selection.as_ref().and_then(|s| s.answer.clone()).unwrap().contains("mirror"));
+    let o = out.fit.optics.unwrap();
+    let s60 = o.specular.iter().find(|s| s.theta_deg == 60.0 && s.wavelength_nm == 550.0).unwrap().weight;
+    assert!((0.35..=0.85).contains(&s60), "st_x3p-2: share {s60} at 60 deg");
+    // The rough scans: geometric optics (their answers stay the render choice's).
+    for name in [
+        "hamby44_Unknown-Bullet_E-Land_1.x3p",
+        "hamby44_downsampled_Barrel_1-Bullet_1-Land_1.x3p",
+        "houston_HFSCP-BA-B11-L1.x3p",
+        "x3ptools_sample-land.x3p",
+        "surfalize_test_1.opd",
+        "surfalize_test_1.plu",
+        "st_al3d-1.al3d",
+        "st_tmd-1_dime.tmd",
+    ] {
+        let hf = ndfit::pipeline::read_preprocessed(&dir.join(name), &Default::default(), &Default::default()).unwrap();
+        let o = optics(&hf);
+        assert_eq!(o.regime, "geometric", "{name}: {}", o.why);
+    }
+}
+
+#[test]
+fn the_optics_share_is_the_wave_engines_specular_needs_shared() {
+    const TEST: &str = "the_optics_share_is_the_wave_engines_specular_needs_shared";
+    // A second algorithm: the wave engine's FFT levels read by a cubic in ln v_z, at the same patches.
+    let Some(dir) = shared_scans(TEST) else { return };
+    for name in ["st_plu-1.plu", "st_x3p-2.x3p"] {
+        let hf = ndfit::pipeline::read_preprocessed(&dir.join(name), &Default::default(), &Default::default()).unwrap();
+        let opts = WaveOptions::default();
+        let (report, _) = wave(&hf, &opts, None).unwrap();
+        let o = optics(&hf);
+        for r in &report.records {
+            let s = o.specular.iter().find(|s| s.theta_deg == r.theta_deg && s.wavelength_nm == r.wavelength_nm).unwrap();
+            assert!(
+                (s.weight - r.specular).abs() < 2e-3,
+                "{name} {} nm {} deg: {} against the engine's {}",
+                r.wavelength_nm,
+                r.theta_deg,
+                s.weight,
+                r.specular
+            );
+        }
+    }
+}
