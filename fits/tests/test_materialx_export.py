@@ -81,3 +81,49 @@ def test_document_validates_generates_glsl_and_turns_the_tangent(tmp_path, targe
     shader = gen.generate("ndfit", material, ctx)
     src = shader.getSourceCode(mx_gen.PIXEL_STAGE)
     assert "mx_rotate_vector3" in src
+
+
+def mirror_fit(answer, sigma=40e-9):
+    """A fit whose answer is a mirror: the mirror shares of Gaussian heights, exp(-(2 k sigma cos t)^2)."""
+    spec = [
+        {"theta_deg": t, "wavelength_nm": l, "weight": math.exp(-((4.0 * math.pi / (l * 1e-9) * sigma * math.cos(math.radians(t))) ** 2))}
+        for l in (450.0, 550.0, 650.0)
+        for t in (0.0, 30.0, 45.0, 60.0, 75.0)
+    ]
+    optics = {"regime": "wave", "wavelength_nm": [450.0, 550.0, 650.0], "coherence_m": 1.8925e-05, "specular": spec}
+    if answer != "mirror":
+        optics["haze"] = {"model": "ggx", "params": {"alpha": 0.05}}
+    return {"schema": "ndfit.fit/1", "model": "ggx", "params": {"alpha": 0.3}, "selection": {"answer": answer}, "optics": optics}
+
+
+@pytest.mark.parametrize("target", sorted(SHADER))
+@pytest.mark.parametrize("answer", ["mirror", "mirror+ggx"])
+def test_mirror_document_validates_and_generates_glsl(tmp_path, target, answer):
+    """A mirror answer's document (a smooth conductor; with haze a `mix` of it, `bg`, and the haze, `fg`, at
+    the export's constant weight) validates against the standard libraries and generates GLSL."""
+    fit = tmp_path / "fit.json"
+    fit.write_text(json.dumps(mirror_fit(answer)))
+    text = ndfit("export", fit, "--to", target)
+    exported = json.loads(ndfit("export", fit, "--to", target, "--json"))
+    lib = mx.createDocument()
+    search = mx.getDefaultDataSearchPath()
+    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), search, lib)
+    doc = mx.createDocument()
+    doc.importLibrary(lib)
+    mx.readFromXmlString(doc, text)
+    ok, msg = doc.validate()
+    assert ok, msg
+    mixes = [n for n in doc.getNodes() if n.getCategory() == "mix"]
+    if answer == "mirror":
+        assert not mixes
+    else:
+        (mix,) = mixes
+        assert mix.getInput("bg").getConnectedNode().getName() == "ndfit_mirror"
+        assert mix.getInput("fg").getConnectedNode().getName() == "ndfit_haze"
+        # MaterialX holds a float input as float32.
+        assert abs(mix.getInput("mix").getValue() - exported["weight"]) < 1e-7
+    gen = mx_glsl.GlslShaderGenerator.create()
+    ctx = mx_gen.GenContext(gen)
+    ctx.registerSourceCodeSearchPath(search)
+    shader = gen.generate("ndfit", doc.getNode("ndfit"), ctx)
+    assert shader.getSourceCode(mx_gen.PIXEL_STAGE)

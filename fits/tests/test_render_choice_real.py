@@ -5,7 +5,9 @@ verdict and `selection.answer`; then `ndfit compare SCAN --scene OTHER --json` r
 fitted in OTHER (a point light from another side, seen from another view, and a wider cap light from
 another direction). A lobe answered in the default scenes must render within FLIP 0.06 of the scan's table
 in OTHER too: the answer holds beyond the scenes it was chosen in. The two scans whose best lobe the issue
-measured as invisible in Mitsuba (st_x3p-2 at FLIP 0.017, st_opd-1 at 0.005) must get a lobe, not the table.
+measured as invisible in Mitsuba (st_x3p-2 at FLIP 0.017, st_opd-1 at 0.005) must get a lobe or a mirror, not the
+table. Mirror answers (light sees a mirror, docs/ANSWER.md) are checked in the plate scene instead
+(tests/test_mirror_scene.py).
 
 Runs the ndfit binary (`NDFIT` or target/release/ndfit); skips when that binary or the scans are absent,
 and fails instead when NDFIT_REQUIRE_SHARED is set (CI).
@@ -52,9 +54,13 @@ def test_answers_hold_in_another_scene(tmp_path):
         sel = fit["selection"]
         answer = sel["answer"]
         assert fit["quality"]["verdict"] in ("ok", "misfit", "unresolved"), scan.name
-        assert answer == "measured" or answer == fit["model"], (scan.name, answer, fit["model"])
         if scan.name in INVISIBLE:
-            assert answer != "measured", f"{scan.name}: answered the table ({sel['render_error']})"
+            assert answer != "measured", f"{scan.name}: answered the table ({sel.get('render_error')})"
+        if "mirror" in answer:
+            # Light sees a mirror: the answer is held in the plate scene (tests/test_mirror_scene.py).
+            rows.append(f"{scan.name}: {answer} (optics {fit['optics']['regime']})")
+            continue
+        assert answer == "measured" or answer == fit["model"], (scan.name, answer, fit["model"])
         if answer == "measured":
             rows.append(f"{scan.name}: measured (closest {fit['model']}, {sel['render_error']['worst']:.3f})")
             continue

@@ -1,13 +1,14 @@
 //! `ndfit export FIT.json --to mitsuba|pbrt|blender|openpbr|materialx [--json]`: a fit as a renderer's
-//! parameters (the math is in `ndfit::export`); `ndfit export FIT.json|SCAN --to rgl -o OUT.bsdf`: the fit
-//! or the scan's own NDF as a tabulated BSDF (`ndfit::export::rgl`).
+//! parameters, or its mirror answer as the renderer's smooth conductor and haze (the math is in
+//! `ndfit::export`); `ndfit export FIT.json|SCAN --to rgl -o OUT.bsdf`: the fit or the scan's own NDF as a
+//! tabulated BSDF (`ndfit::export::rgl`).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{anyhow, bail, Context};
 use ndfit::export::rgl::{self, Flavour, Material, RglOptions};
-use ndfit::export::{export, Target};
+use ndfit::export::{export, export_mirror, MirrorAnswer, Target};
 use ndfit::models::{Model, Ndf};
 
 use super::fit_args::FitHow;
@@ -19,9 +20,11 @@ pub struct Args {
     /// A fit result (`ndfit.fit/1`) or any JSON object with `model` and `params`; with `--to rgl` also a
     /// scan, whose own NDF is tabulated.
     pub fit: PathBuf,
-    /// The renderer: mitsuba (roughconductor), pbrt (conductor, pbrt-v4), blender (Principled BSDF),
-    /// openpbr (OpenPBR Surface), materialx (conductor_bsdf), or rgl (a tabulated BSDF file for Mitsuba 3's
-    /// `measured` and pbrt-v4's `measured`, written to `-o`).
+    /// The renderer: mitsuba (roughconductor), pbrt (conductor, pbrt-v4), blender (a Python script: Principled
+    /// BSDF for GGX, Glossy BSDF for Beckmann), openpbr (OpenPBR Surface), materialx (conductor_bsdf), or rgl
+    /// (a tabulated BSDF file for Mitsuba 3's `measured` and pbrt-v4's `measured`, written to `-o`). A fit
+    /// whose answer is a mirror (`mirror`, `mirror+ggx`) is written as the renderer's smooth conductor,
+    /// blended with its haze lobe.
     #[arg(long = "to", value_name = "RENDERER")]
     pub to: String,
     /// Print one JSON object (the contract's keys, plus `note` and `approximation` when the fit had to be
@@ -98,12 +101,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     let target: Target =
         args.to.parse().map_err(|e: ndfit::Error| anyhow!("{path}: --to: {}; or rgl for a tabulated BSDF", e.message()))?;
-    let text = std::fs::read_to_string(&args.fit).with_context(|| format!("{path}: cannot read"))?;
-    let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| anyhow!("{path}: not valid JSON ({e})"))?;
-    let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
+    let json = read_json(&args.fit, &path)?;
     // The fit region of the fit, over which an approximation is fitted and measured.
     let max_theta = json.pointer("/quality/max_theta_deg").and_then(|v| v.as_f64()).unwrap_or(90.0);
     let name = args.fit.file_name().map_or(path.clone(), |n| n.to_string_lossy().into_owned());
+    // A mirror answer is the optics' material, not the ladder's model.
+    if let Some(answer) = MirrorAnswer::from_json(&json).map_err(|e| anyhow!("{path}: {}", e.message()))? {
+        let out = export_mirror(&answer, target, max_theta).map_err(|e| anyhow!("{path}: {}", e.message()))?;
+        for note in out.notes() {
+            eprintln!("ndfit: {path}: {note}");
+        }
+        return emit(args.json, &path, || out.to_json(), || out.snippet(&name));
+    }
+    let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
     if let Model::Mixture(x) = &model {
         let out = ndfit::export::export_mixture(x, target, max_theta).map_err(|e| anyhow!("{path}: {}", e.message()))?;
         for note in [&out.core.note, &out.tail.note].into_iter().flatten() {
@@ -120,6 +130,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 
 /// `--to rgl`: tabulate a fit file's model, or a scan's regularized empirical NDF, and write the tensor file.
 fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
+    let fit = if looks_like_json(&args.fit)? { Some(read_json(&args.fit, path)?) } else { None };
+    // A mirror answer is refused before the table's own flags are checked: no flag would make it a table.
+    if let Some(a) = fit.as_ref().map(MirrorAnswer::from_json).transpose().map_err(|e| anyhow!("{path}: {}", e.message()))?.flatten() {
+        bail!("{path}: the answer is {}, a mirror's delta reflection, which an RGL table cannot hold; export it with --to mitsuba (or pbrt, blender, openpbr, materialx)", a.answer);
+    }
     let Some(out) = &args.output else { bail!("{path}: --to rgl writes a file: give it with -o OUT.bsdf") };
     if args.json {
         bail!("{path}: --json is not for --to rgl (the table is a binary file)");
@@ -134,10 +149,8 @@ fn run_rgl(args: &Args, path: &str) -> anyhow::Result<ExitCode> {
         material_text(material)
     );
     let fail = |e: ndfit::Error| anyhow!("{path}: {}", e.message());
-    let table = if looks_like_json(&args.fit)? {
-        let text = std::fs::read_to_string(&args.fit).with_context(|| format!("{path}: cannot read"))?;
-        let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| anyhow!("{path}: not valid JSON ({e})"))?;
-        let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
+    let table = if let Some(json) = &fit {
+        let model = Model::from_json(json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
         let description = format!("ndfit tabulated {} model of {name} {}; {tail}", model.id(), params_text(&model));
         rgl::tabulate(&|m| model.d(m), &description, &opts, false).map_err(fail)?
     } else {
@@ -183,6 +196,12 @@ pub(super) fn scan_table_ndf(options: ndfit::Options, scan: &Path) -> anyhow::Re
     let fit = outcome.fit.table_model()?;
     let max_theta = outcome.fit.quality.max_theta_deg;
     Ok((outcome, fit, max_theta))
+}
+
+/// The fit file's JSON document.
+fn read_json(p: &Path, path: &str) -> anyhow::Result<serde_json::Value> {
+    let text = std::fs::read_to_string(p).with_context(|| format!("{path}: cannot read"))?;
+    serde_json::from_str(&text).map_err(|e| anyhow!("{path}: not valid JSON ({e})"))
 }
 
 /// Whether the file's first non-blank byte opens a JSON object (a fit), rather than a scan.

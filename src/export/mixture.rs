@@ -3,7 +3,8 @@
 //! fit's `weight` is the core's):
 //! - Mitsuba 3 `blendbsdf`: `weight` is `t` (0 gives the first, nested BSDF alone, 1 the second);
 //! - pbrt-v4 `MixMaterial`: `amount` is `t` (the probability of choosing the second material);
-//! - Blender Mix Shader: `Fac` is `t` (0 gives the upper Shader input, 1 the lower);
+//! - Blender Mix Shader: `Fac` is `t` (0 gives the upper Shader input, 1 the lower), in one script that
+//!   builds both lobes (export/blender.rs);
 //! - OpenPBR and MaterialX: a `mix` node with `mix = t` (`fg` the tail, `bg` the core).
 //!
 //! Each lobe is exported as a single model ([`super::export`], so a lobe the renderer cannot hold is
@@ -93,11 +94,13 @@ impl MixtureExport {
         Value::Object(m)
     }
 
-    /// The snippet: for Mitsuba a `blendbsdf` with the two `roughconductor`s nested; for the others both
-    /// lobes' snippets under a header that says how to blend them.
+    /// The snippet: for Mitsuba a `blendbsdf` with the two `roughconductor`s nested; for Blender one script
+    /// that builds both lobes and the Mix Shader; for the others both lobes' snippets under a header that
+    /// says how to blend them.
     pub fn snippet(&self, source: &str) -> String {
         let t = self.tail_weight;
         match self.target {
+            Target::Blender => self.blender_script(source),
             Target::Mitsuba => {
                 let inner = |e: &Export| {
                     let s = e.snippet(source);
@@ -116,11 +119,27 @@ impl MixtureExport {
             _ => {
                 let how = match self.target {
                     Target::Pbrt => format!("MakeNamedMaterial \"core\" and \"tail\" from these, then Material \"mix\" \"string materials\" [ \"core\" \"tail\" ] \"float amount\" [ {t} ]"),
-                    Target::Blender => format!("build both Principled BSDFs, then a Mix Shader with Fac = {t} (core into the upper Shader input, tail into the lower)"),
                     _ => format!("mix the two surface shaders with a <mix> node, mix = {t} (fg = tail, bg = core)"),
                 };
                 format!("two lobes: {how}\n\n--- core ---\n{}\n--- tail ---\n{}", self.core.snippet(source), self.tail.snippet(source))
             }
         }
+    }
+
+    /// One Blender script: the core and tail lobes, a Mix Shader with Fac = the tail's share (the core is
+    /// its first Shader input, taken at Fac 0), into the Material Output.
+    fn blender_script(&self, source: &str) -> String {
+        let mut head = format!("ndfit export of {source} (two lobes) to blender: Mix Shader Fac = the tail's share {}", self.tail_weight);
+        for (name, e) in [("core", &self.core), ("tail", &self.tail)] {
+            if let Some(n) = &e.note {
+                head.push_str(&format!("\n{name}: {n}"));
+            }
+        }
+        let mut s = super::blender::Script::new(&head, &super::blender::about(&[&self.core.lobe, &self.tail.lobe]));
+        s.lobe("core", &self.core.lobe);
+        s.lobe("tail", &self.tail.lobe);
+        s.mix("core", "tail");
+        s.fac(self.tail_weight);
+        s.finish("mix")
     }
 }

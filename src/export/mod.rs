@@ -1,5 +1,7 @@
 //! Renderer export: a fitted NDF as the parameters of Mitsuba 3, pbrt-v4, Blender (Cycles Principled
-//! BSDF), OpenPBR and MaterialX, with the tangent direction each needs (CONTRACT.md "Renderer export").
+//! BSDF for GGX, Glossy BSDF for Beckmann), OpenPBR and MaterialX, with the tangent direction each needs
+//! (CONTRACT.md "Renderer export"); a mirror answer of the wave optics as each renderer's smooth conductor,
+//! blended with its haze lobe ([`export_mirror`]).
 //!
 //! Every renderer here evaluates an axis-aligned GGX (Trowbridge-Reitz) or Beckmann lobe in its shading
 //! frame `(u, v, n)`: `D(m) = 1 / (pi a_u a_v (m_u^2/a_u^2 + m_v^2/a_v^2 + m_n^2)^2)` (Heitz eq. 85 in
@@ -12,20 +14,25 @@
 //! The published parameter maps ([`RendererLobe::params`]):
 //! - Mitsuba 3 `roughconductor`: `alpha_u`, `alpha_v` are the alphas (GGX or Beckmann).
 //! - pbrt-v4 `conductor`: `uroughness`, `vroughness` are the alphas with `remaproughness` false (GGX only).
-//! - Blender Principled BSDF (Cycles `svm_node_closure_bsdf`): `r2 = roughness^2`,
-//!   `aspect = sqrt(1 - 0.9 anisotropic)`, `alpha_x = r2 / aspect` along the tangent, `alpha_y = r2 aspect`,
-//!   the tangent turned about `n` by `2 pi anisotropic_rotation`; inputs clamped to `[0, 1]` and alphas
-//!   saturated at 1, so at most 10:1 anisotropy and `alpha_x <= 1` (GGX only).
+//! - Blender Principled BSDF, GGX (Cycles `svm_node_closure_bsdf`, `CLOSURE_BSDF_PRINCIPLED_ID`):
+//!   `r2 = roughness^2`, `aspect = sqrt(1 - 0.9 anisotropic)`, `alpha_x = r2 / aspect` along the tangent,
+//!   `alpha_y = r2 aspect`, the tangent turned about `n` by `2 pi anisotropic_rotation`; inputs clamped to
+//!   `[0, 1]` and alphas saturated at 1, so at most 10:1 anisotropy and `alpha_x <= 1`.
+//! - Blender Glossy BSDF, Beckmann (the same function, `CLOSURE_BSDF_MICROFACET_BECKMANN_ID`):
+//!   `r2 = Roughness^2`, `a = clamp(Anisotropy, -0.99, 0.99)`; for `a < 0` `alpha_x = r2 / (1 + a)` along the
+//!   tangent and `alpha_y = r2 (1 + a)` (for `a > 0` the axes trade places); the tangent turned about `n` by
+//!   `2 pi Rotation` (`rotate_around_axis`, counter-clockwise about `n`, as the Principled one); alphas
+//!   saturated at 1 (`bsdf_microfacet_beckmann_setup`), so at most 10^4:1 anisotropy and `alpha_x <= 1`.
 //! - OpenPBR: `alpha_t = r^2 sqrt(2 / (1 + (1 - a)^2))`, `alpha_b = (1 - a) alpha_t`, i.e.
 //!   `r = ((alpha_t^2 + alpha_b^2) / 2)^(1/4)`, `a = 1 - alpha_b / alpha_t` (GGX only).
 //! - MaterialX `conductor_bsdf`: `roughness` is the vector `(alpha_x, alpha_y)` (GGX only).
 //!
-//! What a renderer cannot hold (an ellipsoid's skew, Beckmann outside Mitsuba, Blender beyond 10:1 or
-//! `alpha_x > 1`) is replaced by the nearest lobe it can, FITTED to the fitted NDF: the lobe maximizing
-//! `E_{m ~ D_fit (m.n)}[ln D_lobe(m)]` with `D_lobe` normalized over the fit region (the Poisson fit of
-//! `objective.md` in the limit of infinite data drawn from `D_fit`), by Nelder-Mead on a quadrature grid that
-//! follows the lobe. Its error is reported as `delta(D_lobe; D_fit)` and `delta(D_fit; D_lobe)` (objective.md)
-//! over the same region.
+//! What a renderer cannot hold (an ellipsoid's skew, Beckmann in pbrt, OpenPBR and MaterialX, Blender beyond
+//! its node's anisotropy or `alpha_x > 1`) is replaced by the nearest lobe it can, FITTED to the fitted NDF:
+//! the lobe maximizing `E_{m ~ D_fit (m.n)}[ln D_lobe(m)]` with `D_lobe` normalized over the fit region (the
+//! Poisson fit of `objective.md` in the limit of infinite data drawn from `D_fit`), by Nelder-Mead on a
+//! quadrature grid that follows the lobe. Its error is reported as `delta(D_lobe; D_fit)` and
+//! `delta(D_fit; D_lobe)` (objective.md) over the same region.
 
 use nalgebra::Vector3;
 use serde_json::{json, Map, Value};
@@ -39,8 +46,15 @@ pub(crate) mod mixture;
 pub mod rgl;
 pub(crate) mod snippet;
 
+// The Blender scripts and the mirror answers.
+mod blender;
+mod mirror;
+mod mirror_snippet;
+
 /// Largest `alpha_x / alpha_y` of Blender's Principled BSDF: `1 / aspect^2` at `anisotropic = 1`.
 pub const BLENDER_MAX_ANISOTROPY: f64 = 10.0;
+/// Largest `alpha_x / alpha_y` of Blender's Glossy BSDF: `1 / (1 + a)^2` at Cycles' clamp `a = -0.99`.
+pub const BLENDER_GLOSSY_MAX_ANISOTROPY: f64 = 1.0e4;
 /// Largest alpha Cycles keeps (`bsdf_microfacet_ggx_setup` saturates both alphas at 1).
 pub const BLENDER_MAX_ALPHA: f64 = 1.0;
 /// Cells across the quadrature grid of the approximation fit (about 0.8 x cells^2 nodes on the hemisphere).
@@ -53,7 +67,7 @@ pub enum Target {
     Mitsuba,
     /// pbrt-v4 `conductor`.
     Pbrt,
-    /// Blender (Cycles/EEVEE) Principled BSDF.
+    /// Blender (Cycles/EEVEE): Principled BSDF for GGX, Glossy BSDF for Beckmann.
     Blender,
     /// OpenPBR Surface.
     OpenPbr,
@@ -76,9 +90,9 @@ impl Target {
         }
     }
 
-    /// Whether the renderer has a Beckmann lobe (only Mitsuba's `roughconductor` does).
+    /// Whether the renderer has a Beckmann lobe (Mitsuba's `roughconductor`, Blender's Glossy BSDF).
     pub fn has_beckmann(self) -> bool {
-        self == Target::Mitsuba
+        matches!(self, Target::Mitsuba | Target::Blender)
     }
 }
 
@@ -93,6 +107,7 @@ impl std::str::FromStr for Target {
 }
 
 pub use crate::models::Distribution;
+pub use mirror::{export_mirror, Gap, MirrorAnswer, MirrorExport, Share, ShareForm, SHARE_WAVELENGTH_NM};
 pub use mixture::export_mixture;
 pub use mixture::MixtureExport;
 
@@ -134,10 +149,7 @@ impl RendererLobe {
                 "alpha_u": au, "alpha_v": av, "tangent_angle": t
             }),
             Target::Pbrt => json!({"uroughness": au, "vroughness": av, "remaproughness": false, "tangent_angle": t}),
-            Target::Blender => {
-                let b = blender_params(au, av, t);
-                json!({"roughness": b[0], "anisotropic": b[1], "anisotropic_rotation": b[2]})
-            }
+            Target::Blender => self.blender_json(),
             Target::OpenPbr => {
                 let (r, a) = openpbr_params(au, av);
                 json!({"specular_roughness": r, "specular_roughness_anisotropy": a, "tangent_angle": t})
@@ -149,6 +161,25 @@ impl RendererLobe {
             _ => Map::new(),
         }
     }
+
+    /// Blender's keys: the contract's `roughness`, `anisotropic`, `anisotropic_rotation` (the Principled BSDF's
+    /// inputs for these alphas, [`blender_params`]), the `node` the script builds (`principled` for GGX,
+    /// `glossy` for Beckmann) and its `distribution`; for the Glossy node its own socket values under
+    /// `inputs` ([`glossy_params`]; its `anisotropic` then exceeds 1 beyond the Principled BSDF's 10:1).
+    fn blender_json(&self) -> Value {
+        let (au, av, t) = (self.alpha_u, self.alpha_v, self.tangent_angle);
+        let b = blender_params(au, av, t);
+        let mut v = json!({"roughness": b[0], "anisotropic": b[1], "anisotropic_rotation": b[2],
+                           "distribution": self.distribution.as_str()});
+        if self.distribution == Distribution::Beckmann {
+            let g = glossy_params(au, av, t);
+            v["node"] = json!("glossy");
+            v["inputs"] = json!({"Roughness": g[0], "Anisotropy": g[1], "Rotation": g[2]});
+        } else {
+            v["node"] = json!("principled");
+        }
+        v
+    }
 }
 
 /// Blender's Principled BSDF inputs `[roughness, anisotropic, anisotropic_rotation]` for `alpha_x >= alpha_y`
@@ -157,8 +188,18 @@ impl RendererLobe {
 pub fn blender_params(alpha_x: f64, alpha_y: f64, t: f64) -> [f64; 3] {
     let roughness = (alpha_x * alpha_y).sqrt().sqrt();
     let anisotropic = (1.0 - alpha_y / alpha_x) / 0.9;
-    let rotation = (t / std::f64::consts::TAU).rem_euclid(1.0);
+    // `+ 0.0` writes the turn of `t = -0` as 0.
+    let rotation = (t / std::f64::consts::TAU).rem_euclid(1.0) + 0.0;
     [roughness, anisotropic, if rotation >= 1.0 { 0.0 } else { rotation }]
+}
+
+/// Blender's Glossy BSDF inputs `[Roughness, Anisotropy, Rotation]` for `alpha_x >= alpha_y` along a tangent at
+/// azimuth `t`: the inverse of Cycles' `alpha_x = Roughness^2 / (1 + a)`, `alpha_y = Roughness^2 (1 + a)` for
+/// `a = Anisotropy <= 0` (so the rougher axis stays on the tangent and the rotation is the Principled one's).
+pub fn glossy_params(alpha_x: f64, alpha_y: f64, t: f64) -> [f64; 3] {
+    let roughness = (alpha_x * alpha_y).sqrt().sqrt();
+    let anisotropy = (alpha_y / alpha_x).sqrt() - 1.0;
+    [roughness, anisotropy, blender_params(alpha_x, alpha_y, t)[2]]
 }
 
 /// OpenPBR `(specular_roughness, specular_roughness_anisotropy)` for `alpha_t >= alpha_b`: the inverse of
@@ -219,9 +260,7 @@ pub fn export(model: &Model, target: Target, max_theta_deg: f64) -> Result<Expor
     let model = model.canonical();
     let exact = exact_lobe(&model);
     let fits = |l: &RendererLobe| -> bool {
-        (l.distribution == Distribution::Ggx || target.has_beckmann())
-            && (target != Target::Blender
-                || (l.alpha_u <= BLENDER_MAX_ALPHA && l.alpha_u <= BLENDER_MAX_ANISOTROPY * l.alpha_v * (1.0 + 1e-12)))
+        (l.distribution == Distribution::Ggx || target.has_beckmann()) && Limits::of(target, l.distribution).is_none_or(|k| k.holds(l))
     };
     if let Some(l) = exact.filter(|l| fits(l)) {
         return Ok(Export { target, lobe: l, approximation: None, note: None });
@@ -232,15 +271,22 @@ pub fn export(model: &Model, target: Target, max_theta_deg: f64) -> Result<Expor
         (crate::models::table::Form::Full, None) => {
             "the ellipsoid's skew (theta_x, theta_y) has no counterpart in an axis-aligned renderer lobe".to_string()
         }
-        (_, Some(l)) if l.distribution == Distribution::Beckmann => format!("{} has no Beckmann lobe", target.as_str()),
+        (_, Some(l)) if l.distribution == Distribution::Beckmann && !target.has_beckmann() => {
+            format!("{} has no Beckmann lobe", target.as_str())
+        }
         (_, Some(l)) if l.alpha_u > BLENDER_MAX_ALPHA => format!("Blender saturates alphas at 1, the fit has alpha_x = {:.4}", l.alpha_u),
-        (_, Some(l)) => format!("Blender's anisotropy is at most 10:1, the fit has {:.2}:1", l.alpha_u / l.alpha_v),
+        (_, Some(l)) => format!(
+            "Blender's {} anisotropy is at most {}:1, the fit has {:.2}:1",
+            if l.distribution == Distribution::Beckmann { "Glossy BSDF" } else { "Principled BSDF" },
+            Limits::of(target, l.distribution).map_or(f64::INFINITY, |k| k.max_ratio),
+            l.alpha_u / l.alpha_v
+        ),
         _ => format!("no renderer implements the {} lobe ({})", model.id(), spec.about),
     };
     let beckmann_model = spec.lobes[0].kernel == crate::models::table::Kernel::Beckmann && !spec.is_mixture();
     let distribution = if beckmann_model && target.has_beckmann() { Distribution::Beckmann } else { Distribution::Ggx };
     let region = RegionNodes::new(&model, max_theta_deg);
-    let lobe = fit_lobe(&model, &region, distribution, target == Target::Blender, exact)?;
+    let lobe = fit_lobe(&model, &region, distribution, Limits::of(target, distribution), exact)?;
     let approx = lobe.to_model()?;
     // A GGX lobe against a Beckmann reference: D_ggx / D_beckmann grows like exp(tan^2 theta / alpha^2), so the
     // expectation has no useful finite value (any quadrature returns an astronomically large number).
@@ -284,6 +330,29 @@ fn exact_lobe(model: &Model) -> Option<RendererLobe> {
     })
 }
 
+/// The alphas a Blender node keeps: Cycles saturates each at [`BLENDER_MAX_ALPHA`] and bounds their ratio.
+#[derive(Debug, Clone, Copy)]
+struct Limits {
+    max_ratio: f64,
+}
+
+impl Limits {
+    /// Blender's limits for a lobe of `distribution` (the Principled BSDF's for GGX, the Glossy BSDF's for
+    /// Beckmann); the other renderers have none.
+    fn of(target: Target, distribution: Distribution) -> Option<Limits> {
+        let max_ratio = match distribution {
+            Distribution::Ggx => BLENDER_MAX_ANISOTROPY,
+            Distribution::Beckmann => BLENDER_GLOSSY_MAX_ANISOTROPY,
+        };
+        (target == Target::Blender).then_some(Limits { max_ratio })
+    }
+
+    /// Whether the node holds `l` as it is (the ratio to rounding: an exact 10:1 fit is on the edge, not beyond).
+    fn holds(&self, l: &RendererLobe) -> bool {
+        l.alpha_u <= BLENDER_MAX_ALPHA && l.alpha_u <= self.max_ratio * l.alpha_v * (1.0 + 1e-12)
+    }
+}
+
 /// Quadrature nodes `(m_k, W_k)` over the fit region, on a grid that follows the model's lobe.
 struct RegionNodes {
     nodes: Vec<(Vector3<f64>, f64)>,
@@ -309,12 +378,12 @@ impl RegionNodes {
 }
 
 /// The renderer lobe of `distribution` maximizing `sum_k w_k ln(D(m_k) / S)`, `w_k = D_ref(m_k) W_k`,
-/// `S = sum_k D(m_k) W_k` (module doc), with Blender's limits when `blender`.
+/// `S = sum_k D(m_k) W_k` (module doc), within Blender's `limits` when given.
 fn fit_lobe(
     reference: &Model,
     region: &RegionNodes,
     distribution: Distribution,
-    blender: bool,
+    limits: Option<Limits>,
     start: Option<RendererLobe>,
 ) -> Result<RendererLobe> {
     use argmin::core::{CostFunction, Executor};
@@ -330,13 +399,13 @@ fn fit_lobe(
         w: &'a [f64],
         wsum: f64,
         distribution: Distribution,
-        blender: bool,
+        limits: Option<Limits>,
     }
     impl CostFunction for Cost<'_> {
         type Param = Vec<f64>;
         type Output = f64;
         fn cost(&self, x: &Vec<f64>) -> std::result::Result<f64, argmin::core::Error> {
-            let Some(model) = lobe_of(x, self.distribution, self.blender).to_model().ok() else { return Ok(f64::INFINITY) };
+            let Some(model) = lobe_of(x, self.distribution, self.limits).to_model().ok() else { return Ok(f64::INFINITY) };
             let (mut ll, mut s) = (0.0, 0.0);
             for ((m, wk), w) in self.nodes.iter().zip(self.w) {
                 let d = model.d(*m);
@@ -368,7 +437,7 @@ fn fit_lobe(
             simplex.push(v);
         }
         let solver = NelderMead::new(simplex).with_sd_tolerance(1e-12).map_err(|e| Error::invalid(format!("approximation fit: {e}")))?;
-        let cost = Cost { nodes: &region.nodes, w: &w, wsum, distribution, blender };
+        let cost = Cost { nodes: &region.nodes, w: &w, wsum, distribution, limits };
         let res = Executor::new(cost, solver)
             .configure(|s| s.max_iters(2000))
             .run()
@@ -377,12 +446,12 @@ fn fit_lobe(
             best = p;
         }
     }
-    Ok(lobe_of(&best, distribution, blender))
+    Ok(lobe_of(&best, distribution, limits))
 }
 
-/// The lobe of the search parameters `(ln a1, ln a2, angle)`, projected onto Blender's limits when asked,
+/// The lobe of the search parameters `(ln a1, ln a2, angle)`, projected onto Blender's `limits` when given,
 /// labeled canonically (`alpha_u >= alpha_v`, angle in `(-pi/2, pi/2]`).
-fn lobe_of(x: &[f64], distribution: Distribution, blender: bool) -> RendererLobe {
+fn lobe_of(x: &[f64], distribution: Distribution, limits: Option<Limits>) -> RendererLobe {
     let (mut a1, mut a2, mut t) = (x[0].exp(), x[1].exp(), x[2]);
     if a2 > a1 {
         std::mem::swap(&mut a1, &mut a2);
@@ -391,9 +460,9 @@ fn lobe_of(x: &[f64], distribution: Distribution, blender: bool) -> RendererLobe
     let floor = crate::models::ALPHA_MIN;
     a1 = a1.clamp(floor, crate::models::ALPHA_MAX);
     a2 = a2.clamp(floor, a1);
-    if blender {
+    if let Some(k) = limits {
         a1 = a1.min(BLENDER_MAX_ALPHA);
-        a2 = a2.clamp(a1 / BLENDER_MAX_ANISOTROPY, a1);
+        a2 = a2.clamp(a1 / k.max_ratio, a1);
     }
     RendererLobe { distribution, alpha_u: a1, alpha_v: a2, tangent_angle: crate::models::canonical::fold_half_turn(t) }
 }

@@ -1,5 +1,5 @@
 //! The export as text in each renderer's own syntax: Mitsuba 3 scene XML, pbrt-v4 scene text, Blender
-//! Python, and MaterialX 1.39 documents for OpenPBR Surface and `conductor_bsdf`.
+//! Python (export/blender.rs), and MaterialX 1.39 documents for OpenPBR Surface and `conductor_bsdf`.
 
 use std::fmt::Write;
 
@@ -36,20 +36,7 @@ impl Export {
                 num("uroughness"),
                 num("vroughness")
             ),
-            Target::Blender => format!(
-                "{}\n# Principled BSDF (GGX): alpha_x = roughness^2 / sqrt(1 - 0.9 anisotropic) along the Tangent input,\n\
-                 # turned about the normal by anisotropic_rotation turns; the Tangent must be the UV map's U direction\n\
-                 # with the scan's +x along U.\nimport bpy\n\nmat = bpy.data.materials.new(\"ndfit\")\nmat.use_nodes = True\n\
-                 nodes, links = mat.node_tree.nodes, mat.node_tree.links\nbsdf = nodes[\"Principled BSDF\"]\n\
-                 bsdf.inputs[\"Metallic\"].default_value = 1.0\nbsdf.inputs[\"Roughness\"].default_value = {}\n\
-                 bsdf.inputs[\"Anisotropic\"].default_value = {}\nbsdf.inputs[\"Anisotropic Rotation\"].default_value = {}\n\
-                 tangent = nodes.new(\"ShaderNodeTangent\")\ntangent.direction_type = \"UV_MAP\"\n\
-                 links.new(tangent.outputs[\"Tangent\"], bsdf.inputs[\"Tangent\"])\n",
-                comment(&head, "# "),
-                num("roughness"),
-                num("anisotropic"),
-                num("anisotropic_rotation")
-            ),
+            Target::Blender => self.blender_script(&head),
             Target::OpenPbr => format!(
                 "<?xml version=\"1.0\"?>\n<!-- {} -->\n<materialx version=\"1.39\">\n  \
                  <!-- alpha_t lies along geometry_tangent: the {tangent}. -->\n{}  \
@@ -91,7 +78,7 @@ impl Export {
 /// counter-clockwise about the normal by `t` radians. `rotate3d` computes
 /// `v cos(a) + (v x axis) sin(a) + axis (axis.v) (1 - cos(a))`, a clockwise turn for a positive amount
 /// (its GLSL and OSL sources), so the amount is `-t` in degrees.
-fn tangent_nodes(t: f64) -> String {
+pub(super) fn tangent_nodes(t: f64) -> String {
     format!(
         "  <tangent name=\"ndfit_surface_tangent\" type=\"vector3\">\n    <input name=\"space\" type=\"string\" value=\"world\"/>\n  </tangent>\n  \
          <normal name=\"ndfit_surface_normal\" type=\"vector3\">\n    <input name=\"space\" type=\"string\" value=\"world\"/>\n  </normal>\n  \
@@ -102,11 +89,11 @@ fn tangent_nodes(t: f64) -> String {
 }
 
 /// Every line of `text` behind `prefix`.
-fn comment(text: &str, prefix: &str) -> String {
+pub(super) fn comment(text: &str, prefix: &str) -> String {
     text.lines().map(|l| format!("{prefix}{l}")).collect::<Vec<_>>().join("\n")
 }
 
 /// Text safe inside an XML comment (no `--`).
-fn xml_comment(text: &str) -> String {
+pub(super) fn xml_comment(text: &str) -> String {
     text.replace("--", "- -")
 }

@@ -71,9 +71,11 @@ fn renderer_alphas(target: Target, v: &Value) -> (f64, f64, f64) {
             assert_eq!(v["remaproughness"], json!(false));
             (f("uroughness"), f("vroughness"), f("tangent_angle"))
         }
+        Target::Blender if v["node"] == json!("glossy") => cycles_glossy(&v["inputs"]),
         Target::Blender => {
             // Cycles: r2 = roughness^2, aspect = sqrt(1 - 0.9 anisotropic), alpha_x = r2/aspect along T,
             // T turned about n by 2 pi anisotropic_rotation; inputs in [0, 1].
+            assert_eq!(v["node"], json!("principled"), "{v}");
             let (r, a, rot) = (f("roughness"), f("anisotropic"), f("anisotropic_rotation"));
             for x in [r, a, rot] {
                 assert!((0.0..=1.0).contains(&x), "{v}");
@@ -94,13 +96,31 @@ fn renderer_alphas(target: Target, v: &Value) -> (f64, f64, f64) {
     }
 }
 
+/// Cycles' Glossy BSDF from its socket values (`svm_node_closure_bsdf`, the microfacet case):
+/// `r2 = clamp(Roughness, 0, 1)^2`, `a = clamp(Anisotropy, -0.99, 0.99)`, isotropic for `|a| <= 1e-4`; for
+/// `a < 0` `alpha_x = r2 / (1 + a)` along T and `alpha_y = r2 (1 + a)`, for `a > 0` `alpha_x = r2 (1 - a)`,
+/// `alpha_y = r2 / (1 - a)`; T turned about n by `2 pi Rotation`; both alphas saturated at 1.
+fn cycles_glossy(inputs: &Value) -> (f64, f64, f64) {
+    let f = |k: &str| inputs[k].as_f64().unwrap_or_else(|| panic!("{k} missing in {inputs}"));
+    let r2 = f("Roughness").clamp(0.0, 1.0).powi(2);
+    let a = f("Anisotropy").clamp(-0.99, 0.99);
+    let (ax, ay) = if a.abs() <= 1e-4 {
+        (r2, r2)
+    } else if a < 0.0 {
+        (r2 / (1.0 + a), r2 * (1.0 + a))
+    } else {
+        (r2 * (1.0 - a), r2 / (1.0 - a))
+    };
+    (ax.min(1.0), ay.min(1.0), TAU * f("Rotation"))
+}
+
 /// The renderer's D at scan-frame direction `m` from its exported keys.
 fn renderer_d(target: Target, v: &Value, m: Vector3<f64>) -> f64 {
     let (au, av, t) = renderer_alphas(target, v);
     let ml = local(m, t);
     match target {
         Target::Pbrt => d_pbrt(au, av, ml),
-        Target::Mitsuba => d_mitsuba(v["distribution"] == json!("beckmann"), au, av, ml),
+        Target::Mitsuba | Target::Blender => d_mitsuba(v["distribution"] == json!("beckmann"), au, av, ml),
         _ => d_mitsuba(false, au, av, ml),
     }
 }
@@ -138,12 +158,45 @@ fn exact_exports_reproduce_d_in_the_renderers_frame() {
             assert_same_d(target, &e.to_json(), &fit, 1e-12);
         }
     }
-    // Beckmann in Mitsuba, the one renderer with it: exact too.
+    // Beckmann in Mitsuba and Blender (its Glossy BSDF), the renderers with it: exact too.
     let fit = model(ModelId::BeckmannAniso, &[0.3, 0.12, 0.7]);
-    let e = export(&fit, Target::Mitsuba, 70.0).unwrap();
-    assert!(e.approximation.is_none());
-    assert_eq!(e.to_json()["distribution"], json!("beckmann"));
-    assert_same_d(Target::Mitsuba, &e.to_json(), &fit, 1e-12);
+    for target in [Target::Mitsuba, Target::Blender] {
+        let e = export(&fit, target, 70.0).unwrap();
+        assert!(e.approximation.is_none() && e.note.is_none());
+        assert_eq!(e.to_json()["distribution"], json!("beckmann"));
+        assert_same_d(target, &e.to_json(), &fit, 1e-12);
+    }
+}
+
+/// Blender writes Beckmann as a Glossy BSDF: Cycles' own map of its Roughness, Anisotropy and Rotation
+/// (`cycles_glossy`, written from `svm_node_closure_bsdf`) gives back the fit's D for random lobes up to
+/// 500:1, beyond the Principled BSDF's 10:1; isotropic lobes have Anisotropy 0; an alpha above 1, which
+/// Cycles saturates, is fitted within the node's limits and said so.
+#[test]
+fn blender_beckmann_is_a_glossy_node() {
+    let mut seed = 11u64;
+    let mut rnd = || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..40 {
+        let ax = 0.02 + 0.9 * rnd();
+        let ay = ax * (0.002 + 0.998 * rnd());
+        let fit = model(ModelId::BeckmannAniso, &[ax, ay, (rnd() - 0.5) * TAU]);
+        let e = export(&fit, Target::Blender, 70.0).expect("export");
+        let v = e.to_json();
+        assert!(e.approximation.is_none() && e.note.is_none(), "{v}");
+        assert_eq!((&v["node"], &v["distribution"]), (&json!("glossy"), &json!("beckmann")), "{v}");
+        assert_same_d(Target::Blender, &v, &fit, 1e-12);
+    }
+    let v = export(&model(ModelId::Beckmann, &[0.2]), Target::Blender, 70.0).unwrap().to_json();
+    assert_eq!(v["inputs"]["Anisotropy"], json!(0.0), "{v}");
+    assert!((v["inputs"]["Roughness"].as_f64().unwrap() - 0.2f64.sqrt()).abs() < 1e-15, "{v}");
+    let rough = model(ModelId::BeckmannAniso, &[1.6, 0.8, 0.0]);
+    let e = export(&rough, Target::Blender, 70.0).unwrap();
+    assert_eq!(e.lobe.distribution, Distribution::Beckmann);
+    assert!(e.approximation.is_some() && e.lobe.alpha_u <= 1.0 + 1e-12, "{:?}", e.lobe);
+    assert!(e.note.unwrap().contains("saturates"));
 }
 
 /// The example: theta_z = -1.043 puts the rough axis at +1.043 rad, and every tangent_angle says so.
@@ -370,7 +423,7 @@ fn cli_export() {
     let keys: [(&str, &[&str]); 5] = [
         ("mitsuba", &["alpha_u", "alpha_v", "distribution", "plugin", "tangent_angle"]),
         ("pbrt", &["remaproughness", "tangent_angle", "uroughness", "vroughness"]),
-        ("blender", &["anisotropic", "anisotropic_rotation", "roughness"]),
+        ("blender", &["anisotropic", "anisotropic_rotation", "distribution", "node", "roughness"]),
         ("openpbr", &["specular_roughness", "specular_roughness_anisotropy", "tangent_angle"]),
         ("materialx", &["roughness", "tangent_angle"]),
     ];

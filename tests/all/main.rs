@@ -7,6 +7,8 @@ mod batch;
 mod bench;
 mod cli;
 mod export;
+mod export_blender;
+mod export_mirror;
 mod export_rgl;
 mod facade;
 mod fit;
