@@ -46,7 +46,7 @@ def scene(bsdf, spp=16):
             "film": {"type": "hdrfilm", "width": WIDTH, "height": HEIGHT, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
             "sampler": {"type": "stratified", "sample_count": spp, "seed": 1},
         },
-        "plate": {"type": "rectangle", "to_world": T().scale([2.2, 2.2, 1.0]), "bsdf": bsdf},
+        "plate": {"type": "rectangle", "to_world": T().scale([3.2, 3.2, 1.0]), "bsdf": bsdf},
         # The light faces the plate's centre; 2.4 x 1.2 m at 6 m: about 23 x 11 degrees, a window with sharp edges.
         "light": {
             "type": "rectangle",
