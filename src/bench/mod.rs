@@ -13,6 +13,7 @@
 
 pub mod accuracy;
 pub mod analysis;
+pub mod answer;
 pub mod floors;
 pub(crate) mod knobs;
 pub mod mem;

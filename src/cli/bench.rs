@@ -2,7 +2,7 @@
 //! comparison with the numpy + nlopt pipeline.
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -85,6 +85,14 @@ pub struct Args {
     /// (--quick: 2048^2, one run each).
     #[arg(long)]
     pub wave: bool,
+    /// What `auto`'s answer costs (`ndfit::bench::answer`): `ndfit fit SCAN` (auto: optics, ladder, render
+    /// choice) against `ndfit fit SCAN --model ggx-aniso` as whole processes, interleaved, on the shared
+    /// real scans and fresh synthetic truths (seed from the clock); writes answer.json and answer.md
+    #[arg(long)]
+    pub answer: bool,
+    /// With --answer: side of the fresh truths (default 512, quick 128).
+    #[arg(long)]
+    pub answer_size: Option<usize>,
     /// With --wave: side of the synthetic speed scan (default 4096, quick 2048).
     #[arg(long)]
     pub wave_size: Option<usize>,
@@ -169,6 +177,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     if args.trace {
         return trace(&args);
+    }
+    if args.answer {
+        return answer(&args);
     }
     if args.wave {
         return wave(&args);
@@ -430,6 +441,40 @@ fn trace(args: &Args) -> anyhow::Result<ExitCode> {
     ndfit::io::write_bytes_atomic(&args.out.join("trace.md"), md.as_bytes())?;
     eprint!("{md}");
     eprintln!("wrote {} and {}", args.out.join("trace.json").display(), args.out.join("trace.md").display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--answer`: `auto` against one `ggx-aniso` fit (`ndfit::bench::answer`).
+fn answer(args: &Args) -> anyhow::Result<ExitCode> {
+    use ndfit::bench::answer as ab;
+    let exe = std::env::current_exe().context("cannot find the ndfit executable")?;
+    let dir = ndfit::bench::wave::default_scans().first().and_then(|p| p.parent().map(Path::to_path_buf));
+    let mut scans: Vec<PathBuf> = match &dir {
+        Some(d) if d.is_dir() => std::fs::read_dir(d)
+            .with_context(|| d.display().to_string())?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|e| !matches!(e.to_str(), Some("json" | "md"))))
+            .collect(),
+        _ => Vec::new(),
+    };
+    scans.sort();
+    let seed = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(1, |d| d.as_secs());
+    let plan = ab::AnswerPlan {
+        scans,
+        size: args.answer_size.unwrap_or(if args.quick { 128 } else { 512 }),
+        seed,
+        repeats: args.repeats.unwrap_or(if args.quick { 1 } else { 3 }),
+        ndfit: exe,
+    };
+    std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create the output folder", args.out.display()))?;
+    let tmp = tempfile::Builder::new().prefix(".bench-answer.").tempdir_in(&args.out).context("cannot create a temporary folder")?;
+    let work = args.work_dir.clone().unwrap_or_else(|| tmp.path().to_path_buf());
+    let b = ab::run(&plan, &work, |l| eprintln!("{l}"))?;
+    let md = ab::markdown(&b);
+    ndfit::io::write_bytes_atomic(&args.out.join("answer.json"), serde_json::to_string_pretty(&b).context("JSON")?.as_bytes())?;
+    ndfit::io::write_bytes_atomic(&args.out.join("answer.md"), md.as_bytes())?;
+    eprint!("{md}");
+    eprintln!("wrote {} and {}", args.out.join("answer.json").display(), args.out.join("answer.md").display());
     Ok(ExitCode::SUCCESS)
 }
 

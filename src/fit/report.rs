@@ -95,6 +95,10 @@ pub struct Timings {
     pub ndf_ms: Option<f64>,
     /// The fit (all starts, covariance, for `auto` all candidate models).
     pub fit_ms: f64,
+    /// `auto`'s optics: the mirror share over the coherence patches, and a mirror's haze (filled in by
+    /// `Pipeline`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub optics_ms: Option<f64>,
 }
 
 /// One candidate of `--model auto`.

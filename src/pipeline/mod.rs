@@ -201,10 +201,11 @@ impl Pipeline {
         Ok((ndf, scan.input_info(path), ndf_ms))
     }
 
-    /// What light sees of the scan, for `auto` with its answer (`None` otherwise).
-    fn optics_of(&self, scan: &Prepared) -> Option<Optics> {
+    /// What light sees of the scan, for `auto` with its answer (`None` otherwise), and the time taken (ms).
+    fn optics_of(&self, scan: &Prepared) -> Option<(Optics, f64)> {
         let _p = crate::phases::phase("optics");
-        (self.options.render.is_some() && self.options.model == ModelChoice::Auto).then(|| crate::answer::optics_with_haze(scan))
+        let t = Instant::now();
+        (self.options.render.is_some() && self.options.model == ModelChoice::Auto).then(|| (crate::answer::optics_with_haze(scan), ms(t)))
     }
 
     fn finish(
@@ -214,11 +215,12 @@ impl Pipeline {
         path: &Path,
         read_ms: f64,
         ndf_ms: f64,
-        optics: Option<Optics>,
+        optics: Option<(Optics, f64)>,
     ) -> Result<Outcome> {
+        let optics_ms = optics.as_ref().map(|o| o.1);
         let mut report = match (&self.options.render, self.options.model) {
             (Some(render), ModelChoice::Auto) => {
-                fit_answered(&ndf, &self.options.fit_options(), render, &path.display().to_string(), optics)
+                fit_answered(&ndf, &self.options.fit_options(), render, &path.display().to_string(), optics.map(|o| o.0))
             }
             _ => fit(&ndf, self.options.model, &self.options.fit_options()),
         }
@@ -226,6 +228,7 @@ impl Pipeline {
         report.input = Some(input);
         report.timings.read_ms = Some(read_ms);
         report.timings.ndf_ms = Some(ndf_ms);
+        report.timings.optics_ms = optics_ms;
         Ok(Outcome { ndf, fit: report })
     }
 }

@@ -230,3 +230,25 @@ fn wave_bench_on_a_tiny_scan_writes_every_field() {
     let levels: Vec<u64> = pts.iter().map(|p| p["levels"].as_u64().expect("levels")).collect();
     assert!(levels.windows(2).all(|w| w[0] > w[1]), "{levels:?}");
 }
+
+#[test]
+fn answer_bench_on_fresh_truths_measures_both_commands_and_reads_the_regime() {
+    // No shared scans: the three fresh truths of 64^2, one run each. The polished one is a mirror to light
+    // (0.1 nm heights at 0.5 um: its mirror share at 450 nm, 0 deg, is exp(-(4 pi 0.1 / 450)^2) ~ 0.99992).
+    let dir = tempfile::tempdir().unwrap();
+    let plan =
+        ndfit::bench::answer::AnswerPlan { scans: vec![dir.path().join("absent.x3p")], size: 64, seed: 7, repeats: 1, ndfit: ndfit_bin() };
+    let b = ndfit::bench::answer::run(&plan, dir.path(), |_| {}).unwrap();
+    assert_eq!(b.rows.len(), 3);
+    assert_eq!(b.notes.len(), 1, "the absent scan is a note: {:?}", b.notes);
+    for r in &b.rows {
+        assert!(r.auto_ms > 0.0 && r.ggx_aniso_ms > 0.0 && (r.ratio - r.auto_ms / r.ggx_aniso_ms).abs() < 1e-12, "{r:?}");
+        assert!(r.optics_ms.is_some_and(|o| o >= 0.0 && o <= r.auto_ms), "{r:?}");
+    }
+    let polished = b.rows.iter().find(|r| r.scan.starts_with("polished")).unwrap();
+    assert_eq!((polished.regime.as_deref(), polished.answer.as_deref()), (Some("wave"), Some("mirror")));
+    let rough = b.rows.iter().find(|r| r.scan.starts_with("gaussian")).unwrap();
+    assert_eq!(rough.regime.as_deref(), Some("geometric"));
+    let md = ndfit::bench::answer::markdown(&b);
+    assert!(md.contains("| polished (0.1 nm), seed 7 | wave | mirror |") && md.contains("against the aim of 3x"), "{md}");
+}
