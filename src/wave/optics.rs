@@ -127,13 +127,7 @@ pub fn mirror_shares<S: BandSource<T = f64>>(src: &S, wavelengths_nm: &[f64], in
                     acc.tilt2 += c.s1 * c.tan2;
                     acc.floor += u.iter().map(|x| x * x).sum::<f64>() / c.s1;
                     for (a, &v) in acc.coherent.iter_mut().zip(&vz) {
-                        let (mut cr, mut ci) = (0.0, 0.0);
-                        for (&rk, &uk) in r.iter().zip(u.iter()) {
-                            // A masked point has u = 0 and adds nothing.
-                            let (s, co) = (v * rk).sin_cos();
-                            cr += uk * co;
-                            ci += uk * s;
-                        }
+                        let (cr, ci) = mean_field(r, u, v);
                         *a += (cr * cr + ci * ci) / c.s1;
                     }
                     slopes(r, u, px, py, [g.dx, g.dy], &bands, &mut acc);
@@ -159,6 +153,29 @@ pub fn mirror_shares<S: BandSource<T = f64>>(src: &S, wavelengths_nm: &[f64], in
         beyond_band: acc.beyond.iter().map(|&b| if acc.points > 0.0 { b / acc.points } else { 0.0 }).fold(0.0, f64::max),
         note,
     }
+}
+
+/// `sum u exp(i v r)` as (real, imaginary), four samples at a time (a masked point has `u = 0` and adds
+/// nothing); the sums run in index order whatever the threads.
+fn mean_field(r: &[f64], u: &[f64], v: f64) -> (f64, f64) {
+    use wide::f64x4;
+    let (mut cr, mut ci) = (f64x4::ZERO, f64x4::ZERO);
+    let vv = f64x4::splat(v);
+    let (r4, u4) = (r.chunks_exact(4), u.chunks_exact(4));
+    let (rt, ut) = (r4.remainder(), u4.remainder());
+    for (rk, uk) in r4.zip(u4) {
+        let (s, c) = (vv * f64x4::new([rk[0], rk[1], rk[2], rk[3]])).sin_cos();
+        let w = f64x4::new([uk[0], uk[1], uk[2], uk[3]]);
+        cr += w * c;
+        ci += w * s;
+    }
+    let (mut re, mut im) = (cr.reduce_add(), ci.reduce_add());
+    for (&rk, &uk) in rt.iter().zip(ut) {
+        let (s, c) = (v * rk).sin_cos();
+        re += uk * c;
+        im += uk * s;
+    }
+    (re, im)
 }
 
 /// Add a patch's forward-difference slopes (valid pairs only) and, at normal incidence, the points whose
