@@ -92,6 +92,15 @@ class Fit:
     def verdict(self) -> str: ...
     @property
     def warnings(self) -> List[str]: ...
+    @property
+    def answer(self) -> Optional[str]:
+        """``auto``'s answer: a model id, ``measured``, ``mirror`` or ``mirror+ggx``; None for one model."""
+    @property
+    def regime(self) -> Optional[str]:
+        """``auto``'s regime (``optics.regime``): ``geometric``, ``mixed`` or ``wave``; None for one model."""
+    @property
+    def optics(self) -> Optional[Dict[str, Any]]:
+        """``auto``'s ``optics`` (regime, wavelength_nm, coherence_m, specular, haze, ...); None for one model."""
     def to_dict(self) -> Dict[str, Any]: ...
     def to_json(self) -> str: ...
     @staticmethod

@@ -65,6 +65,9 @@ def assert_rows_match_batch(df, root, entries):
         for name in set(PARAM_COLUMNS) - set(fit["params"]):
             assert math.isnan(row[name]), (key, name)
         assert row["verdict"] == fit["quality"]["verdict"]
+        # auto's answer and regime (None where a model was named).
+        assert row["answer"] == (fit.get("selection") or {}).get("answer"), key
+        assert row["regime"] == (fit.get("optics") or {}).get("regime"), key
         assert row["reduced_chi2"] == fit["quality"]["reduced_chi2"]
         assert pd.isna(row["error"]) and pd.isna(row["error_kind"])
 

@@ -136,3 +136,17 @@ def test_bad_input_raises_the_cli_line(ndfit_bin, tmp_path, npy, heights):
     ]:
         with pytest.raises(ndfit.NdfitError, match=pattern):
             ndfit.wave(npy, **RAW_KW, **kwargs)
+
+
+def test_fit_carries_the_regime_and_a_mirror_answer():
+    # White heights of 0.1 nm RMS at 0.5 um: the mirror share at 450 nm and normal incidence is
+    # exp(-(4 pi 0.1 / 450)^2) = 0.99992 (less the patches' own spread): light sees a mirror.
+    z = np.random.default_rng(3).normal(0.0, 1e-10, (256, 256))
+    fit = ndfit.fit(ndfit.Scan(z, dx=DX))
+    assert fit.regime == "wave" and fit.answer == "mirror"
+    o = fit.optics
+    assert len(o["specular"]) == 15 and all(s["weight"] > 0.99 for s in o["specular"])
+    doc = json.loads(fit.to_json())
+    assert doc["optics"]["regime"] == "wave" and doc["selection"]["answer"] == "mirror"
+    one = ndfit.fit(ndfit.Scan(z, dx=DX), model="ggx")
+    assert one.regime is None and one.answer is None
