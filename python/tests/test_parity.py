@@ -13,7 +13,7 @@ import pytest
 import ndfit
 from conftest import real_scan_files, run_cli
 
-TIMING = re.compile(r'("(?:read_ms|ndf_ms|fit_ms)": )[-+0-9.eE]+')
+TIMING = re.compile(r'("(?:read_ms|ndf_ms|fit_ms|optics_ms)": )[-+0-9.eE]+')
 
 
 def without_timings(text: str) -> str:
