@@ -119,7 +119,7 @@ fn main() -> ndfit::Result<()> {
 }
 
 /// How many BRDF evaluations a render of `scene` takes.
-fn count(scene: &ndfit::render::Scene, brdf: &dyn ndfit::render::Brdf) -> usize {
+fn count(scene: &ndfit::render::Stage, brdf: &dyn ndfit::render::Brdf) -> usize {
     use std::sync::atomic::{AtomicUsize, Ordering};
     let n = AtomicUsize::new(0);
     let f = |wi: nalgebra::Vector3<f64>, wo: nalgebra::Vector3<f64>| {

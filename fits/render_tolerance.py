@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The image difference a production render carries by itself: the mean HDR-FLIP between two Mitsuba 3
-renders of the SAME material that differ only in their random seed, in ndfit's two default scenes.
+renders of the SAME material that differ only in their random seed, in ndfit's default scenes.
 
 This is the yardstick for `ndfit compare --render-tolerance` (data_formats/render.md, "The choice"): a lobe
 whose render differs from the table's by no more than a production render's own sampling noise is
@@ -23,13 +23,17 @@ The scenes are ndfit's (data_formats/render.md, "Frame and scenes"; fits/tests/t
 the unit sphere (identity transform), an orthographic camera from -y with +z up and half-width 1.05, a box
 pixel filter; `point` = a directional light of irradiance pi from theta=60, phi=-90 at 128 x 128;
 `broad` = a spherical area light subtending a 25-degree half-angle cap about the same direction, radiance
-1/sin^2(25 deg), at 64 x 64. The integrator is what a production render of the scene does: a path tracer
-with emitter sampling and BSDF sampling combined by MIS (the sphere is convex, so only direct light
-arrives); emitters hidden (black background, as ndfit renders).
+1/sin^2(25 deg), at 64 x 64; `window` = ndfitpy/mirror_scene.py's plate in a black room (room radiance 0):
+a square plate (z = 0, half-width 3.2, `s` = +x) seen 65 degrees off its normal by a perspective camera
+(fov 32 degrees across, 160 x 96, every pixel plate) under a 2.4 x 1.2 rectangular light of radiance 20
+where the plate reflects it toward the camera. The integrator is what a production render of the scene
+does: a path tracer with emitter sampling and BSDF sampling combined by MIS (the sphere is convex and the
+plate flat, so only direct light arrives); emitters hidden (black background, as ndfit renders).
 
 Usage (from the repository root):
     fits/.venv/bin/python fits/render_tolerance.py --ndfit target/release/ndfit \
         /work/shared/data/scans/st_x3p-2.x3p /work/shared/data/scans/st_opd-1.opd
+    (`--scenes window --sampler multijitter` for the plate scene: about 2 minutes a table at 4096 spp.)
 Scratch files (tables, fits) go to --workdir (default: a fresh folder under the system's temp dir).
 """
 
@@ -48,11 +52,13 @@ import numpy as np
 import flip_evaluator
 import mitsuba as mi
 
+from ndfitpy import mirror_scene as ms
+
 EXTENT = 1.05
 LIGHT = (60.0, -90.0)
 HALF_ANGLE = 25.0
 DYNAMIC_RANGE = 1e3  # ndfit's choice::DYNAMIC_RANGE
-SIZES = {"point": 128, "broad": 64}
+SIZES = {"point": (128, 128), "broad": (64, 64), "window": (ms.WIDTH, ms.HEIGHT)}  # width, height
 
 
 def direction(theta_deg, phi_deg):
@@ -68,6 +74,10 @@ def run(ndfit, *args):
 
 
 def scene_dict(scene, bsdf_path, spp, sampler, size):
+    bsdf = {"type": "measured", "filename": str(bsdf_path)}
+    if scene == "window":
+        assert tuple(size) == (ms.WIDTH, ms.HEIGHT), size
+        return ms.scene_dict(bsdf, spp, room=0.0, sampler=sampler)
     light = direction(*LIGHT)
     if scene == "point":
         emitter = {"type": "directional", "direction": [-c for c in light], "irradiance": {"type": "rgb", "value": math.pi}}
@@ -86,10 +96,10 @@ def scene_dict(scene, bsdf_path, spp, sampler, size):
             "type": "orthographic",
             "to_world": mi.ScalarTransform4f().look_at(origin=[0, -10, 0], target=[0, 0, 0], up=[0, 0, 1])
             @ mi.ScalarTransform4f().scale([EXTENT, EXTENT, 1]),
-            "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+            "film": {"type": "hdrfilm", "width": size[0], "height": size[1], "rfilter": {"type": "box"}, "pixel_format": "rgb"},
             "sampler": {"type": sampler, "sample_count": spp},
         },
-        "sphere": {"type": "sphere", "bsdf": {"type": "measured", "filename": str(bsdf_path)}},
+        "sphere": {"type": "sphere", "bsdf": bsdf},
         "light": emitter,
     }
 
@@ -136,7 +146,7 @@ def main():
     ap.add_argument("scans", nargs="+", help="heightfield scans (anything `ndfit export --to rgl` reads)")
     ap.add_argument("--ndfit", default=os.environ.get("NDFIT", "target/release/ndfit"), help="the ndfit binary (default: $NDFIT, else target/release/ndfit)")
     ap.add_argument("--material", default="Al", help="the conductor of the tables (default Al, the choice's default)")
-    ap.add_argument("--scenes", default="point,broad")
+    ap.add_argument("--scenes", default="point,broad", help="any of point, broad, window (default point,broad)")
     ap.add_argument("--spp", default="16,64,256", help="sample counts of the production renders")
     ap.add_argument("--ref-spp", type=int, default=4096, help="sample count of the converged reference")
     ap.add_argument("--sampler", default="independent", help="Mitsuba sampler (independent, stratified, multijitter, orthogonal, ldsampler)")
@@ -151,6 +161,9 @@ def main():
     if not os.access(args.ndfit, os.X_OK):
         sys.exit(f"no ndfit binary at {args.ndfit} (--ndfit or $NDFIT)")
     scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
+    for sc in scenes:
+        if sc not in SIZES:
+            sys.exit(f"unknown scene {sc!r} (--scenes takes {', '.join(SIZES)})")
     spps = [int(s) for s in args.spp.split(",")]
 
     variant = args.variant

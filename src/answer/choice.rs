@@ -22,7 +22,7 @@ use crate::fit::{Decide, Decision, Offered};
 use crate::flip::{auto_exposures, hdr, HdrOptions, HdrReference, RgbImage, DEFAULT_PPD};
 use crate::models::Model;
 use crate::ndf::EmpiricalNdf;
-use crate::render::{direction, Brdf, BrdfSet, Image, Light, Scene};
+use crate::render::{direction, Brdf, BrdfSet, Image, Light, Scene, Stage, Window};
 
 /// An exported table as a renderer shows it: `D` read bilinearly from the table's `ndf` grid, Smith's
 /// `G1` from its `sigma` grid, both directions' masking separable (as Mitsuba's `measured` with
@@ -161,27 +161,35 @@ impl BrdfSet<2> for TableAndLobe<'_> {
             [*t, *l] = self.shade(self.table.unshaded(wi, wo, gi), self.lobe.unshaded(wi, wo, lambda_i));
         }
     }
+
+    fn mirror(&self, wi: Vector3<f64>, active: [bool; 2]) -> [[f64; 3]; 2] {
+        [&self.table as &dyn Brdf, &self.lobe].mirror(wi, active)
+    }
 }
 
 /// A scene of the choice with the name the report gives it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NamedScene {
-    /// `point` or `broad` for the defaults; a stated scene is named by its spec.
+    /// `point`, `broad` or `window` for the defaults; a stated scene is named by its spec.
     pub name: String,
     /// The scene.
-    pub scene: Scene,
+    pub scene: Stage,
 }
 
 /// The default scenes: the sphere under a point light (every half vector in one image) and under a broad
 /// light (the NDF blurred, as a room lights an object); `data_formats/render.md` states them.
 pub fn default_scenes() -> Vec<NamedScene> {
-    vec![NamedScene { name: "point".into(), scene: Scene::point() }, NamedScene { name: "broad".into(), scene: Scene::broad() }]
+    vec![
+        NamedScene { name: "point".into(), scene: Scene::point().into() },
+        NamedScene { name: "broad".into(), scene: Scene::broad().into() },
+    ]
 }
 
 /// The scenes a spec names, comma-separated: `point` or `broad`, each optionally followed by
 /// `:KEY=VALUE` changes, `light=THETA/PHI` and `view=THETA/PHI` (degrees, the sphere's frame, `z` its
-/// pole), `cap=DEG` (a cap light of that half-angle instead) and `size=N` (pixels). An unknown name or
-/// key, a bad number or a scene that cannot be rendered is an error naming it.
+/// pole), `cap=DEG` (a cap light of that half-angle instead) and `size=N` (pixels); or `window` (the plate
+/// under a window, [`Window`]), whose `size=N` is its width (the height three fifths of it). An unknown
+/// name or key, a bad number or a scene that cannot be rendered is an error naming it.
 pub fn parse_scenes(spec: &str) -> Result<Vec<NamedScene>> {
     let mut out: Vec<NamedScene> = Vec::new();
     for item in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
@@ -190,7 +198,25 @@ pub fn parse_scenes(spec: &str) -> Result<Vec<NamedScene>> {
         let mut scene = match base {
             "point" => Scene::point(),
             "broad" => Scene::broad(),
-            _ => return Err(Error::invalid(format!("scene '{item}': unknown scene '{base}' (point or broad)"))),
+            "window" => {
+                let mut w = Window::default();
+                for kv in parts {
+                    let bad = |why: &str| Error::invalid(format!("scene '{item}': '{kv}': {why}"));
+                    match kv.split_once('=') {
+                        Some(("size", v)) => {
+                            w.width = v.trim().parse().map_err(|_| bad("not a pixel count"))?;
+                            w.height = (w.width * 3).div_ceil(5);
+                        }
+                        _ => return Err(bad("the window scene takes only size=N")),
+                    }
+                }
+                w.validate().map_err(|e| Error::invalid(format!("scene '{item}': {}", e.message())))?;
+                if !out.iter().any(|s| s.name == item) {
+                    out.push(NamedScene { name: item.to_string(), scene: Stage::Window(w) });
+                }
+                continue;
+            }
+            _ => return Err(Error::invalid(format!("scene '{item}': unknown scene '{base}' (point, broad or window)"))),
         };
         for kv in parts {
             let bad = |why: &str| Error::invalid(format!("scene '{item}': '{kv}': {why}"));
@@ -223,11 +249,11 @@ pub fn parse_scenes(spec: &str) -> Result<Vec<NamedScene>> {
         }
         scene.validate().map_err(|e| Error::invalid(format!("scene '{item}': {}", e.message())))?;
         if !out.iter().any(|s| s.name == item) {
-            out.push(NamedScene { name: item.to_string(), scene });
+            out.push(NamedScene { name: item.to_string(), scene: scene.into() });
         }
     }
     if out.is_empty() {
-        return Err(Error::invalid(format!("no scene in '{spec}' (point, broad, or one with :KEY=VALUE changes)")));
+        return Err(Error::invalid(format!("no scene in '{spec}' (point, broad, window, or one with :KEY=VALUE changes)")));
     }
     Ok(out)
 }
@@ -902,9 +928,10 @@ mod tests {
             let table = ScanBrdf { reg: &reg, area: &area, material: Material::Al };
             let lobe = AnalyticBrdf { model, material };
             for s in default_scenes() {
+                let Stage::Sphere(scene) = s.scene else { continue };
                 let [t, l] = s.scene.render_set(&TableAndLobe { table, lobe }).unwrap();
-                assert_eq!(bits(&t), bits(&render_before(&s.scene, &table)), "{} {model:?}", s.name);
-                assert_eq!(bits(&l), bits(&render_before(&s.scene, &lobe)), "{} {model:?}", s.name);
+                assert_eq!(bits(&t), bits(&render_before(&scene, &table)), "{} {model:?}", s.name);
+                assert_eq!(bits(&l), bits(&render_before(&scene, &lobe)), "{} {model:?}", s.name);
             }
         }
     }
@@ -986,8 +1013,8 @@ mod tests {
     fn scene_specs_state_their_changes() {
         let s = parse_scenes("point, broad:cap=40:light=30/0:size=48,point").unwrap();
         assert_eq!(s.len(), 2, "the repeated point is one scene");
-        assert_eq!((s[0].name.as_str(), &s[0].scene), ("point", &Scene::point()));
-        let b = &s[1].scene;
+        assert_eq!((s[0].name.as_str(), &s[0].scene), ("point", &Stage::Sphere(Scene::point())));
+        let Stage::Sphere(b) = &s[1].scene else { panic!("a sphere") };
         assert_eq!(b.camera.size, 48);
         assert_eq!(b.camera.view, Scene::broad().camera.view);
         let Light::Cap { dir, half_angle, radiance } = b.light else { panic!("a cap") };
@@ -996,14 +1023,19 @@ mod tests {
         // A white Lambertian surface facing the cap still shows 1.
         assert!((radiance * half_angle.sin().powi(2) - 1.0).abs() < 1e-12);
         let p = parse_scenes("point:view=0/0:cap=10").unwrap();
-        assert!(matches!(p[0].scene.light, Light::Cap { .. }));
-        assert!((p[0].scene.camera.view - Vector3::z()).norm() < 1e-12);
+        let Stage::Sphere(p) = p[0].scene else { panic!("a sphere") };
+        assert!(matches!(p.light, Light::Cap { .. }));
+        assert!((p.camera.view - Vector3::z()).norm() < 1e-12);
+        let w = parse_scenes("window:size=80").unwrap();
+        assert_eq!(w[0].scene, Stage::Window(Window { width: 80, height: 48, ..Window::default() }));
         for (bad, says) in [
             ("spot", "unknown scene 'spot'"),
             ("point:light=30", "THETA/PHI"),
             ("point:glow=1", "unknown key"),
             ("broad:cap=0", "(0, 90]"),
             ("point:size=0", "image size"),
+            ("window:size=0", "image size"),
+            ("window:light=30/0", "only size=N"),
             ("point:light=a/3", "not a finite number"),
             ("", "no scene"),
         ] {

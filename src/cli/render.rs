@@ -1,14 +1,16 @@
-//! `ndfit render INPUT [--scene point|broad] [--light THETA,PHI] [--view THETA,PHI] [--size N] -o OUT.exr|OUT.npy`:
-//! the sphere of `ndfit::render` with a fit's lobe (JSON) or an RGL table (`.bsdf`, evaluated as Mitsuba 3's
-//! `measured` does), written as OpenEXR or NumPy.
+//! `ndfit render INPUT [--scene point|broad|window] [--light THETA,PHI] [--view THETA,PHI] [--size N] -o OUT.exr|OUT.npy`:
+//! a scene of `ndfit::render` (the sphere, or the plate under a window) with a fit's lobe (JSON; a mirror
+//! answer as its mirror and haze) or an RGL table (`.bsdf`, evaluated as Mitsuba 3's `measured` does; a
+//! wave BRDF's table with its mirror share as a mirror), written as OpenEXR or NumPy.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{anyhow, bail, Context};
 use ndfit::export::rgl::{AnalyticBrdf, Material, Measured, TensorFile};
+use ndfit::export::{MirrorAnswer, MirrorBrdf};
 use ndfit::models::Model;
-use ndfit::render::{direction, Brdf, Light, Scene};
+use ndfit::render::{direction, Brdf, Light, Scene, Stage, Window};
 
 /// Arguments of `ndfit render`.
 #[derive(Debug, clap::Args)]
@@ -16,7 +18,8 @@ pub struct Args {
     /// A fit result (`ndfit fit -o`, or any JSON object with `model` and `params`) or an RGL tabulated BSDF
     /// (`ndfit export --to rgl`).
     pub input: PathBuf,
-    /// point (a directional light) or broad (a spherical-cap light of `--half-angle`).
+    /// point (a directional light), broad (a spherical-cap light of `--half-angle`) or window (a plate seen
+    /// near grazing under a sharp-edged rectangular light; `--size` is its width, the height 3/5 of it).
     #[arg(long, default_value = "point")]
     pub scene: String,
     /// Direction toward the light, `THETA,PHI` in degrees in the sphere's frame (`z` its pole)
@@ -27,7 +30,7 @@ pub struct Args {
     /// equator, pole up, the tangent s pointing right at the image's centre].
     #[arg(long, value_name = "THETA,PHI")]
     pub view: Option<String>,
-    /// Pixels per side [default: 128 for point, 64 for broad].
+    /// Pixels per side [default: 128 for point, 64 for broad; the width for window, 160].
     #[arg(long)]
     pub size: Option<usize>,
     /// `--scene broad`: the half-angle of the light's cone in degrees.
@@ -61,15 +64,25 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             bail!("{path}: --material is for a fit; a table carries its conductor");
         }
         let t = TensorFile::parse(&bytes).map_err(|e| anyhow!("{path}: {}", e.message()))?;
-        Box::new(Measured::new(&t).map_err(|e| anyhow!("{path}: {}", e.message()))?)
+        match wave_conductor(&t) {
+            // The wave BRDF's table (`ndfit wave --to rgl`): its diffuse part and its mirror, what light sees.
+            Some(material) => Box::new(MirrorBrdf::wave(&t, material).map_err(|e| anyhow!("{path}: {}", e.message()))?),
+            None => Box::new(Measured::new(&t).map_err(|e| anyhow!("{path}: {}", e.message()))?),
+        }
     } else {
         let text = std::str::from_utf8(&bytes).map_err(|_| anyhow!("{path}: neither an RGL table nor a JSON fit (not UTF-8)"))?;
         let json: serde_json::Value =
             serde_json::from_str(text).map_err(|e| anyhow!("{path}: neither an RGL table nor valid JSON ({e})"))?;
-        let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
         let material: Material =
             args.material.as_deref().unwrap_or("none").parse().map_err(|e: ndfit::Error| anyhow!("{path}: --material: {}", e.message()))?;
-        Box::new(AnalyticBrdf { model, material })
+        // A mirror answer is drawn as it is exported: its mirror and its haze, not the ladder's lobe.
+        match MirrorAnswer::from_json(&json).map_err(|e| anyhow!("{path}: {}", e.message()))? {
+            Some(answer) => Box::new(MirrorBrdf::new(&answer, material)),
+            None => {
+                let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
+                Box::new(AnalyticBrdf { model, material })
+            }
+        }
     };
     let image = scene.render(brdf.as_ref()).map_err(|e| anyhow!("{path}: {}", e.message()))?;
     let data = if as_npy { image.to_npy() } else { image.to_exr().map_err(|e| anyhow!("{}: {}", out.display(), e.message()))? };
@@ -78,12 +91,28 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The conductor of a wave BRDF's table (one with a `mirror_share` field), named in its description as
+/// `ndfit wave --to rgl` writes it; `None` for any other table.
+fn wave_conductor(t: &TensorFile) -> Option<Material> {
+    t.field("mirror_share")?;
+    let text = String::from_utf8_lossy(&t.field("description")?.data).into_owned();
+    let name = text.split("Fresnel of the conductor ").nth(1)?.split_whitespace().next()?;
+    name.parse().ok()
+}
+
 /// The scene the flags describe.
-fn scene(args: &Args) -> Result<Scene, String> {
+fn scene(args: &Args) -> Result<Stage, String> {
     let mut scene = match args.scene.as_str() {
         "point" => Scene::point(),
         "broad" => Scene::broad(),
-        s => return Err(format!("--scene: unknown scene '{}' (expected point or broad)", super::one_line(s))),
+        "window" => {
+            if args.light.is_some() || args.view.is_some() {
+                return Err("--scene window: --light and --view are for the sphere scenes".into());
+            }
+            let width = args.size.unwrap_or(Window::default().width);
+            return Ok(Stage::Window(Window { width, height: (width * 3).div_ceil(5), ..Window::default() }));
+        }
+        s => return Err(format!("--scene: unknown scene '{}' (expected point, broad or window)", super::one_line(s))),
     };
     if let Some(v) = &args.view {
         scene.camera.view = angles("--view", v)?;
@@ -103,7 +132,7 @@ fn scene(args: &Args) -> Result<Scene, String> {
             Light::Cap { dir: light.unwrap_or(dir), half_angle, radiance: 1.0 / half_angle.sin().powi(2) }
         }
     };
-    Ok(scene)
+    Ok(scene.into())
 }
 
 /// `THETA,PHI` in degrees as a unit vector.

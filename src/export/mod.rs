@@ -49,6 +49,7 @@ pub(crate) mod snippet;
 // The Blender scripts and the mirror answers.
 mod blender;
 mod mirror;
+mod mirror_brdf;
 mod mirror_snippet;
 
 /// Largest `alpha_x / alpha_y` of Blender's Principled BSDF: `1 / aspect^2` at `anisotropic = 1`.
@@ -108,6 +109,7 @@ impl std::str::FromStr for Target {
 
 pub use crate::models::Distribution;
 pub use mirror::{export_mirror, Gap, MirrorAnswer, MirrorExport, Share, ShareForm, SHARE_WAVELENGTH_NM};
+pub use mirror_brdf::MirrorBrdf;
 pub use mixture::export_mixture;
 pub use mixture::MixtureExport;
 

@@ -46,7 +46,7 @@ struct Rules {
 }
 
 /// The light rule's tables.
-struct Ring {
+pub(super) struct Ring {
     /// Gauss-Legendre in radius, per ring.
     radial: Vec<(f64, f64)>,
     /// `(cos, sin, weight)` of the trapezoid rule on a full circle.
@@ -56,7 +56,7 @@ struct Ring {
 }
 
 impl Ring {
-    fn new() -> Ring {
+    pub(super) fn new() -> Ring {
         let circle = (0..AZIMUTH)
             .map(|k| {
                 let (sp, cp) = (2.0 * PI * (k as f64 + 0.5) / AZIMUTH as f64).sin_cos();
@@ -81,48 +81,114 @@ impl Ring {
 pub(super) fn render<const K: usize>(scene: &Scene, set: &dyn BrdfSet<K>) -> [Image; K] {
     let rules = Rules { pixel: gauss_legendre(scene.camera.points), ring: Ring::new() };
     let c = &scene.camera;
-    let n = c.size;
     let ext = c.extent;
-    let side = 2.0 * ext / n as f64;
-    let floor = 1e-3 * scene.light.white_radiance();
-    let axes = scene.image_axes();
-    let all = [true; K];
-    let shade = |x: f64, y: f64, active: [bool; K]| {
-        normal_at(scene, axes, x, y).map_or([[0.0; 3]; K], |nrm| radiance(scene, set, nrm, &rules, active))
+    let grid = Grid {
+        width: c.size,
+        height: c.size,
+        left: -ext,
+        top: ext,
+        side: 2.0 * ext / c.size as f64,
+        rule: c.rule,
+        refine: c.refine,
+        tolerance: c.tolerance,
+        floor: 1e-3 * scene.light.white_radiance(),
+        rough_refine: 0,
     };
+    let sphere = Sphere { scene, set, axes: scene.image_axes(), rules: &rules };
+    pixels(&grid, &sphere, &rules.pixel)
+}
+
+/// The image's pixels on the image plane and the pixel rule's settings.
+pub(super) struct Grid {
+    /// Pixels per row and rows.
+    pub width: usize,
+    pub height: usize,
+    /// The image plane's left edge and top edge.
+    pub left: f64,
+    pub top: f64,
+    /// A pixel's side on the image plane (pixels are square).
+    pub side: f64,
+    /// The pixel rule, its refinements and their tolerance ([`super::Camera`]).
+    pub rule: PixelRule,
+    pub refine: usize,
+    pub tolerance: f64,
+    /// The absolute part of the refinement's threshold (radiance).
+    pub floor: f64,
+    /// How many times the centre rule's pixel that is not smooth is refined (0: its Gauss rule as it is).
+    pub rough_refine: usize,
+}
+
+/// What the pixel rules integrate: the radiance of each BRDF `k` with `active[k]` seen at a point of the
+/// image plane, `None` off the object.
+pub(super) trait Geometry<const K: usize>: Sync {
+    /// The radiances at image-plane point `(x, y)` (`y` up), `None` off the object.
+    fn shade(&self, x: f64, y: f64, active: [bool; K]) -> Option<[[f64; 3]; K]>;
+    /// Whether the object's outline crosses the square of side `side` with lower-left corner `at`.
+    fn crossed(&self, at: [f64; 2], side: f64) -> bool;
+}
+
+/// The unit sphere of a [`Scene`] under its distant light.
+struct Sphere<'a, const K: usize> {
+    scene: &'a Scene,
+    set: &'a dyn BrdfSet<K>,
+    axes: [Vector3<f64>; 2],
+    rules: &'a Rules,
+}
+
+impl<const K: usize> Geometry<K> for Sphere<'_, K> {
+    fn shade(&self, x: f64, y: f64, active: [bool; K]) -> Option<[[f64; 3]; K]> {
+        normal_at(self.scene, self.axes, x, y).map(|nrm| radiance(self.scene, self.set, nrm, self.rules, active))
+    }
+
+    fn crossed(&self, at: [f64; 2], side: f64) -> bool {
+        on_silhouette(at, side)
+    }
+}
+
+/// Every pixel of `grid` over `geo` by its pixel rule (`rule` the Gauss-Legendre points per axis).
+pub(super) fn pixels<const K: usize>(grid: &Grid, geo: &dyn Geometry<K>, rule: &[(f64, f64)]) -> [Image; K] {
+    let (w, h, side) = (grid.width, grid.height, grid.side);
+    let floor = grid.floor;
+    let all = [true; K];
+    let shade = |x: f64, y: f64, active: [bool; K]| geo.shade(x, y, active).unwrap_or([[0.0; 3]; K]);
+    let crossed = |at: [f64; 2], side: f64| geo.crossed(at, side);
     // The lower-left corner of pixel (i, j), row j from the top.
-    let corner = |i: usize, j: usize| [-ext + i as f64 * side, ext - (j + 1) as f64 * side];
-    let gauss =
-        |i: usize, j: usize, active: [bool; K]| cell(&shade, corner(i, j), side, c.refine, c.tolerance, floor, &rules.pixel, active);
-    // A pixel of the centre rule whose image is not smooth: the Gauss rule as it is (refining it would
-    // cost as much as the rest of the image; its points still resolve a highlight's edge to a half pixel).
-    let rough = |i: usize, j: usize, active: [bool; K]| cell(&shade, corner(i, j), side, 0, c.tolerance, floor, &rules.pixel, active);
-    let mut data = vec![[[0f32; 3]; K]; n * n];
-    if c.rule == PixelRule::Centre && c.refine > 0 {
-        // Each centre's values, `None` off the sphere.
-        let mut centres = vec![None; n * n];
-        centres.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
+    let corner = |i: usize, j: usize| [grid.left + i as f64 * side, grid.top - (j + 1) as f64 * side];
+    let gauss = |i: usize, j: usize, active: [bool; K]| {
+        cell(&shade, &crossed, corner(i, j), side, grid.refine, grid.tolerance, floor, rule, active)
+    };
+    // A pixel of the centre rule whose image is not smooth: the Gauss rule, refined `rough_refine` times
+    // (on the sphere not at all: refining it would cost as much as the rest of the image, and its points
+    // still resolve a highlight's edge to a half pixel; a mirror's sharp image needs its edges' coverage).
+    let rough = |i: usize, j: usize, active: [bool; K]| {
+        cell(&shade, &crossed, corner(i, j), side, grid.rough_refine, grid.tolerance, floor, rule, active)
+    };
+    let mut data = vec![[[0f32; 3]; K]; w * h];
+    if grid.rule == PixelRule::Centre && grid.refine > 0 {
+        // Each centre's values, `None` off the object.
+        let mut centres = vec![None; w * h];
+        centres.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
             for (i, v) in row.iter_mut().enumerate() {
                 let [x, y] = corner(i, j).map(|a| a + side / 2.0);
-                *v = normal_at(scene, axes, x, y).map(|nrm| radiance(scene, set, nrm, &rules, all));
+                *v = geo.shade(x, y, all);
             }
         });
         let at = |i: isize, j: isize| {
-            let inside = (0..n as isize).contains(&i) && (0..n as isize).contains(&j);
+            let inside = (0..w as isize).contains(&i) && (0..h as isize).contains(&j);
             if inside {
-                centres[j as usize * n + i as usize]
+                centres[j as usize * w + i as usize]
             } else {
                 None
             }
         };
-        data.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
+        data.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
             for (i, out) in row.iter_mut().enumerate() {
-                let v = if on_silhouette(corner(i, j), side) {
+                let v = if crossed(corner(i, j), side) {
                     gauss(i, j, all)
                 } else {
                     let (ii, jj) = (i as isize, j as isize);
                     match [at(ii, jj), at(ii - 1, jj), at(ii + 1, jj), at(ii, jj - 1), at(ii, jj + 1)] {
-                        // Off the sphere and not on the silhouette: the whole square is background.
+                        // Off the object and not on its outline: the whole square is background.
                         [None, ..] => [[0.0; 3]; K],
                         [Some(m), Some(l), Some(r), Some(d), Some(u)] => {
                             let mut v = [[0.0; 3]; K];
@@ -133,7 +199,7 @@ pub(super) fn render<const K: usize>(scene: &Scene, set: &dyn BrdfSet<K>) -> [Im
                                 let level = m[0] + m[1] + m[2];
                                 let size = fix[0].abs() + fix[1].abs() + fix[2].abs();
                                 // Where the correction is large the image is not smooth at the pixel's scale.
-                                if size <= 0.1 * c.tolerance * (level + 3.0 * floor) {
+                                if size <= 0.1 * grid.tolerance * (level + 3.0 * floor) {
                                     v[k] = [0, 1, 2].map(|q| m[q] + fix[q]);
                                 } else {
                                     rougher[k] = true;
@@ -145,7 +211,7 @@ pub(super) fn render<const K: usize>(scene: &Scene, set: &dyn BrdfSet<K>) -> [Im
                             }
                             v
                         }
-                        // A neighbour off the sphere: no second difference across the silhouette.
+                        // A neighbour off the object (or off the image): no second difference across it.
                         _ => gauss(i, j, all),
                     }
                 };
@@ -153,13 +219,13 @@ pub(super) fn render<const K: usize>(scene: &Scene, set: &dyn BrdfSet<K>) -> [Im
             }
         });
     } else {
-        data.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
+        data.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
             for (i, out) in row.iter_mut().enumerate() {
                 *out = gauss(i, j, all).map(|v| v.map(|x| x as f32));
             }
         });
     }
-    std::array::from_fn(|k| Image { width: n, height: n, data: data.iter().map(|p| p[k]).collect() })
+    std::array::from_fn(|k| Image { width: w, height: h, data: data.iter().map(|p| p[k]).collect() })
 }
 
 /// [`Scene::normal_at`] with the image's axes found once.
@@ -177,6 +243,7 @@ fn normal_at(scene: &Scene, [right, up]: [Vector3<f64>; 2], x: f64, y: f64) -> O
 #[allow(clippy::too_many_arguments)]
 fn cell<const K: usize>(
     shade: &dyn Fn(f64, f64, [bool; K]) -> [[f64; 3]; K],
+    crossed: &dyn Fn([f64; 2], f64) -> bool,
     at: [f64; 2],
     side: f64,
     depth: usize,
@@ -202,11 +269,11 @@ fn cell<const K: usize>(
     if depth == 0 || rule.len() < 2 {
         return mean;
     }
-    let crossed = on_silhouette(at, side);
+    let crossed_here = crossed(at, side);
     let split: [bool; K] = std::array::from_fn(|k| {
         let level = mean[k][0] + mean[k][1] + mean[k][2];
         // Its points agree (a NaN spread does not), and no silhouette crosses it.
-        let settled = hi[k] - lo[k] <= tol * (level + 3.0 * floor) && !crossed;
+        let settled = hi[k] - lo[k] <= tol * (level + 3.0 * floor) && !crossed_here;
         active[k] && !settled
     });
     if !split.contains(&true) {
@@ -215,7 +282,7 @@ fn cell<const K: usize>(
     let h = side / 2.0;
     let mut sum = [[0.0; 3]; K];
     for (dx, dy) in [(0.0, 0.0), (h, 0.0), (0.0, h), (h, h)] {
-        let v = cell(shade, [at[0] + dx, at[1] + dy], h, depth - 1, tol, floor, rule, split);
+        let v = cell(shade, crossed, [at[0] + dx, at[1] + dy], h, depth - 1, tol, floor, rule, split);
         for k in (0..K).filter(|&k| split[k]) {
             (0..3).for_each(|c| sum[k][c] += 0.25 * v[k][c]);
         }
@@ -249,8 +316,23 @@ fn radiance<const K: usize>(scene: &Scene, set: &dyn BrdfSet<K>, n: Vector3<f64>
             f.map(|f| f.map(|f| f * irradiance * wo.z))
         }
         Light::Cap { dir, half_angle, radiance } => {
-            cap(set, wi, to_local(&frame, dir), half_angle, &rules.ring, active).map(|v| v.map(|v| v * radiance))
+            let c = to_local(&frame, dir);
+            let mut v = cap(set, wi, c, half_angle, &rules.ring, active);
+            // A smooth part reflects the cap where the mirror direction meets it above the horizon.
+            let r = Vector3::new(-wi.x, -wi.y, wi.z);
+            if r.z > 0.0 && r.dot(&c) >= half_angle.cos() {
+                add_mirror(&mut v, set.mirror(wi, active), active);
+            }
+            v.map(|v| v.map(|v| v * radiance))
         }
+    }
+}
+
+/// `v[k] += m[k]` for each BRDF `k` with `active[k]` whose smooth part `m[k]` is not zero (a BRDF without
+/// one keeps its bits).
+pub(super) fn add_mirror<const K: usize>(v: &mut [[f64; 3]; K], m: [[f64; 3]; K], active: [bool; K]) {
+    for k in (0..K).filter(|&k| active[k] && m[k] != [0.0; 3]) {
+        (0..3).for_each(|q| v[k][q] += m[k][q]);
     }
 }
 
@@ -342,15 +424,171 @@ fn cap<const K: usize>(
             }
         }
     }
+    gather(set, wi, &dirs, &weights, active)
+}
+
+/// `sum_j w_j f_k(wi, l_j) l_j.z` over the light points `dirs` and their `weights`, for each BRDF `k` of
+/// `set` with `active[k]`, every point evaluated in one call.
+fn gather<const K: usize>(
+    set: &dyn BrdfSet<K>,
+    wi: Vector3<f64>,
+    dirs: &[Vector3<f64>],
+    weights: &[f64],
+    active: [bool; K],
+) -> [[f64; 3]; K] {
     let mut f: [Vec<[f64; 3]>; K] = std::array::from_fn(|k| if active[k] { vec![[0.0; 3]; dirs.len()] } else { Vec::new() });
-    set.eval_many(wi, &dirs, active, &mut f);
+    set.eval_many(wi, dirs, active, &mut f);
     std::array::from_fn(|k| {
         let mut acc = [0.0; 3];
-        for ((l, w), f) in dirs.iter().zip(&weights).zip(&f[k]) {
+        for ((l, w), f) in dirs.iter().zip(weights).zip(&f[k]) {
             (0..3).for_each(|q| acc[q] += w * f[q] * l.z);
         }
         acc
     })
+}
+
+/// `int f_k(wi, wo) max(wo.z, 0) dwo` over the convex spherical polygon of unit vertices `q` (local frame,
+/// in order around it) for each BRDF `k` of `set` with `active[k]`, and whether the mirror direction of
+/// `wi` lies inside the polygon above the horizon. Rings about the mirror direction, as the cap's: each
+/// ring's azimuths inside the polygon are the intersection of the arcs inside its edges' great circles;
+/// the radial breaks are the distances to the vertices and to the edges, where the arcs' ends have
+/// square-root edges (those intervals take the cap's smoothing map).
+pub(super) fn polygon<const K: usize>(
+    set: &dyn BrdfSet<K>,
+    wi: Vector3<f64>,
+    q: &[Vector3<f64>],
+    rules: &Ring,
+    active: [bool; K],
+) -> ([[f64; 3]; K], bool) {
+    let n = q.len();
+    let r = Vector3::new(-wi.x, -wi.y, wi.z);
+    let centroid = q.iter().sum::<Vector3<f64>>().normalize();
+    // The edges' great circles, their unit normals pointing inside.
+    let m: Vec<Vector3<f64>> = (0..n)
+        .map(|k| {
+            let m = q[k].cross(&q[(k + 1) % n]).normalize();
+            if m.dot(&centroid) < 0.0 {
+                -m
+            } else {
+                m
+            }
+        })
+        .collect();
+    let inside = m.iter().all(|m| r.dot(m) >= 0.0);
+    let dist = |v: Vector3<f64>| r.dot(&v).clamp(-1.0, 1.0).acos();
+    // The radii where a ring's arcs change: the vertices, and the edges where r's foot lies on them.
+    let mut features: Vec<f64> = q.iter().map(|&v| dist(v)).collect();
+    for k in 0..n {
+        let (a, b) = (q[k], q[(k + 1) % n]);
+        let foot = r - m[k] * r.dot(&m[k]);
+        if foot.norm() > 1e-12 {
+            let (foot, ab) = (foot.normalize(), a.cross(&b));
+            if a.cross(&foot).dot(&ab) >= 0.0 && foot.cross(&b).dot(&ab) >= 0.0 {
+                features.push(dist(foot));
+            }
+        }
+    }
+    let hi = q.iter().map(|&v| dist(v)).fold(0.0, f64::max);
+    let lo = if inside { 0.0 } else { features.iter().copied().fold(f64::INFINITY, f64::min) };
+    let mut breaks = vec![(lo, lo > 0.0), (hi, true)];
+    breaks.extend(features.iter().filter(|&&f| f > lo * (1.0 + 1e-9) && hi - f > 1e-9).map(|&f| (f, true)));
+    let mut rho = RHO0;
+    while rho < hi {
+        if rho > lo * (1.0 + 1e-9) && features.iter().all(|f| (rho - f).abs() > 1e-9) && hi - rho > 1e-9 {
+            breaks.push((rho, false));
+        }
+        rho *= GROWTH;
+    }
+    breaks.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // The azimuth origin e1 points from r toward the polygon (any perpendicular when they coincide).
+    let toward = centroid - r * r.dot(&centroid);
+    let e1 = if toward.norm() > 1e-12 { toward.normalize() } else { any_perpendicular(r) };
+    let e2 = r.cross(&e1);
+    // Per edge: (r . m, e1 . m, e2 . m).
+    let proj: Vec<[f64; 3]> = m.iter().map(|m| [r.dot(m), e1.dot(m), e2.dot(m)]).collect();
+    let (mut dirs, mut weights) = (Vec::new(), Vec::new());
+    let mut arcs: Vec<(f64, f64)> = Vec::with_capacity(4);
+    for pair in breaks.windows(2) {
+        let ((a, rim_a), (b, rim_b)) = (pair[0], pair[1]);
+        if b <= a {
+            continue;
+        }
+        for &(s, ws) in &rules.radial {
+            let (rho, jac) = if rim_a || rim_b {
+                (a + (b - a) * (1.0 - (PI * s).cos()) / 2.0, (b - a) * PI / 2.0 * (PI * s).sin())
+            } else if a == 0.0 {
+                (b * s, b)
+            } else {
+                let rho = a * (b / a).powf(s);
+                (rho, rho * (b / a).ln())
+            };
+            let (sr, cr) = rho.sin_cos();
+            let w_rho = ws * jac * sr;
+            let whole = ring_arcs(&proj, sr, cr, &mut arcs);
+            let mut add = |cp: f64, sp: f64, w: f64| {
+                let l = r * cr + (e1 * cp + e2 * sp) * sr;
+                // Below the horizon the plate hides the light.
+                if l.z > 0.0 {
+                    dirs.push(l);
+                    weights.push(w_rho * w);
+                }
+            };
+            if whole {
+                rules.circle.iter().for_each(|&(cp, sp, w)| add(cp, sp, w));
+                continue;
+            }
+            for &(lo, hi) in &arcs {
+                rules.arc((hi - lo) / 2.0).iter().for_each(|&(x, w)| {
+                    let (sp, cp) = (lo + (hi - lo) * x).sin_cos();
+                    add(cp, sp, (hi - lo) * w)
+                });
+            }
+        }
+    }
+    (gather(set, wi, &dirs, &weights, active), inside && r.z > 0.0)
+}
+
+/// The azimuths of the ring of radius `rho` (`sin`, `cos` given) inside every edge of `proj` (per edge
+/// `(r . m, e1 . m, e2 . m)`, `m` its inward normal) as intervals of `[0, 2 pi)` into `arcs`; true when no
+/// edge cuts the ring (the whole circle, `arcs` then unused).
+fn ring_arcs(proj: &[[f64; 3]], sr: f64, cr: f64, arcs: &mut Vec<(f64, f64)>) -> bool {
+    const TAU: f64 = 2.0 * PI;
+    arcs.clear();
+    arcs.push((0.0, TAU));
+    let mut whole = true;
+    for &[c0, a, b] in proj {
+        // Inside the edge: cr c0 + sr (a cos phi + b sin phi) >= 0.
+        let amp = sr * a.hypot(b);
+        let t = if amp > 0.0 {
+            -cr * c0 / amp
+        } else if cr * c0 >= 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        if t <= -1.0 {
+            continue;
+        }
+        whole = false;
+        if t >= 1.0 {
+            arcs.clear();
+            return false;
+        }
+        let (mid, half) = (b.atan2(a), t.acos());
+        let start = (mid - half).rem_euclid(TAU);
+        let end = start + 2.0 * half;
+        let cut: [(f64, f64); 2] = if end <= TAU { [(start, end), (0.0, 0.0)] } else { [(start, TAU), (0.0, end - TAU)] };
+        let before = std::mem::take(arcs);
+        for (lo, hi) in before {
+            for &(c, d) in &cut {
+                let (x, y) = (lo.max(c), hi.min(d));
+                if y > x {
+                    arcs.push((x, y));
+                }
+            }
+        }
+    }
+    whole
 }
 
 /// A unit vector perpendicular to the unit vector `v`.

@@ -15,11 +15,13 @@ mod image;
 mod integrate;
 mod quadrature;
 mod scene;
+mod window;
 
 use nalgebra::Vector3;
 
 pub use image::Image;
 pub use scene::{Camera, Light, PixelRule, Scene};
+pub use window::Window;
 
 /// What is rendered: a BRDF in the local shading frame (`z` the normal, `x` the tangent `s`).
 pub trait Brdf: Sync {
@@ -35,6 +37,13 @@ pub trait Brdf: Sync {
             *o = self.eval(wi, wo);
         }
     }
+
+    /// The smooth part: the RGB share of the light from the mirror direction `r = (-wi.x, -wi.y, wi.z)`
+    /// that is reflected toward `wi` (`f = m delta(wo - r) / cos theta_o`), a smooth conductor's Fresnel
+    /// term for instance. Zero for a BRDF without one; [`Brdf::eval`] never includes it.
+    fn mirror(&self, _wi: Vector3<f64>) -> [f64; 3] {
+        [0.0; 3]
+    }
 }
 
 /// `K` BRDFs rendered together at the same shading points ([`Scene::render_set`]): each value is what
@@ -48,6 +57,9 @@ pub trait BrdfSet<const K: usize>: Sync {
     /// `f_k(wi, wo)` for every `wo` of `wos` into `out[k]` (as long as `wos`) for every `k` with
     /// `active[k]`, as [`Brdf::eval_many`].
     fn eval_many(&self, wi: Vector3<f64>, wos: &[Vector3<f64>], active: [bool; K], out: &mut [Vec<[f64; 3]>; K]);
+
+    /// Each BRDF's smooth part ([`Brdf::mirror`]) for every `k` with `active[k]` (zero for the others).
+    fn mirror(&self, wi: Vector3<f64>, active: [bool; K]) -> [[f64; 3]; K];
 }
 
 /// BRDFs rendered together that share nothing but the geometry.
@@ -62,6 +74,10 @@ impl<const K: usize> BrdfSet<K> for [&dyn Brdf; K] {
         for k in (0..K).filter(|&k| active[k]) {
             self[k].eval_many(wi, wos, &mut out[k]);
         }
+    }
+
+    fn mirror(&self, wi: Vector3<f64>, active: [bool; K]) -> [[f64; 3]; K] {
+        std::array::from_fn(|k| if active[k] { self[k].mirror(wi) } else { [0.0; 3] })
     }
 }
 
@@ -89,4 +105,44 @@ pub fn direction(theta: f64, phi: f64) -> Vector3<f64> {
     let (st, ct) = theta.sin_cos();
     let (sp, cp) = phi.sin_cos();
     Vector3::new(st * cp, st * sp, ct)
+}
+
+/// A scene of either kind: the sphere under a distant light ([`Scene`]) or the plate under a window
+/// ([`Window`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Stage {
+    /// The unit sphere.
+    Sphere(Scene),
+    /// The plate under a window.
+    Window(Window),
+}
+
+impl Stage {
+    /// Refuse what cannot be rendered, with the reason in one line.
+    pub fn validate(&self) -> crate::Result<()> {
+        match self {
+            Stage::Sphere(s) => s.validate(),
+            Stage::Window(w) => w.validate(),
+        }
+    }
+
+    /// Render `brdf`: linear RGB radiance per pixel, rows from the top.
+    pub fn render(&self, brdf: &dyn Brdf) -> crate::Result<Image> {
+        let [image] = self.render_set(&[brdf])?;
+        Ok(image)
+    }
+
+    /// Render every BRDF of `set` in one pass over the shading points.
+    pub fn render_set<const K: usize>(&self, set: &dyn BrdfSet<K>) -> crate::Result<[Image; K]> {
+        match self {
+            Stage::Sphere(s) => s.render_set(set),
+            Stage::Window(w) => w.render_set(set),
+        }
+    }
+}
+
+impl From<Scene> for Stage {
+    fn from(s: Scene) -> Stage {
+        Stage::Sphere(s)
+    }
 }

@@ -197,3 +197,44 @@ fn the_optics_share_is_the_wave_engines_specular_needs_shared() {
         }
     }
 }
+
+/// The glow around a polished scan's mirror image is the haze the wave module predicts, not a pure
+/// mirror's darkness: in the window scene (a plate near grazing under a sharp-edged light, black room),
+/// each near-mirror scan's `mirror+ggx` answer (`ndfit fit --model auto`) renders closer, by HDR-FLIP over the
+/// plate, to the wave prediction (`ndfit wave --to rgl`: its diffuse table and its mirror share) than the
+/// same mirror without its haze does; and the wave table renders its mirror's sharp image.
+#[test]
+fn mirror_answers_render_toward_the_wave_prediction_needs_shared() {
+    use ndfit::answer::choice::flip_mean;
+    use ndfit::export::rgl::{Material, TensorFile};
+    use ndfit::export::{MirrorAnswer, MirrorBrdf};
+    use ndfit::render::{Stage, Window};
+    const TEST: &str = "mirror_answers_render_toward_the_wave_prediction_needs_shared";
+    let Some(dir) = shared_scans(TEST) else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = Stage::Window(Window::default());
+    let run = |args: &[&str]| {
+        let o = std::process::Command::new(crate::common::ndfit_bin()).args(args).output().unwrap();
+        assert!(o.status.success(), "ndfit {args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    };
+    for name in ["st_opd-1.opd", "st_plu-1.plu", "st_sur-2.sur"] {
+        let scan = dir.join(name);
+        let (fit, table) = (tmp.path().join(format!("{name}.json")), tmp.path().join(format!("{name}.bsdf")));
+        run(&["fit", scan.to_str().unwrap(), "--model", "auto", "-o", fit.to_str().unwrap()]);
+        run(&["wave", scan.to_str().unwrap(), "--to", "rgl", "-o", table.to_str().unwrap(), "--quiet"]);
+        let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&fit).unwrap()).unwrap();
+        let answer = MirrorAnswer::from_json(&json).unwrap().unwrap();
+        assert_eq!(answer.answer, "mirror+ggx", "{name}");
+        let bare = MirrorAnswer { answer: "mirror".into(), haze: None, ..answer.clone() };
+        // Both sides with the conductor of the wave table (material none by default: F = 1).
+        let wave = MirrorBrdf::wave(&TensorFile::parse(&std::fs::read(&table).unwrap()).unwrap(), Material::None).unwrap();
+        let reference = scene.render(&wave).unwrap();
+        let with_haze = flip_mean(&reference, &scene.render(&MirrorBrdf::new(&answer, Material::None)).unwrap()).unwrap();
+        let mirror = flip_mean(&reference, &scene.render(&MirrorBrdf::new(&bare, Material::None)).unwrap()).unwrap();
+        eprintln!("{name}: FLIP against the wave prediction: the answer {with_haze:.4}, its mirror alone {mirror:.4}");
+        assert!(with_haze < 0.8 * mirror, "{name}: the haze does not bring the answer toward the wave prediction");
+        // The light's sharp image: the centre reflects the light's centre at nearly its radiance.
+        let c = reference.get(reference.width / 2, reference.height / 2)[1];
+        assert!(c > 0.95 * 20.0, "{name}: the wave prediction's mirror image is {c} at the centre");
+    }
+}
