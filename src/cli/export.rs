@@ -111,7 +111,27 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         for note in out.notes() {
             eprintln!("ndfit: {path}: {note}");
         }
-        return emit(args.json, &path, || out.to_json(), || out.snippet(&name));
+        // What the blend's approximation shows in the render.
+        let error = ndfit::answer::blend_render_error(&answer, &out).map_err(|e| anyhow!("{path}: {}", e.message()))?;
+        if let Some(e) = &error {
+            let scenes: Vec<String> = e.per_scene.iter().map(|(s, v)| format!("{s} {v:.4}")).collect();
+            eprintln!(
+                "ndfit: {path}: {}'s blend renders within mean HDR-FLIP {:.4} of the answer with its listed shares ({}; both with F = 1)",
+                target.as_str(),
+                e.worst,
+                scenes.join(", ")
+            );
+        }
+        let json = || {
+            let mut v = out.to_json();
+            if let (Some(e), Some(m)) = (&error, v.as_object_mut()) {
+                let mut r: serde_json::Map<String, serde_json::Value> = e.per_scene.iter().map(|(s, x)| (s.clone(), (*x).into())).collect();
+                r.insert("worst".into(), e.worst.into());
+                m.insert("render_error".into(), r.into());
+            }
+            v
+        };
+        return emit(args.json, &path, json, || out.snippet(&name));
     }
     let model = Model::from_json(&json).map_err(|e| anyhow!("{path}: not a fit result: {}", e.message()))?;
     if let Model::Mixture(x) = &model {

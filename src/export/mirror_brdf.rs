@@ -46,6 +46,16 @@ impl MirrorBrdf {
         MirrorBrdf { shares, diffuse: haze.map_or(Diffuse::None, |h| Diffuse::Haze(Box::new(h))), material }
     }
 
+    /// `answer` with the mirror share `share(theta_deg)` at every wavelength instead of its listed shares:
+    /// what a renderer's blend draws when its weight is a constant (`share` constant) or follows the angle
+    /// alone (Blender's Fac).
+    pub fn with_share(answer: &MirrorAnswer, share: &dyn Fn(f64) -> f64, material: Material) -> MirrorBrdf {
+        let mut b = MirrorBrdf::new(answer, material);
+        let curve: Vec<(f64, f64)> = (0..=90).map(|t| (t as f64, share(t as f64).clamp(0.0, 1.0))).collect();
+        b.shares = [curve.clone(), curve.clone(), curve];
+        b
+    }
+
     /// The wave prediction of an `ndfit wave --to rgl` table `t`: its diffuse table and, as a mirror of
     /// the conductor `material` (the table's), the shares of its `mirror_share` field (`[wavelengths,
     /// theta_i]`). A table without that field is refused.
