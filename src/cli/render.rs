@@ -39,6 +39,12 @@ pub struct Args {
     /// For a fit: the conductor (none, Al, Ag, Au, Cu or Cr); a table carries its own.
     #[arg(long)]
     pub material: Option<String>,
+    /// With a wave BRDF's table (`ndfit wave SCAN --to rgl`): the scan's geometric table (`ndfit export SCAN
+    /// --to rgl`) to join it with by incidence, the reference of a scan whose regime changes with the angle
+    /// (the wave prediction where the mirror share is at least 0.5, the geometric table below 0.05, linear
+    /// in the share between).
+    #[arg(long, value_name = "GEOMETRIC.bsdf")]
+    pub join: Option<PathBuf>,
     /// The image to write (`.exr` or `.npy`, written atomically).
     #[arg(short = 'o', long)]
     pub output: PathBuf,
@@ -64,12 +70,25 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             bail!("{path}: --material is for a fit; a table carries its conductor");
         }
         let t = TensorFile::parse(&bytes).map_err(|e| anyhow!("{path}: {}", e.message()))?;
-        match wave_conductor(&t) {
+        match (wave_conductor(&t), &args.join) {
             // The wave BRDF's table (`ndfit wave --to rgl`): its diffuse part and its mirror, what light sees.
-            Some(material) => Box::new(MirrorBrdf::wave(&t, material).map_err(|e| anyhow!("{path}: {}", e.message()))?),
-            None => Box::new(Measured::new(&t).map_err(|e| anyhow!("{path}: {}", e.message()))?),
+            (Some(material), None) => Box::new(MirrorBrdf::wave(&t, material).map_err(|e| anyhow!("{path}: {}", e.message()))?),
+            (Some(material), Some(geo)) => {
+                let gp = geo.display().to_string();
+                let bytes = std::fs::read(geo).with_context(|| format!("{gp}: cannot read"))?;
+                let g = TensorFile::parse(&bytes).map_err(|e| anyhow!("{gp}: {}", e.message()))?;
+                let ramp = [ndfit::answer::GEOMETRIC_SHARE, ndfit::answer::MIRROR_SHARE];
+                Box::new(MirrorBrdf::joined(&t, &g, material, ramp).map_err(|e| anyhow!("{path} joined with {gp}: {}", e.message()))?)
+            }
+            (None, Some(_)) => {
+                bail!("{path}: --join is for a wave BRDF's table (ndfit wave SCAN --to rgl); this table has no mirror share")
+            }
+            (None, None) => Box::new(Measured::new(&t).map_err(|e| anyhow!("{path}: {}", e.message()))?),
         }
     } else {
+        if args.join.is_some() {
+            bail!("{path}: --join is for a wave BRDF's table (ndfit wave SCAN --to rgl), not a fit");
+        }
         let text = std::str::from_utf8(&bytes).map_err(|_| anyhow!("{path}: neither an RGL table nor a JSON fit (not UTF-8)"))?;
         let json: serde_json::Value =
             serde_json::from_str(text).map_err(|e| anyhow!("{path}: neither an RGL table nor valid JSON ({e})"))?;

@@ -23,6 +23,9 @@ enum Diffuse {
     Haze(Box<AnalyticBrdf>),
     /// The diffuse wave BRDF's table, as it is (it holds its own energy).
     Wave(Box<Measured>),
+    /// The wave prediction joined by incidence with the geometric table: `g(theta_i)` of the wave's diffuse
+    /// table and mirror, `1 - g` of the geometric table.
+    Joined { wave: Box<Measured>, geometric: Box<Measured>, ramp: [f64; 2] },
 }
 
 /// A mirror with its diffuse part for the renderer ([module docs](self)).
@@ -44,6 +47,29 @@ impl MirrorBrdf {
                 |nm| if haze.is_none() || answer.specular.is_empty() { vec![(0.0, 1.0)] } else { at_wavelength(&answer.specular, nm) },
             );
         MirrorBrdf { shares, diffuse: haze.map_or(Diffuse::None, |h| Diffuse::Haze(Box::new(h))), material }
+    }
+
+    /// The reference of a scan whose regime changes with the angle: its wave prediction (`wave`, as
+    /// [`MirrorBrdf::wave`]) and its geometric table (`geometric`, `ndfit export SCAN --to rgl`) joined by
+    /// incidence. Per channel the wave's weight is `g = clamp((s - lo) / (hi - lo), 0, 1)` of the wave's own
+    /// mirror share `s(theta_i)`, `[lo, hi] = ramp` (the regime's thresholds: geometric below `lo`, a mirror
+    /// from `hi`): `f = g (s F delta + f_wave) + (1 - g) f_geometric`, continuous in the angle.
+    pub fn joined(wave: &TensorFile, geometric: &TensorFile, material: Material, ramp: [f64; 2]) -> Result<MirrorBrdf> {
+        let MirrorBrdf { shares, diffuse, .. } = MirrorBrdf::wave(wave, material)?;
+        let Diffuse::Wave(w) = diffuse else { unreachable!("MirrorBrdf::wave holds the wave table") };
+        if !(ramp[0] < ramp[1]) {
+            return Err(Error::invalid(format!("the join's ramp {ramp:?} must rise")));
+        }
+        let geometric = Box::new(Measured::new(geometric)?);
+        Ok(MirrorBrdf { shares, diffuse: Diffuse::Joined { wave: w, geometric, ramp }, material })
+    }
+
+    /// The wave's weight per channel at `wi` (1 unless joined).
+    fn wave_weight(&self, wi: Vector3<f64>) -> [f64; 3] {
+        match self.diffuse {
+            Diffuse::Joined { ramp: [lo, hi], .. } => self.shares_at(wi).map(|s| ((s - lo) / (hi - lo)).clamp(0.0, 1.0)),
+            _ => [1.0; 3],
+        }
     }
 
     /// `answer` with the mirror share `share(theta_deg)` at every wavelength instead of its listed shares:
@@ -140,6 +166,10 @@ impl Brdf for MirrorBrdf {
                 [0, 1, 2].map(|c| (1.0 - s[c]) * f[c])
             }
             Diffuse::Wave(table) => table.eval(wi, wo),
+            Diffuse::Joined { wave, geometric, .. } => {
+                let (g, w, t) = (self.wave_weight(wi), wave.eval(wi, wo), geometric.eval(wi, wo));
+                [0, 1, 2].map(|c| g[c] * w[c] + (1.0 - g[c]) * t[c])
+            }
         }
     }
 
@@ -152,6 +182,7 @@ impl Brdf for MirrorBrdf {
                 out.iter_mut().for_each(|o| (0..3).for_each(|c| o[c] *= 1.0 - s[c]));
             }
             Diffuse::Wave(table) => table.eval_many(wi, wos, out),
+            Diffuse::Joined { .. } => out.iter_mut().zip(wos).for_each(|(o, &wo)| *o = self.eval(wi, wo)),
         }
     }
 
@@ -160,8 +191,8 @@ impl Brdf for MirrorBrdf {
         if wi.z <= 0.0 {
             return [0.0; 3];
         }
-        let (s, f) = (self.shares_at(wi), self.material.fresnel_rgb(wi.z));
-        [0, 1, 2].map(|c| s[c] * f[c])
+        let (s, f, g) = (self.shares_at(wi), self.material.fresnel_rgb(wi.z), self.wave_weight(wi));
+        [0, 1, 2].map(|c| g[c] * s[c] * f[c])
     }
 }
 

@@ -236,3 +236,20 @@ fn a_mirror_answer_renders_as_its_parts_in_the_window() {
         .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
     assert!((sum_b - sum_p).abs() < 1e-4 * sum_p, "{sum_b} against {sum_p}");
 }
+
+/// `--join` is for a wave BRDF's table: with a fit it is refused in one line naming the file, no image.
+#[test]
+fn join_is_refused_for_a_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let fit = dir.path().join("f.json");
+    std::fs::write(&fit, r#"{"model": "ggx", "params": {"alpha": 0.1}}"#).unwrap();
+    let out = dir.path().join("o.npy");
+    let o = std::process::Command::new(crate::common::ndfit_bin())
+        .args(["render", fit.to_str().unwrap(), "--join", fit.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--join is for a wave BRDF's table") && err.contains("f.json"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!out.exists());
+}
