@@ -28,7 +28,8 @@ enum Diffuse {
     Joined { wave: Box<Measured>, geometric: Box<Measured>, ramp: [f64; 2] },
 }
 
-/// A mirror with its diffuse part for the renderer ([module docs](self)).
+/// A mirror with its diffuse part for the renderer: `s F` toward the mirror direction, and a haze lobe
+/// taking `1 - s`, a wave table as it is, or a wave table joined with a geometric one by incidence.
 pub struct MirrorBrdf {
     /// Per RGB channel, `(theta_deg, s)` by incidence.
     shares: [Vec<(f64, f64)>; 3],

@@ -21,7 +21,8 @@ use super::quadrature::gauss_legendre;
 use super::{BrdfSet, Image, PixelRule};
 use crate::error::{Error, Result};
 
-/// The window scene ([module docs](self)).
+/// The window scene: a plate seen near grazing under a sharp-edged rectangular light (geometry and
+/// quadrature in `data_formats/render.md`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Window {
     /// Pixels per row.
