@@ -120,11 +120,8 @@ def compare(a, b, label):
     return rel, score
 
 
-# (mean |diff| / mean radiance, FLIP) bounds, about twice what was measured (Mitsuba 3.9.1, scalar_rgb):
-# (a) ggx-aniso 0.3/0.12: 0.0022, FLIP 0.0036 (against Mitsuba at 4096 spp: 0.0008, 0.0028);
-# (b) ggx 0.05: 0.0057, FLIP 0.0092 (at 4096 spp: 0.0020, 0.0074);
-# (c) st_metropro-1's mirror: 0.0013, FLIP 0.0009, on the pixels the window's edges cross (the image is 20,
-#     F = 1, inside in both; ndfit refines the edge pixels' coverage, Mitsuba samples it).
+# (mean |diff| / mean radiance, FLIP) bounds, about twice what was measured (data_formats/render.md,
+# "Measured accuracy", window scene against Mitsuba).
 BOUNDS = {"aniso": (0.005, 0.008), "narrow": (0.012, 0.02), "mirror": (0.003, 0.002)}
 
 

@@ -1,8 +1,8 @@
 //! What a renderer's blend costs a mirror answer in the render: where a target's weight cannot follow the
 //! angle and the wavelength (a constant, or Blender's form of the angle alone; `export::export_mirror`), the
 //! answer rendered with that blend's mirror share against the answer rendered with its listed shares, in
-//! the choice's default scenes and the window scene (issue "A mirror is a mirror": measure the
-//! approximation's render error and print it with the export).
+//! the choice's default scenes and the window scene: the approximation's render error, printed with the
+//! export.
 
 use crate::error::Result;
 use crate::export::rgl::Material;

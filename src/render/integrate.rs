@@ -389,15 +389,7 @@ fn cap<const K: usize>(
             continue;
         }
         for &(s, ws) in &rules.radial {
-            // The radius and d(rho)/ds of the interval's map.
-            let (rho, jac) = if rim_a || rim_b {
-                (a + (b - a) * (1.0 - (PI * s).cos()) / 2.0, (b - a) * PI / 2.0 * (PI * s).sin())
-            } else if a == 0.0 {
-                (b * s, b)
-            } else {
-                let rho = a * (b / a).powf(s);
-                (rho, rho * (b / a).ln())
-            };
+            let (rho, jac) = radial_map(a, b, rim_a || rim_b, s);
             let (sr, cr) = rho.sin_cos();
             let w_rho = ws * jac * sr;
             let mut add = |cp: f64, sp: f64, w: f64| {
@@ -514,14 +506,7 @@ pub(super) fn polygon<const K: usize>(
             continue;
         }
         for &(s, ws) in &rules.radial {
-            let (rho, jac) = if rim_a || rim_b {
-                (a + (b - a) * (1.0 - (PI * s).cos()) / 2.0, (b - a) * PI / 2.0 * (PI * s).sin())
-            } else if a == 0.0 {
-                (b * s, b)
-            } else {
-                let rho = a * (b / a).powf(s);
-                (rho, rho * (b / a).ln())
-            };
+            let (rho, jac) = radial_map(a, b, rim_a || rim_b, s);
             let (sr, cr) = rho.sin_cos();
             let w_rho = ws * jac * sr;
             let whole = ring_arcs(&proj, sr, cr, &mut arcs);
@@ -591,6 +576,21 @@ fn ring_arcs(proj: &[[f64; 3]], sr: f64, cr: f64, arcs: &mut Vec<(f64, f64)>) ->
     whole
 }
 
+/// The radius and `d(rho)/ds` at `s` in `[0, 1]` of the ring interval `[a, b]`: the cosine map where a
+/// ring at an end touches the light's edge (`rim`: the arc's square-root edge made smooth), linear from 0,
+/// else geometric (Gauss-Legendre in `ln rho`).
+#[inline]
+fn radial_map(a: f64, b: f64, rim: bool, s: f64) -> (f64, f64) {
+    if rim {
+        (a + (b - a) * (1.0 - (PI * s).cos()) / 2.0, (b - a) * PI / 2.0 * (PI * s).sin())
+    } else if a == 0.0 {
+        (b * s, b)
+    } else {
+        let rho = a * (b / a).powf(s);
+        (rho, rho * (b / a).ln())
+    }
+}
+
 /// A unit vector perpendicular to the unit vector `v`.
 fn any_perpendicular(v: Vector3<f64>) -> Vector3<f64> {
     let a = if v.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
@@ -598,12 +598,12 @@ fn any_perpendicular(v: Vector3<f64>) -> Vector3<f64> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     /// An anisotropic GGX lobe with separable Smith masking and `F = 1`, written out here (Heitz 2014
-    /// eq. 85 and 86) so the test depends on nothing else.
-    fn ggx(ax: f64, ay: f64) -> impl Fn(Vector3<f64>, Vector3<f64>) -> [f64; 3] + Sync {
+    /// eq. 85 and 86) so the renderer's tests depend on nothing else.
+    pub(in crate::render) fn ggx(ax: f64, ay: f64) -> impl Fn(Vector3<f64>, Vector3<f64>) -> [f64; 3] + Sync {
         move |wi: Vector3<f64>, wo: Vector3<f64>| {
             if wi.z <= 0.0 || wo.z <= 0.0 {
                 return [0.0; 3];

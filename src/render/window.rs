@@ -147,8 +147,9 @@ impl Window {
         (p.x.abs() <= self.plate && p.y.abs() <= self.plate).then_some(p)
     }
 
-    /// Whether the centre of each pixel sees the plate, row-major from the top: the object's pixels,
-    /// over which the choice scores this scene.
+    /// Whether the centre of each pixel sees the plate, row-major from the top: the object's pixels. With
+    /// the default geometry every pixel is the plate's, so the choice's mean over the image is the mean
+    /// over the object.
     pub fn mask(&self) -> Vec<bool> {
         let eye = self.eye();
         let [hx, hy] = self.half_extent();
@@ -233,22 +234,9 @@ impl<const K: usize> Geometry<K> for Plate<'_, K> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{Brdf, Camera};
+    use super::super::integrate::tests::ggx;
+    use super::super::Brdf;
     use super::*;
-
-    /// An anisotropic GGX lobe with separable Smith masking and `F = 1` (Heitz 2014 eq. 85 and 86).
-    fn ggx(ax: f64, ay: f64) -> impl Fn(Vector3<f64>, Vector3<f64>) -> [f64; 3] + Sync {
-        move |wi: Vector3<f64>, wo: Vector3<f64>| {
-            if wi.z <= 0.0 || wo.z <= 0.0 {
-                return [0.0; 3];
-            }
-            let h = (wi + wo).normalize();
-            let q = (h.x / ax).powi(2) + (h.y / ay).powi(2) + h.z * h.z;
-            let d = 1.0 / (PI * ax * ay * q * q);
-            let g1 = |w: Vector3<f64>| 2.0 / (1.0 + (1.0 + ((ax * w.x).powi(2) + (ay * w.y).powi(2)) / (w.z * w.z)).sqrt());
-            [d * g1(wi) * g1(wo) / (4.0 * wi.z * wo.z); 3]
-        }
-    }
 
     /// A smooth conductor with `F = 1`: nothing but its smooth part.
     struct Mirror;
@@ -361,7 +349,6 @@ mod tests {
         assert!(seen > 0 && seen < m.len(), "{seen} of {}", m.len());
         assert!(small.validate().is_ok());
         assert!(Window { light_distance: 0.5, light_half: [1.2, 2.0], ..w }.validate().is_err());
-        let _ = Camera::default();
     }
 
     /// The centre rule against the refined Gauss rule on a glossy lobe: the image agrees within a few

@@ -246,8 +246,8 @@ fn mirror_answers_render_toward_the_wave_prediction_needs_shared() {
 /// reference is the geometric table, bit for bit; from 0.5 (70-75 deg) it is the wave prediction, mirror
 /// included; between, the join is continuous in energy: the albedo (mirror included) by incidence never
 /// leaves the span of the two predictions' albedos by more than a quadrature's error, and the two agree
-/// within 3% where they meet (Kirchhoff's total reflectance and geometric optics' on the same heights:
-/// measured within 1.3%, 0.9850 against 0.9982 at 65 deg).
+/// within 3% where they meet (Kirchhoff's total reflectance and geometric optics' on the same heights).
+/// The shares the join reads from the wave table are the optics' own (a second algorithm) at 0-75 deg.
 #[test]
 fn a_mixed_regimes_reference_joins_wave_and_geometric_by_incidence() {
     use ndfit::export::rgl::{Material, TensorFile};
@@ -302,6 +302,21 @@ fn a_mixed_regimes_reference_joins_wave_and_geometric_by_incidence() {
     };
     // The share's extremes over the RGB channels (a longer wavelength sees a smoother surface).
     let share = |t: f64| [0, 1, 2].map(|c| joined.share(c, t));
+    // The wave table's shares (its engine, read by incidence) against the fit's optics (a second algorithm)
+    // at 550 nm; the green channel is 549 nm.
+    let fit: serde_json::Value = serde_json::from_slice(&std::fs::read(p("fit.json")).unwrap()).unwrap();
+    for s in fit["optics"]["specular"].as_array().unwrap().iter().filter(|s| s["wavelength_nm"] == 550.0) {
+        let (t, want) = (s["theta_deg"].as_f64().unwrap(), s["weight"].as_f64().unwrap());
+        assert!((share(t)[1] - want).abs() < 0.02, "{t} deg: the table's share {} against the optics' {want}", share(t)[1]);
+    }
+    // `ndfit render` finds the wave table's conductor and joins it as the library does.
+    run(&["render", &p("w.bsdf"), "--join", &p("g.bsdf"), "--scene", "window", "--size", "40", "-o", &p("j.npy")]);
+    let bytes = std::fs::read(p("j.npy")).unwrap();
+    let header = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let cli: Vec<f32> = bytes[10 + header..].chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect();
+    let scene = ndfit::render::Window { width: 40, height: 24, ..Default::default() };
+    let lib = scene.render_set(&[&joined as &dyn Brdf]).unwrap()[0].data.iter().flatten().copied().collect::<Vec<f32>>();
+    assert_eq!(cli, lib);
     let mut seen = [false; 3];
     for t in [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0, 65.0, 70.0, 75.0] {
         let wi = direction(f64::to_radians(t), 0.3);
