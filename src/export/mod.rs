@@ -402,12 +402,15 @@ fn fit_lobe(
         wsum: f64,
         distribution: Distribution,
         limits: Option<Limits>,
+        angle: Option<f64>,
     }
     impl CostFunction for Cost<'_> {
         type Param = Vec<f64>;
         type Output = f64;
         fn cost(&self, x: &Vec<f64>) -> std::result::Result<f64, argmin::core::Error> {
-            let Some(model) = lobe_of(x, self.distribution, self.limits).to_model().ok() else { return Ok(f64::INFINITY) };
+            let Some(model) = lobe_of(&with_angle(x, self.angle), self.distribution, self.limits).to_model().ok() else {
+                return Ok(f64::INFINITY);
+            };
             let (mut ll, mut s) = (0.0, 0.0);
             for ((m, wk), w) in self.nodes.iter().zip(self.w) {
                 let d = model.d(*m);
@@ -421,8 +424,12 @@ fn fit_lobe(
         }
     }
     // Start from the exact lobe (Beckmann, Blender's limits) or the skewed ellipsoid's slope-space axes.
+    // An axis-aligned reference is symmetric about its own axes, and so is the likelihood over the cone of
+    // the region: the nearest lobe keeps those axes, and only its two roughnesses are searched (a free
+    // angle would stop wherever the simplex's tolerance met the flat valley, a few 1e-4 rad off the axes).
+    let angle = start.map(|l| l.tangent_angle);
     let x0 = match start {
-        Some(l) => vec![l.alpha_u.ln(), l.alpha_v.ln(), l.tangent_angle],
+        Some(l) => vec![l.alpha_u.ln(), l.alpha_v.ln()],
         None => {
             let a = reference.axes().unwrap_or_else(|| LobeAxes::aligned(0.1, 0.1, 0.0));
             vec![a.widths[0].max(1e-4).ln(), a.widths[1].max(1e-4).ln(), a.alpha_x_azimuth]
@@ -432,14 +439,14 @@ fn fit_lobe(
     // Two rounds: the second restarts the simplex at the first's optimum (a collapsed simplex's cure).
     for _ in 0..2 {
         let mut simplex = vec![best.clone()];
-        for i in 0..3 {
+        for i in 0..best.len() {
             let mut v = best.clone();
             // 10% in each alpha, 0.1 rad in the angle: the scale of the difference between the two lobes.
             v[i] += 0.1;
             simplex.push(v);
         }
         let solver = NelderMead::new(simplex).with_sd_tolerance(1e-12).map_err(|e| Error::invalid(format!("approximation fit: {e}")))?;
-        let cost = Cost { nodes: &region.nodes, w: &w, wsum, distribution, limits };
+        let cost = Cost { nodes: &region.nodes, w: &w, wsum, distribution, limits, angle };
         let res = Executor::new(cost, solver)
             .configure(|s| s.max_iters(2000))
             .run()
@@ -448,7 +455,12 @@ fn fit_lobe(
             best = p;
         }
     }
-    Ok(lobe_of(&best, distribution, limits))
+    Ok(lobe_of(&with_angle(&best, angle), distribution, limits))
+}
+
+/// The search parameters `(ln a1, ln a2, angle)` of a search over the roughnesses alone at a fixed `angle`.
+fn with_angle(x: &[f64], angle: Option<f64>) -> Vec<f64> {
+    x.iter().copied().chain(angle).collect()
 }
 
 /// The lobe of the search parameters `(ln a1, ln a2, angle)`, projected onto Blender's `limits` when given,
