@@ -588,6 +588,14 @@ pub fn fit_auto_with(ndf: &EmpiricalNdf, opts: &FitOptions, judge: &dyn Decide) 
     ladder(ndf, opts, true, Some(judge))
 }
 
+/// [`fit_auto`] on the one-lobe rungs alone, for a scan that light sees as a mirror (the answer's own
+/// module, `answer::optics`): the ladder then describes the slopes and decides nothing a renderer shows,
+/// and a second lobe, the costliest fits of the ladder, would only describe them in more detail. The
+/// two-lobe models are listed in `selection.not_fitted`, and the ladder's sentence says why.
+pub fn fit_auto_one_lobe(ndf: &EmpiricalNdf, opts: &FitOptions) -> Result<FitReport> {
+    Ladder { lazy: true, one_lobe: true }.run(ndf, opts, None)
+}
+
 /// One lobe `auto` fitted, as a [`Decide`] judge sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Offered {
@@ -660,182 +668,206 @@ pub fn fit_auto_pruned(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool) -> Res
 
 /// The ladder of [`fit_auto_pruned`], its answer decided by `judge` when there is one.
 fn ladder(ndf: &EmpiricalNdf, opts: &FitOptions, lazy: bool, judge: Option<&dyn Decide>) -> Result<FitReport> {
-    let t0 = Instant::now();
-    let phase = crate::phases::phase("fit.session");
-    let s = Session::new(ndf, opts)?;
-    drop(phase);
-    // The ladder's fits, their reports and the choice.
-    let _p = crate::phases::phase("fit.ladder");
-    // A candidate that cannot be fitted is left out (and said so); only when none is usable is it an error.
-    let mut warnings = Vec::new();
-    // A delta NDF: every model is at its floor; the simplest wins (only the first rung is fitted).
-    let delta = s.data.k_nonzero == 1;
-    // The ladder's steps: its models grouped by rung, then by parameter count, simplest first (the order
-    // of the choice, so a step left out can only hold models the choice would rank after one within the
-    // tolerance).
-    let mut steps: Vec<(usize, usize)> =
-        ModelId::EVERY.iter().filter(|id| id.spec().in_auto).map(|&id| (rung(id), id.n_params())).collect();
-    steps.sort();
-    steps.dedup();
-    let k = s.data.k_nonzero;
-    let n = s.data.n;
-    let mut fits: Vec<Fitted> = Vec::new();
-    let mut deltas: Vec<Option<f64>> = Vec::new();
-    let mut errors: Vec<Option<f64>> = Vec::new();
-    let mut not_fitted: Vec<ModelId> = Vec::new();
-    let mut c_data = 1.0;
-    for (r, p) in steps {
-        let here: Vec<ModelId> =
-            ModelId::EVERY.iter().copied().filter(|id| id.spec().in_auto && (rung(*id), id.n_params()) == (r, p)).collect();
-        // Climb only while it pays: no model so far is within the tolerance.
-        let within = errors.iter().zip(&fits).any(|(e, f)| e.is_some_and(|e| e <= opts.tolerance) && guard_ok(&fits, f, c_data, n));
-        if (lazy && within) || (delta && r > 0) {
-            not_fitted.extend(here);
-            continue;
-        }
-        let parents: Vec<Option<&Fitted>> = here.iter().map(|id| id.parent().and_then(|p| fits.iter().find(|f| f.id == p))).collect();
-        // A model whose parent is in the ladder but was not fitted (dropped) cannot grow from it.
-        let fitted: Vec<Option<(Option<Fitted>, Option<String>)>> = {
-            use rayon::prelude::*;
-            here.par_iter()
-                .zip(parents.par_iter())
-                .map(|(&id, &p)| {
-                    let orphan = id.parent().is_some_and(|q| q.spec().in_auto) && p.is_none();
-                    if delta {
-                        Some((Some(delta_fit(&s, id)), None))
-                    } else if orphan {
-                        None
-                    } else {
-                        Some(candidate(fit_on_rung(&s, id, p, opts)))
-                    }
-                })
-                .collect()
-        };
-        for (id, f) in here.iter().zip(fitted) {
-            let Some((f, w)) = f else {
-                warnings.push(format!("{id}: not fitted, its parent {} gave no usable fit", id.parent().map_or("", |p| p.as_str())));
-                continue;
-            };
-            warnings.extend(w);
-            if let Some(f) = f {
-                let m = Model::from_params(f.id, &public(&f)).ok();
-                let seen = m.as_ref().map(|m| objective::Seen { model: m, rounding: s.data.rounding.as_ref() });
-                let d = seen.as_ref().and_then(|m| metric::delta_to_data(m, ndf));
-                deltas.push(d);
-                errors.push(d.and_then(|d| verdict::excess_delta(d, metric::counting_noise2(seen.as_ref()?, ndf))));
-                fits.push(f);
-            }
-        }
-        if r == 0 {
-            // The guard's overdispersion: the data's own, or (no dispersion split) the first rung's.
-            let c_first = qbic::overdispersion(fits.iter().filter_map(|f| reduced(f, k)));
-            c_data = mixture::data_c(ndf, &s, c_first);
-        }
-        // No model can leave less than the data's noise, so the smallest deviance per dof so far bounds it:
-        // on a smooth surface the dispersion split reads tens and would refuse every added parameter.
-        let c_fits = fits.iter().filter_map(|f| reduced(f, k)).fold(f64::INFINITY, f64::min);
-        c_data = c_data.min(c_fits).max(1.0);
-    }
-    if fits.is_empty() {
-        return Err(Error::new(ErrorKind::Numerical, format!("no model could be fitted ({})", warnings.join("; "))));
-    }
-    let idx = |id: ModelId| fits.iter().position(|f| f.id == id);
-    let supported: Vec<bool> = fits.iter().map(|f| guard_ok(&fits, f, c_data, n)).collect();
-    // Simplest first: rung, parameters, error (unknown errors last), then the table's order.
-    let mut order: Vec<usize> = (0..fits.len()).collect();
-    let key = |i: usize| errors[i].filter(|e| e.is_finite()).unwrap_or(f64::INFINITY);
-    order.sort_by(|&a, &b| {
-        (rung(fits[a].id), fits[a].id.n_params())
-            .cmp(&(rung(fits[b].id), fits[b].id.n_params()))
-            .then(key(a).total_cmp(&key(b)))
-            .then(fits[a].id.cmp(&fits[b].id))
-    });
-    let priced: Vec<f64> = order.iter().map(|&i| if supported[i] { key(i) } else { f64::INFINITY }).collect();
-    let (by_ndf, within) = match verdict::select(&priced, opts.tolerance) {
-        Some((j, w)) => (order[j], w),
-        // No error is known (a delta NDF, or no bin with a count): the simplest supported model.
-        None => (order.iter().copied().find(|&i| supported[i]).unwrap_or(order[0]), false),
-    };
-    let chosen = match judge {
-        None => by_ndf,
-        Some(judge) => {
-            let offered: Vec<Offered> = order
+    Ladder { lazy, one_lobe: false }.run(ndf, opts, judge)
+}
+
+/// How far the ladder climbs: `lazy`, a step only while no model before it is within the tolerance;
+/// `one_lobe`, the one-lobe rungs alone ([`fit_auto_one_lobe`]).
+#[derive(Debug, Clone, Copy)]
+struct Ladder {
+    lazy: bool,
+    one_lobe: bool,
+}
+
+impl Ladder {
+    fn run(self, ndf: &EmpiricalNdf, opts: &FitOptions, judge: Option<&dyn Decide>) -> Result<FitReport> {
+        let Ladder { lazy, one_lobe } = self;
+        let t0 = Instant::now();
+        let phase = crate::phases::phase("fit.session");
+        let s = Session::new(ndf, opts)?;
+        drop(phase);
+        // The ladder's fits, their reports and the choice.
+        let _p = crate::phases::phase("fit.ladder");
+        // A candidate that cannot be fitted is left out (and said so); only when none is usable is it an error.
+        let mut warnings = Vec::new();
+        // A delta NDF: every model is at its floor; the simplest wins (only the first rung is fitted).
+        let delta = s.data.k_nonzero == 1;
+        // The ladder's steps: its models grouped by rung, then by parameter count, simplest first (the order
+        // of the choice, so a step left out can only hold models the choice would rank after one within the
+        // tolerance).
+        let mut steps: Vec<(usize, usize)> =
+            ModelId::EVERY.iter().filter(|id| id.spec().in_auto).map(|&id| (rung(id), id.n_params())).collect();
+        steps.sort();
+        steps.dedup();
+        let k = s.data.k_nonzero;
+        let n = s.data.n;
+        let mut fits: Vec<Fitted> = Vec::new();
+        let mut deltas: Vec<Option<f64>> = Vec::new();
+        let mut errors: Vec<Option<f64>> = Vec::new();
+        let mut not_fitted: Vec<ModelId> = Vec::new();
+        let mut second_lobes: Vec<ModelId> = Vec::new();
+        let mut c_data = 1.0;
+        for (r, p) in steps {
+            let (here, two): (Vec<ModelId>, Vec<ModelId>) = ModelId::EVERY
                 .iter()
-                .map(|&i| {
-                    Ok(Offered {
-                        model: Model::from_params(fits[i].id, &public(&fits[i]))?,
-                        supported: supported[i],
-                        delta_data: deltas[i],
+                .copied()
+                .filter(|id| id.spec().in_auto && (rung(*id), id.n_params()) == (r, p))
+                .partition(|id| !(one_lobe && id.spec().is_mixture()));
+            second_lobes.extend(two);
+            if here.is_empty() {
+                continue;
+            }
+            // Climb only while it pays: no model so far is within the tolerance.
+            let within = errors.iter().zip(&fits).any(|(e, f)| e.is_some_and(|e| e <= opts.tolerance) && guard_ok(&fits, f, c_data, n));
+            if (lazy && within) || (delta && r > 0) {
+                not_fitted.extend(here);
+                continue;
+            }
+            let parents: Vec<Option<&Fitted>> = here.iter().map(|id| id.parent().and_then(|p| fits.iter().find(|f| f.id == p))).collect();
+            // A model whose parent is in the ladder but was not fitted (dropped) cannot grow from it.
+            let fitted: Vec<Option<(Option<Fitted>, Option<String>)>> = {
+                use rayon::prelude::*;
+                here.par_iter()
+                    .zip(parents.par_iter())
+                    .map(|(&id, &p)| {
+                        let orphan = id.parent().is_some_and(|q| q.spec().in_auto) && p.is_none();
+                        if delta {
+                            Some((Some(delta_fit(&s, id)), None))
+                        } else if orphan {
+                            None
+                        } else {
+                            Some(candidate(fit_on_rung(&s, id, p, opts)))
+                        }
                     })
-                })
-                .collect::<Result<_>>()?;
-            let decision = judge.decide(&offered, s.data.max_theta.to_degrees())?;
-            // No lobe fitted so far renders close enough, and the ladder stopped early: fit it whole.
-            if decision.answer.is_none() && lazy && !not_fitted.is_empty() && !delta {
-                drop(_p);
-                return ladder(ndf, opts, false, Some(judge));
+                    .collect()
+            };
+            for (id, f) in here.iter().zip(fitted) {
+                let Some((f, w)) = f else {
+                    warnings.push(format!("{id}: not fitted, its parent {} gave no usable fit", id.parent().map_or("", |p| p.as_str())));
+                    continue;
+                };
+                warnings.extend(w);
+                if let Some(f) = f {
+                    let m = Model::from_params(f.id, &public(&f)).ok();
+                    let seen = m.as_ref().map(|m| objective::Seen { model: m, rounding: s.data.rounding.as_ref() });
+                    let d = seen.as_ref().and_then(|m| metric::delta_to_data(m, ndf));
+                    deltas.push(d);
+                    errors.push(d.and_then(|d| verdict::excess_delta(d, metric::counting_noise2(seen.as_ref()?, ndf))));
+                    fits.push(f);
+                }
             }
-            order[decision.reported.min(order.len() - 1)]
+            if r == 0 {
+                // The guard's overdispersion: the data's own, or (no dispersion split) the first rung's.
+                let c_first = qbic::overdispersion(fits.iter().filter_map(|f| reduced(f, k)));
+                c_data = mixture::data_c(ndf, &s, c_first);
+            }
+            // No model can leave less than the data's noise, so the smallest deviance per dof so far bounds it:
+            // on a smooth surface the dispersion split reads tens and would refuse every added parameter.
+            let c_fits = fits.iter().filter_map(|f| reduced(f, k)).fold(f64::INFINITY, f64::min);
+            c_data = c_data.min(c_fits).max(1.0);
         }
-    };
-    let table = order[table_lobe(&order.iter().map(|&i| deltas[i]).collect::<Vec<_>>())];
-    let table_id = fits[table].id;
-    let c = qbic::overdispersion(fits.iter().filter_map(|f| reduced(f, k)));
-    let crit: Vec<f64> = fits.iter().map(|f| qbic::qbic(f.f, c, f.id.n_params(), n)).collect();
-    let crit_data: Vec<f64> = fits.iter().map(|f| qbic::qbic(f.f, c_data, f.id.n_params(), n)).collect();
-    let candidates: Vec<Candidate> = order
-        .iter()
-        .map(|&i| {
-            let f = &fits[i];
-            let par = f.id.parent();
-            let pi = par.and_then(idx);
-            Candidate {
-                model: f.id,
-                params: names(f.id, &public(f)),
-                n_params: f.id.n_params(),
-                objective_value: f.f,
-                reduced_chi2: reduced(f, k),
-                delta_data: deltas[i],
-                criterion: crit[i],
-                parent: par,
-                d_criterion: pi.map(|j| crit[i] - crit[j]),
-                d_delta_data: pi.and_then(|j| Some(deltas[i]? - deltas[j]?)),
-                converged: f.local.converged,
-                qbic_data: Some(crit_data[i]),
-                deviance_per_dof: reduced(f, k),
-                gain_per_param: pi.map(|j| {
-                    let dp = (f.id.n_params() as f64 - fits[j].id.n_params() as f64).max(1.0);
-                    (fits[j].f - f.f) / (c_data * dp)
-                }),
-                rung: Some(rung(f.id)),
-                delta_excess: errors[i],
-                effect: pi.and_then(|j| Some(errors[j]? - errors[i]?)),
-                supported: Some(supported[i]),
-                render_error: None,
+        if fits.is_empty() {
+            return Err(Error::new(ErrorKind::Numerical, format!("no model could be fitted ({})", warnings.join("; "))));
+        }
+        let idx = |id: ModelId| fits.iter().position(|f| f.id == id);
+        let supported: Vec<bool> = fits.iter().map(|f| guard_ok(&fits, f, c_data, n)).collect();
+        // Simplest first: rung, parameters, error (unknown errors last), then the table's order.
+        let mut order: Vec<usize> = (0..fits.len()).collect();
+        let key = |i: usize| errors[i].filter(|e| e.is_finite()).unwrap_or(f64::INFINITY);
+        order.sort_by(|&a, &b| {
+            (rung(fits[a].id), fits[a].id.n_params())
+                .cmp(&(rung(fits[b].id), fits[b].id.n_params()))
+                .then(key(a).total_cmp(&key(b)))
+                .then(fits[a].id.cmp(&fits[b].id))
+        });
+        let priced: Vec<f64> = order.iter().map(|&i| if supported[i] { key(i) } else { f64::INFINITY }).collect();
+        let (by_ndf, within) = match verdict::select(&priced, opts.tolerance) {
+            Some((j, w)) => (order[j], w),
+            // No error is known (a delta NDF, or no bin with a count): the simplest supported model.
+            None => (order.iter().copied().find(|&i| supported[i]).unwrap_or(order[0]), false),
+        };
+        let chosen = match judge {
+            None => by_ndf,
+            Some(judge) => {
+                let offered: Vec<Offered> = order
+                    .iter()
+                    .map(|&i| {
+                        Ok(Offered {
+                            model: Model::from_params(fits[i].id, &public(&fits[i]))?,
+                            supported: supported[i],
+                            delta_data: deltas[i],
+                        })
+                    })
+                    .collect::<Result<_>>()?;
+                let decision = judge.decide(&offered, s.data.max_theta.to_degrees())?;
+                // No lobe fitted so far renders close enough, and the ladder stopped early: fit it whole.
+                if decision.answer.is_none() && lazy && !not_fitted.is_empty() && !delta {
+                    drop(_p);
+                    return Ladder { lazy: false, ..self }.run(ndf, opts, Some(judge));
+                }
+                order[decision.reported.min(order.len() - 1)]
             }
-        })
-        .collect();
-    let summary = ladder_summary(&fits, &errors, &supported, by_ndf, within, opts.tolerance, &not_fitted);
-    let best = fits.into_iter().nth(chosen).expect("chosen indexes the fits");
-    let mut rep = build_report(ndf, &s, best, opts, 0.0)?;
-    rep.warnings.extend(warnings);
-    rep.selection = Some(Selection {
-        criterion: "qbic".into(),
-        overdispersion: c,
-        candidates,
-        data_overdispersion: Some(c_data),
-        ladder: Some(summary),
-        tolerance: Some(opts.tolerance),
-        not_fitted,
-        answer: None,
-        render_error: None,
-        render_tolerance: None,
-        render_noise: None,
-        scenes: Vec::new(),
-        table_lobe: Some(table_id),
-    });
-    rep.timings.fit_ms = t0.elapsed().as_secs_f64() * 1e3;
-    Ok(rep)
+        };
+        let table = order[table_lobe(&order.iter().map(|&i| deltas[i]).collect::<Vec<_>>())];
+        let table_id = fits[table].id;
+        let c = qbic::overdispersion(fits.iter().filter_map(|f| reduced(f, k)));
+        let crit: Vec<f64> = fits.iter().map(|f| qbic::qbic(f.f, c, f.id.n_params(), n)).collect();
+        let crit_data: Vec<f64> = fits.iter().map(|f| qbic::qbic(f.f, c_data, f.id.n_params(), n)).collect();
+        let candidates: Vec<Candidate> = order
+            .iter()
+            .map(|&i| {
+                let f = &fits[i];
+                let par = f.id.parent();
+                let pi = par.and_then(idx);
+                Candidate {
+                    model: f.id,
+                    params: names(f.id, &public(f)),
+                    n_params: f.id.n_params(),
+                    objective_value: f.f,
+                    reduced_chi2: reduced(f, k),
+                    delta_data: deltas[i],
+                    criterion: crit[i],
+                    parent: par,
+                    d_criterion: pi.map(|j| crit[i] - crit[j]),
+                    d_delta_data: pi.and_then(|j| Some(deltas[i]? - deltas[j]?)),
+                    converged: f.local.converged,
+                    qbic_data: Some(crit_data[i]),
+                    deviance_per_dof: reduced(f, k),
+                    gain_per_param: pi.map(|j| {
+                        let dp = (f.id.n_params() as f64 - fits[j].id.n_params() as f64).max(1.0);
+                        (fits[j].f - f.f) / (c_data * dp)
+                    }),
+                    rung: Some(rung(f.id)),
+                    delta_excess: errors[i],
+                    effect: pi.and_then(|j| Some(errors[j]? - errors[i]?)),
+                    supported: Some(supported[i]),
+                    render_error: None,
+                }
+            })
+            .collect();
+        let summary = ladder_summary(&fits, &errors, &supported, by_ndf, within, opts.tolerance, &not_fitted, &second_lobes);
+        not_fitted.extend(second_lobes);
+        let best = fits.into_iter().nth(chosen).expect("chosen indexes the fits");
+        let mut rep = build_report(ndf, &s, best, opts, 0.0)?;
+        rep.warnings.extend(warnings);
+        rep.selection = Some(Selection {
+            criterion: "qbic".into(),
+            overdispersion: c,
+            candidates,
+            data_overdispersion: Some(c_data),
+            ladder: Some(summary),
+            tolerance: Some(opts.tolerance),
+            not_fitted,
+            answer: None,
+            render_error: None,
+            render_tolerance: None,
+            render_noise: None,
+            scenes: Vec::new(),
+            table_lobe: Some(table_id),
+        });
+        rep.timings.fit_ms = t0.elapsed().as_secs_f64() * 1e3;
+        Ok(rep)
+    }
 }
 
 /// `F / (K - p - 1)`, when there are degrees of freedom.
@@ -862,6 +894,7 @@ fn ladder_summary(
     within: bool,
     tolerance: f64,
     not_fitted: &[ModelId],
+    second_lobes: &[ModelId],
 ) -> String {
     let pct = |e: Option<f64>| e.map_or("unknown".to_string(), |e| format!("{:.1}%", 100.0 * e));
     let id = fits[chosen].id;
@@ -903,6 +936,13 @@ fn ladder_summary(
     if !not_fitted.is_empty() {
         let ids: Vec<&str> = not_fitted.iter().map(|m| m.as_str()).collect();
         out += &format!("; not fitted (a model below them is within the tolerance, or the NDF is a delta): {}", ids.join(", "));
+    }
+    if !second_lobes.is_empty() {
+        let ids: Vec<&str> = second_lobes.iter().map(|m| m.as_str()).collect();
+        out += &format!(
+            "; not fitted (light sees a mirror: the lobes describe the slopes, and a second lobe nothing a renderer shows): {}",
+            ids.join(", ")
+        );
     }
     out
 }

@@ -177,7 +177,8 @@ pub struct Selection {
     /// The tolerance on the NDF error beyond counting noise the choice used (`--tolerance`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tolerance: Option<f64>,
-    /// The models of the ladder not fitted, as a model on a rung below them was within the tolerance.
+    /// The models of the ladder not fitted: a model on a rung below them was within the tolerance, or (the
+    /// two-lobe models) light sees the scan as a mirror and the ladder only describes its slopes.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub not_fitted: Vec<ModelId>,
     /// The model a renderer should use (the render choice): a model id, or `measured` when no lobe renders

@@ -310,7 +310,7 @@ pub fn fit(ndf: &EmpiricalNdf, model: ModelChoice, opts: &FitOptions) -> Result<
 }
 
 /// Stage 3 for `auto` with its answer: where light sees a mirror ([`crate::answer::answer_mirror`]), the
-/// ladder by the NDF alone and the mirror answer; elsewhere the render choice ([`fit_rendered`]), or the
+/// ladder's one-lobe rungs by the NDF alone ([`crate::fit::fit_auto_one_lobe`]) and the mirror answer; elsewhere the render choice ([`fit_rendered`]), or the
 /// ladder by the NDF alone with a warning if the renders cannot be made. `optics` goes into the report.
 pub fn fit_answered(
     ndf: &EmpiricalNdf,
@@ -322,7 +322,7 @@ pub fn fit_answered(
     let t0 = Instant::now();
     let mirror = optics.as_ref().is_some_and(|o| o.regime != crate::answer::Regime::Geometric.as_str());
     let mut report = if mirror {
-        crate::fit::fit_auto(ndf, opts)?
+        crate::fit::fit_auto_one_lobe(ndf, opts)?
     } else {
         match fit_rendered(ndf, opts, render, scan) {
             Ok(r) => r,

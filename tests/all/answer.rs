@@ -116,6 +116,31 @@ fn a_rough_surface_is_geometric_and_keeps_its_render_answer() {
     assert_eq!(out.fit.optics.unwrap().regime, "geometric");
 }
 
+/// Where light sees a mirror the ladder only describes the slopes: its one-lobe rungs are fitted, each the
+/// same fit, bit for bit, as in the whole ladder on the same NDF, and the two-lobe models are listed as
+/// not fitted, and why.
+#[test]
+fn a_mirror_fits_the_ladders_one_lobe_rungs_alone() {
+    use ndfit::models::ModelId;
+    let options = Options::default();
+    let out = Pipeline::new(options.clone()).run(white(256, 0.5e-6, 1e-10, 2), "polished").unwrap();
+    let sel = out.fit.selection.as_ref().unwrap();
+    assert_eq!(sel.answer.as_deref(), Some("mirror"));
+    let two: Vec<ModelId> = ModelId::EVERY.iter().copied().filter(|id| id.spec().in_auto && id.spec().is_mixture()).collect();
+    assert_eq!(two.len(), 3);
+    for id in &two {
+        assert!(sel.not_fitted.contains(id) && sel.candidates.iter().all(|c| c.model != *id), "{id}: {:?}", sel.not_fitted);
+    }
+    assert!(sel.ladder.as_deref().unwrap().contains("light sees a mirror"), "{:?}", sel.ladder);
+    let whole = ndfit::fit::fit_auto_pruned(&out.ndf, &options.fit_options(), false).unwrap();
+    let whole = whole.selection.unwrap();
+    assert!(sel.candidates.len() >= 2);
+    for c in &sel.candidates {
+        let w = whole.candidates.iter().find(|w| w.model == c.model).unwrap_or_else(|| panic!("{} not in the whole ladder", c.model));
+        assert_eq!((&c.params, c.objective_value.to_bits()), (&w.params, w.objective_value.to_bits()), "{}", c.model);
+    }
+}
+
 #[test]
 fn polished_scans_answer_a_mirror_never_an_error() {
     // Gaussian heights of 0.03 and 0.1 nm RMS at 0.5 um spacing, and a flat scan with one 1 um spike.
