@@ -845,7 +845,7 @@ impl Ladder {
                 }
             })
             .collect();
-        let summary = ladder_summary(&fits, &errors, &supported, by_ndf, within, opts.tolerance, &not_fitted, &second_lobes);
+        let summary = ladder_summary(&fits, &errors, &supported, by_ndf, within, opts.tolerance, [&not_fitted, &second_lobes]);
         not_fitted.extend(second_lobes);
         let best = fits.into_iter().nth(chosen).expect("chosen indexes the fits");
         let mut rep = build_report(ndf, &s, best, opts, 0.0)?;
@@ -893,8 +893,7 @@ fn ladder_summary(
     chosen: usize,
     within: bool,
     tolerance: f64,
-    not_fitted: &[ModelId],
-    second_lobes: &[ModelId],
+    [not_fitted, second_lobes]: [&[ModelId]; 2],
 ) -> String {
     let pct = |e: Option<f64>| e.map_or("unknown".to_string(), |e| format!("{:.1}%", 100.0 * e));
     let id = fits[chosen].id;
