@@ -220,7 +220,10 @@ pub fn answer_mirror(report: &mut FitReport, optics: Optics) -> bool {
 /// [`optics`] of `src` with a mirror's haze ([`haze`] on a copy of the residual heights, only where the
 /// regime is not geometric); a haze that cannot be computed is said in `note`.
 pub fn optics_with_haze<S: BandSource<T = f64>>(src: &S) -> Optics {
-    let mut o = optics(src);
+    let mut o = {
+        let _p = crate::phases::phase("optics.shares");
+        optics(src)
+    };
     if o.regime == Regime::Geometric.as_str() {
         return o;
     }
@@ -229,6 +232,7 @@ pub fn optics_with_haze<S: BandSource<T = f64>>(src: &S) -> Optics {
     let z = src.band(0, g.ny, &mut buf).values().to_vec();
     // The coherence patch, else what the scan resolves (as `mirror_shares` used).
     let sides = [o.coherence_m, o.patches["side_x_m"].max(o.patches["side_y_m"]), o.patches["side_x_m"].min(o.patches["side_y_m"])];
+    let _p = crate::phases::phase("optics.haze");
     match Scan::new(g.nx, g.ny, g.dx, g.dy, z).and_then(|s| haze(&s, &sides)) {
         Ok(h) => o.haze = Some(h),
         Err(e) => {
