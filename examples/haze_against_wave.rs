@@ -1,12 +1,25 @@
 //! A mirror answer's haze against the wave prediction (docs/ANSWER.md, "No one alpha serves every scene"):
 //! the answer's haze alpha scaled by k (0: the mirror alone), and the ladder's lobe as the haze, each
-//! rendered in the point, broad and window scenes and scored by mean HDR-FLIP against the wave prediction
+//! rendered in the point, broad and window scenes and scored by mean HDR-FLIP against the wave prediction,
+//! over the whole image and over the pixels where the prediction holds light
 //! (`ndfit wave SCAN --to rgl`), or against the joined reference of a mixed scan when the scan's geometric
 //! table (`ndfit export SCAN --to rgl`) is given. Material none on both sides.
 //!
 //!     ndfit fit SCAN -o FIT.json; ndfit wave SCAN --to rgl -o W.bsdf [; ndfit export SCAN --to rgl -o G.bsdf]
 //!     cargo run --release --example haze_against_wave -- FIT.json W.bsdf [G.bsdf]
-use ndfit::answer::choice::flip_mean;
+use ndfit::answer::choice::{exposures, flip_mean};
+use ndfit::flip::{hdr, RgbImage, DEFAULT_PPD};
+use ndfit::render::Image;
+
+/// Mean HDR-FLIP over the pixels where the reference holds light in every channel (the wave prediction is
+/// 0 beyond the band the scan resolves: there it is silent, not dark).
+fn flip_in_band(reference: &Image, test: &Image) -> f64 {
+    let rgb = |i: &Image| RgbImage::new(i.width, i.height, i.data.clone()).unwrap();
+    let map = hdr(&rgb(reference), &rgb(test), DEFAULT_PPD, &exposures(reference).unwrap()).unwrap();
+    let lit: Vec<f64> =
+        reference.data.iter().zip(map.values()).filter(|(p, _)| p.iter().all(|&c| c > 0.0)).map(|(_, &v)| v as f64).collect();
+    lit.iter().sum::<f64>() / lit.len().max(1) as f64
+}
 use ndfit::export::rgl::{Material, TensorFile};
 use ndfit::export::{MirrorAnswer, MirrorBrdf};
 use ndfit::models::Model;
@@ -39,8 +52,14 @@ fn main() {
         a.answer = if haze.is_some() { "mirror+ggx".into() } else { "mirror".into() };
         a.haze = haze;
         let b = MirrorBrdf::new(&a, Material::None);
-        let v: Vec<String> =
-            scenes.iter().zip(&refs).map(|((n, s), r)| format!("{n} {:.4}", flip_mean(r, &s.render(&b).unwrap()).unwrap())).collect();
+        let v: Vec<String> = scenes
+            .iter()
+            .zip(&refs)
+            .map(|((n, s), r)| {
+                let t = s.render(&b).unwrap();
+                format!("{n} {:.4} (in band {:.4})", flip_mean(r, &t).unwrap(), flip_in_band(r, &t))
+            })
+            .collect();
         println!("{name}: {}", v.join("  "));
     }
 }
