@@ -1,9 +1,9 @@
 //! A mirror answer's haze against the wave prediction (docs/ANSWER.md, "No one alpha serves every scene"):
 //! the answer's haze alpha scaled by k (0: the mirror alone), and the ladder's lobe as the haze, each
-//! rendered in the point, broad and window scenes and scored by mean HDR-FLIP against the wave prediction,
-//! over the whole image and over the pixels where the prediction holds light
+//! rendered in the point, broad and window scenes and scored by mean HDR-FLIP against the wave prediction
 //! (`ndfit wave SCAN --to rgl`), or against the joined reference of a mixed scan when the scan's geometric
-//! table (`ndfit export SCAN --to rgl`) is given. Material none on both sides.
+//! table (`ndfit export SCAN --to rgl`) is given, over the whole image and over the pixels where the
+//! reference holds light. Material none on both sides.
 //!
 //!     ndfit fit SCAN -o FIT.json; ndfit wave SCAN --to rgl -o W.bsdf [; ndfit export SCAN --to rgl -o G.bsdf]
 //!     cargo run --release --example haze_against_wave -- FIT.json W.bsdf [G.bsdf]
