@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 use crate::error::Result;
 use crate::fit::{FitReport, Haze, Optics, SpecularShare, Verdict};
 use crate::models::ModelId;
-use crate::scan::{BandSource, Scan};
+use crate::scan::{BandSource, Heightfield, Scan};
 use crate::wave::{
     default_coherence_m, mirror_shares, Diffraction, MirrorShares, WaveOptions, DEFAULT_INCIDENCES_DEG, DEFAULT_WAVELENGTHS_NM,
 };
@@ -220,25 +220,49 @@ pub fn answer_mirror(report: &mut FitReport, optics: Optics) -> bool {
 /// [`optics`] of `src` with a mirror's haze ([`haze`] on a copy of the residual heights, only where the
 /// regime is not geometric); a haze that cannot be computed is said in `note`.
 pub fn optics_with_haze<S: BandSource<T = f64>>(src: &S) -> Optics {
-    let mut o = {
+    let (mut o, heights) = optics_and_heights(src);
+    if let Some(h) = heights {
+        add_haze(&mut o, h);
+    }
+    o
+}
+
+/// [`optics`] of `src` and, where the regime is not geometric, a copy of its residual heights for
+/// [`add_haze`] (which the caller may run beside other work, after the scan itself is released).
+pub fn optics_and_heights<S: BandSource<T = f64>>(src: &S) -> (Optics, Option<Heightfield>) {
+    let o = {
         let _p = crate::phases::phase("optics.shares");
         optics(src)
     };
     if o.regime == Regime::Geometric.as_str() {
-        return o;
+        return (o, None);
     }
     let g = src.shape();
     let mut buf = Vec::new();
     let z = src.band(0, g.ny, &mut buf).values().to_vec();
-    // The coherence patch, else what the scan resolves (as `mirror_shares` used).
-    let sides = [o.coherence_m, o.patches["side_x_m"].max(o.patches["side_y_m"]), o.patches["side_x_m"].min(o.patches["side_y_m"])];
-    let _p = crate::phases::phase("optics.haze");
-    match Scan::new(g.nx, g.ny, g.dx, g.dy, z).and_then(|s| haze(&s, &sides)) {
-        Ok(h) => o.haze = Some(h),
+    match Scan::new(g.nx, g.ny, g.dx, g.dy, z) {
+        Ok(h) => (o, Some(h)),
         Err(e) => {
-            let line = format!("the haze could not be computed: {}", e.message());
-            o.note = Some(o.note.map_or(line.clone(), |n| format!("{n}; {line}")));
+            let mut o = o;
+            note_no_haze(&mut o, e.message());
+            (o, None)
         }
     }
-    o
+}
+
+/// Add the haze of `heights` (the scan's, from [`optics_and_heights`]) to `o`: fitted on the coherence
+/// patch, else on what the scan resolves (as `mirror_shares` used); a haze that cannot be computed is said
+/// in `note`.
+pub fn add_haze(o: &mut Optics, heights: Heightfield) {
+    let _p = crate::phases::phase("optics.haze");
+    let sides = [o.coherence_m, o.patches["side_x_m"].max(o.patches["side_y_m"]), o.patches["side_x_m"].min(o.patches["side_y_m"])];
+    match haze(&heights, &sides) {
+        Ok(h) => o.haze = Some(h),
+        Err(e) => note_no_haze(o, e.message()),
+    }
+}
+
+fn note_no_haze(o: &mut Optics, why: &str) {
+    let line = format!("the haze could not be computed: {why}");
+    o.note = Some(o.note.take().map_or(line.clone(), |n| format!("{n}; {line}")));
 }

@@ -202,10 +202,14 @@ impl Pipeline {
     }
 
     /// What light sees of the scan, for `auto` with its answer (`None` otherwise), and the time taken (ms).
-    fn optics_of(&self, scan: &Prepared) -> Option<(Optics, f64)> {
+    /// The heights come along where light sees a mirror: its haze is computed beside the ladder.
+    fn optics_of(&self, scan: &Prepared) -> Option<Sighted> {
         let _p = crate::phases::phase("optics");
         let t = Instant::now();
-        (self.options.render.is_some() && self.options.model == ModelChoice::Auto).then(|| (crate::answer::optics_with_haze(scan), ms(t)))
+        (self.options.render.is_some() && self.options.model == ModelChoice::Auto).then(|| {
+            let (optics, heights) = crate::answer::optics_and_heights(scan);
+            Sighted { optics, heights, ms: ms(t) }
+        })
     }
 
     fn finish(
@@ -215,12 +219,36 @@ impl Pipeline {
         path: &Path,
         read_ms: f64,
         ndf_ms: f64,
-        optics: Option<(Optics, f64)>,
+        optics: Option<Sighted>,
     ) -> Result<Outcome> {
-        let optics_ms = optics.as_ref().map(|o| o.1);
-        let mut report = match (&self.options.render, self.options.model) {
-            (Some(render), ModelChoice::Auto) => {
-                fit_answered(&ndf, &self.options.fit_options(), render, &path.display().to_string(), optics.map(|o| o.0))
+        let mut optics_ms = optics.as_ref().map(|o| o.ms);
+        let mut report = match (&self.options.render, self.options.model, optics) {
+            (Some(_), ModelChoice::Auto, Some(Sighted { mut optics, heights: Some(heights), .. })) => {
+                // Light sees a mirror ([`fit_answered`]'s first case): the haze and the ladder's one-lobe rungs
+                // are independent, so they run side by side.
+                let opts = self.options.fit_options();
+                let (report, haze_ms) = rayon::join(
+                    || {
+                        let t0 = Instant::now();
+                        crate::fit::fit_auto_one_lobe(&ndf, &opts).map(|mut r| {
+                            r.timings.fit_ms = ms(t0);
+                            r
+                        })
+                    },
+                    || {
+                        let t = Instant::now();
+                        crate::answer::add_haze(&mut optics, heights);
+                        ms(t)
+                    },
+                );
+                optics_ms = optics_ms.map(|m| m + haze_ms);
+                report.map(|mut r| {
+                    crate::answer::answer_mirror(&mut r, optics);
+                    r
+                })
+            }
+            (Some(render), ModelChoice::Auto, sighted) => {
+                fit_answered(&ndf, &self.options.fit_options(), render, &path.display().to_string(), sighted.map(|o| o.optics))
             }
             _ => fit(&ndf, self.options.model, &self.options.fit_options()),
         }
@@ -231,6 +259,14 @@ impl Pipeline {
         report.timings.optics_ms = optics_ms;
         Ok(Outcome { ndf, fit: report })
     }
+}
+
+/// What light sees of a scan ([`crate::answer::optics_and_heights`]), the time it took (ms), and the
+/// heights its haze is computed on where it sees a mirror.
+struct Sighted {
+    optics: Optics,
+    heights: Option<crate::scan::Heightfield>,
+    ms: f64,
 }
 
 /// Drop a scan read from a file. Heights that are the mapped file are unmapped on a thread of its own:

@@ -47,7 +47,7 @@ impl Tiling {
 }
 
 /// What the patches add up to.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Sums {
     /// Per level: `sum_p |FFT g_p|^2`, stored with the x frequency outer: `[kx * P_y + ky]`.
     pub spectra: Vec<Vec<f64>>,
@@ -95,54 +95,80 @@ pub(crate) fn hann(n: usize) -> Vec<f64> {
 }
 
 /// Per-thread FFT plans and buffers.
-struct Work {
+struct Fft2 {
     row: Arc<dyn Fft<f64>>,
     col: Arc<dyn Fft<f64>>,
     buf: Vec<Complex<f64>>,
     tr: Vec<Complex<f64>>,
     scratch: Vec<Complex<f64>>,
-    r: Vec<f64>,
-    u: Vec<f64>,
-    wm: Vec<f64>,
 }
 
-impl Work {
-    fn new(px: usize, py: usize) -> Work {
+impl Fft2 {
+    fn new(px: usize, py: usize) -> Fft2 {
         let mut planner = FftPlanner::new();
         // The inverse transform: sum g exp(+i v_t . x), the sign of the phase v_z h (see mod.rs).
         let row = planner.plan_fft_inverse(px);
         let col = planner.plan_fft_inverse(py);
         let s = row.get_inplace_scratch_len().max(col.get_inplace_scratch_len());
         let n = px * py;
-        Work {
-            row,
-            col,
-            buf: vec![Complex::default(); n],
-            tr: vec![Complex::default(); n],
-            scratch: vec![Complex::default(); s],
-            r: vec![0.0; n],
-            u: vec![0.0; n],
-            wm: vec![0.0; n],
-        }
+        Fft2 { row, col, buf: vec![Complex::default(); n], tr: vec![Complex::default(); n], scratch: vec![Complex::default(); s] }
     }
 }
 
-/// Sum every patch of `scan` at every level (rayon over chunks of patches, summed in order).
+/// A patch centred ([`centre`]): its heights about their weighted mean `r`, `u = (w m)^2` and `wm = w m`.
+struct Patch {
+    r: Vec<f64>,
+    u: Vec<f64>,
+    wm: Vec<f64>,
+}
+
+impl Patch {
+    fn new(n: usize) -> Patch {
+        Patch { r: vec![0.0; n], u: vec![0.0; n], wm: vec![0.0; n] }
+    }
+}
+
+/// Sum every patch of `scan` at every level (rayon over chunks of patches, summed in order; a scan of one
+/// chunk, too few patches to share out, has its levels side by side instead).
 pub(crate) fn accumulate(scan: &Scan<'_>, tiling: Tiling, levels: &Levels, progress: Option<&(dyn Fn(usize, usize) + Sync)>) -> Sums {
+    accumulate_as(scan, tiling, levels, progress, tiling.cols * tiling.rows <= CHUNK)
+}
+
+/// [`accumulate`], the levels side by side when `by_levels` (a scan of one chunk), else the chunks.
+fn accumulate_as(
+    scan: &Scan<'_>,
+    tiling: Tiling,
+    levels: &Levels,
+    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+    by_levels: bool,
+) -> Sums {
     let n_patches = tiling.cols * tiling.rows;
     let bins = tiling.px * tiling.py;
     let chunks: Vec<usize> = (0..n_patches.div_ceil(CHUNK)).collect();
     let wave = (rayon::current_num_threads() * 2).max(1);
-    let mut total = Sums::zero(levels.len(), bins);
     let (wx, wy) = (hann(tiling.px), hann(tiling.py));
+    if by_levels && chunks.len() == 1 {
+        // The chunk's sums are the total's: every sum is of non-negative terms, so adding them to zero
+        // changes no bit.
+        let part = by_level(scan, tiling, levels, &wx, &wy);
+        if let Some(f) = progress {
+            f(n_patches, n_patches);
+        }
+        return part;
+    }
+    let mut total = Sums::zero(levels.len(), bins);
     for group in chunks.chunks(wave) {
         let parts: Vec<Sums> = group
             .par_iter()
             .map(|&c| {
-                let mut work = Work::new(tiling.px, tiling.py);
+                let (mut fft, mut centred) = (Fft2::new(tiling.px, tiling.py), Patch::new(bins));
                 let mut sums = Sums::zero(levels.len(), bins);
                 for p in c * CHUNK..((c + 1) * CHUNK).min(n_patches) {
-                    patch(scan, tiling, p, levels, &wx, &wy, &mut work, &mut sums);
+                    if let Some(s1) = centre_patch(scan, tiling, p, &wx, &wy, &mut centred, &mut sums) {
+                        for (l, &vz) in levels.vz.iter().enumerate() {
+                            level(&mut fft, &centred, s1, vz, &mut sums.coherent[l], &mut sums.spectra[l], tiling);
+                        }
+                    }
                 }
                 sums
             })
@@ -157,57 +183,95 @@ pub(crate) fn accumulate(scan: &Scan<'_>, tiling: Tiling, levels: &Levels, progr
     total
 }
 
-/// Add patch `p` (row-major over the tiling) to `sums`.
-#[allow(clippy::too_many_arguments)]
-fn patch(scan: &Scan<'_>, t: Tiling, p: usize, levels: &Levels, wx: &[f64], wy: &[f64], work: &mut Work, sums: &mut Sums) {
-    let (px, py) = (t.px, t.py);
+/// The sums of every patch of a scan of one chunk, each level's in its own task: a level's sums take the
+/// same values in the same patch order as in [`accumulate`]'s chunks, so the result is theirs to the bit.
+fn by_level(scan: &Scan<'_>, t: Tiling, levels: &Levels, wx: &[f64], wy: &[f64]) -> Sums {
+    let bins = t.px * t.py;
+    let mut sums = Sums::zero(0, bins);
+    let mut patches = Vec::new();
+    for p in 0..t.cols * t.rows {
+        let mut c = Patch::new(bins);
+        if let Some(s1) = centre_patch(scan, t, p, wx, wy, &mut c, &mut sums) {
+            patches.push((c, s1));
+        }
+    }
+    // One group of levels per thread, each with one set of FFT buffers (a patch's are megabytes).
+    let threads = rayon::current_num_threads().clamp(1, levels.len().max(1));
+    let done: Vec<Vec<(usize, f64, Vec<f64>)>> = (0..threads)
+        .into_par_iter()
+        .map(|g| {
+            let mut fft = Fft2::new(t.px, t.py);
+            (g..levels.len())
+                .step_by(threads)
+                .map(|l| {
+                    let (mut coherent, mut spectrum) = (0.0, vec![0.0; bins]);
+                    for (c, s1) in &patches {
+                        level(&mut fft, c, *s1, levels.vz[l], &mut coherent, &mut spectrum, t);
+                    }
+                    (l, coherent, spectrum)
+                })
+                .collect()
+        })
+        .collect();
+    let mut per_level: Vec<(usize, f64, Vec<f64>)> = done.into_iter().flatten().collect();
+    per_level.sort_by_key(|x| x.0);
+    (sums.coherent, sums.spectra) = per_level.into_iter().map(|(_, c, s)| (c, s)).unzip();
+    sums
+}
+
+/// Centre patch `p` (row-major over the tiling) into `c` and add its weights to `sums`; its `sum u`, or
+/// `None` (counted as skipped) when too few of its points are valid.
+fn centre_patch(scan: &Scan<'_>, t: Tiling, p: usize, wx: &[f64], wy: &[f64], c: &mut Patch, sums: &mut Sums) -> Option<f64> {
+    let px = t.px;
     let (pi, pj) = (p / t.cols, p % t.cols);
-    let (i0, j0) = (t.i0 + pi * py, t.j0 + pj * px);
+    let (i0, j0) = (t.i0 + pi * t.py, t.j0 + pj * px);
     let row = |i: usize| &scan.row(i0 + i)[j0..j0 + px];
-    let Some(c) = centre(row, px, [scan.dx, scan.dy], wx, wy, &mut work.r, &mut work.u, &mut work.wm) else {
+    let Some(k) = centre(row, px, [scan.dx, scan.dy], wx, wy, &mut c.r, &mut c.u, &mut c.wm) else {
         sums.skipped += 1;
-        return;
+        return None;
     };
     sums.used += 1;
-    sums.weight += c.s1;
-    sums.tilt2 += c.s1 * c.tan2;
-    sums.floor += work.u.iter().map(|u| u * u).sum::<f64>() / c.s1;
-    let s1 = c.s1;
+    sums.weight += k.s1;
+    sums.tilt2 += k.s1 * k.tan2;
+    sums.floor += c.u.iter().map(|u| u * u).sum::<f64>() / k.s1;
+    Some(k.s1)
+}
+
+/// Add one centred patch (weight sum `s1`) at level `vz` to that level's `coherent` sum and `spectrum`.
+fn level(f: &mut Fft2, c: &Patch, s1: f64, vz: f64, coherent: &mut f64, spectrum: &mut [f64], t: Tiling) {
+    let (px, py) = (t.px, t.py);
     let n = px * py;
-    for (l, &vz) in levels.vz.iter().enumerate() {
-        // The mean field chi and the diffuse field g.
-        let (mut cr, mut ci) = (0.0, 0.0);
-        for k in 0..n {
-            let u = work.u[k];
-            work.buf[k] = if u > 0.0 {
-                let (s, c) = (vz * work.r[k]).sin_cos();
-                cr += u * c;
-                ci += u * s;
-                Complex::new(c, s)
-            } else {
-                Complex::default()
-            };
+    // The mean field chi and the diffuse field g.
+    let (mut cr, mut ci) = (0.0, 0.0);
+    for k in 0..n {
+        let u = c.u[k];
+        f.buf[k] = if u > 0.0 {
+            let (s, co) = (vz * c.r[k]).sin_cos();
+            cr += u * co;
+            ci += u * s;
+            Complex::new(co, s)
+        } else {
+            Complex::default()
+        };
+    }
+    let chi = Complex::new(cr / s1, ci / s1);
+    *coherent += chi.norm_sqr() * s1;
+    for k in 0..n {
+        let w = c.wm[k];
+        if w > 0.0 {
+            f.buf[k] = (f.buf[k] - chi) * w;
         }
-        let chi = Complex::new(cr / s1, ci / s1);
-        sums.coherent[l] += chi.norm_sqr() * s1;
-        for k in 0..n {
-            let w = work.wm[k];
-            if w > 0.0 {
-                work.buf[k] = (work.buf[k] - chi) * w;
-            }
+    }
+    // Rows, then the transpose's rows (the columns).
+    f.row.process_with_scratch(&mut f.buf, &mut f.scratch);
+    for i in 0..py {
+        for j in 0..px {
+            f.tr[j * py + i] = f.buf[i * px + j];
         }
-        // Rows, then the transpose's rows (the columns).
-        work.row.process_with_scratch(&mut work.buf, &mut work.scratch);
-        for i in 0..py {
-            for j in 0..px {
-                work.tr[j * py + i] = work.buf[i * px + j];
-            }
-        }
-        work.col.process_with_scratch(&mut work.tr, &mut work.scratch);
-        let acc = &mut sums.spectra[l];
-        for (a, v) in acc.iter_mut().zip(&work.tr) {
-            *a += v.norm_sqr();
-        }
+    }
+    f.col.process_with_scratch(&mut f.tr, &mut f.scratch);
+    for (a, v) in spectrum.iter_mut().zip(&f.tr) {
+        *a += v.norm_sqr();
     }
 }
 
@@ -290,4 +354,35 @@ pub(crate) fn centre<'r>(
         }
     }
     Some(Centred { s1, tan2: a * a + b * b })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scan of one chunk summed level by level equals, to the bit, the same scan summed by its chunk:
+    /// one, three and four patches (one with a hole that skips it), at several levels.
+    #[test]
+    fn the_levels_side_by_side_sum_as_the_chunks_do() {
+        let (nx, ny) = (64, 48);
+        let mut z: Vec<f64> = (0..nx * ny).map(|k| 1e-7 * ((k % nx) as f64 * 0.37).sin() * ((k / nx) as f64 * 0.21).cos()).collect();
+        // A hole that skips the second patch of the 2 x 2 tiling and the third of the 3 x 1, and leaves
+        // masked points in the others.
+        for i in 2..14 {
+            for j in 40..60 {
+                z[i * nx + j] = f64::NAN;
+            }
+        }
+        let scan = Scan::new(nx, ny, 1e-7, 1e-7, z).expect("valid");
+        let levels = Levels::covering(&[(1.1e7, 2.3e7)], 1.1);
+        assert!(levels.len() > 4);
+        for (px, py) in [(64, 48), (21, 48), (32, 24)] {
+            let t = Tiling::new(nx, ny, px, py);
+            let a = accumulate_as(&scan, t, &levels, None, true);
+            let b = accumulate_as(&scan, t, &levels, None, false);
+            assert!(a.used + a.skipped == t.cols * t.rows && a.used > 0, "{px} x {py}: {} used", a.used);
+            assert_eq!(a.skipped, usize::from(t.cols * t.rows > 1), "{px} x {py}");
+            assert_eq!(a, b, "{px} x {py}");
+        }
+    }
 }
