@@ -1020,11 +1020,12 @@ def loaded(xml):
 
 # As a mirror: the answer, exported for Mitsuba.
 answer_xml, _ = ndfit("export", fit_path, "--to", "mitsuba")
-# As its geometric lobe: the ladder's two-lobe Beckmann fit of the slopes (the closest lobe the render choice
-# found to the geometric table before light was asked), exported for Mitsuba.
-lobe = next(c for c in fit["selection"]["candidates"] if c["model"] == "beckmann2")
+# As its geometric lobe: the two-lobe Beckmann fit of the slopes (the closest lobe the render choice found to
+# the geometric table before light was asked; where light sees a mirror `auto` fits no two-lobe model, so it is
+# asked for by name), exported for Mitsuba.
 lobe_path = os.path.join(OUT, "lobe.json")
-json.dump({"model": lobe["model"], "params": lobe["params"]}, open(lobe_path, "w"))
+ndfit("fit", SCAN, "--model", "beckmann2", "-o", lobe_path)
+lobe = json.load(open(lobe_path))
 lobe_xml, _ = ndfit("export", lobe_path, "--to", "mitsuba")
 # As its table: the scan's own empirical NDF (Mitsuba's `measured`).
 table = os.path.join(OUT, "scan.bsdf")
