@@ -426,7 +426,7 @@ fn fit_lobe(
     // Start from the exact lobe (Beckmann, Blender's limits) or the skewed ellipsoid's slope-space axes.
     // An axis-aligned reference is symmetric about its own axes, and so is the likelihood over the cone of
     // the region: the nearest lobe keeps those axes, and only its two roughnesses are searched (a free
-    // angle would stop wherever the simplex's tolerance met the flat valley, a few 1e-4 rad off the axes).
+    // angle would stop wherever the simplex's tolerance met the flat valley, off the axes).
     let angle = start.map(|l| l.tangent_angle);
     let x0 = match start {
         Some(l) => vec![l.alpha_u.ln(), l.alpha_v.ln()],

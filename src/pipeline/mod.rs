@@ -221,34 +221,11 @@ impl Pipeline {
         ndf_ms: f64,
         optics: Option<Sighted>,
     ) -> Result<Outcome> {
-        let mut optics_ms = optics.as_ref().map(|o| o.ms);
-        let mut report = match (&self.options.render, self.options.model, optics) {
-            (Some(_), ModelChoice::Auto, Some(Sighted { mut optics, heights: Some(heights), .. })) => {
-                // Light sees a mirror ([`fit_answered`]'s first case): the haze and the ladder's one-lobe rungs
-                // are independent, so they run side by side.
-                let opts = self.options.fit_options();
-                let (report, haze_ms) = rayon::join(
-                    || {
-                        let t0 = Instant::now();
-                        crate::fit::fit_auto_one_lobe(&ndf, &opts).map(|mut r| {
-                            r.timings.fit_ms = ms(t0);
-                            r
-                        })
-                    },
-                    || {
-                        let t = Instant::now();
-                        crate::answer::add_haze(&mut optics, heights);
-                        ms(t)
-                    },
-                );
-                optics_ms = optics_ms.map(|m| m + haze_ms);
-                report.map(|mut r| {
-                    crate::answer::answer_mirror(&mut r, optics);
-                    r
-                })
-            }
-            (Some(render), ModelChoice::Auto, sighted) => {
-                fit_answered(&ndf, &self.options.fit_options(), render, &path.display().to_string(), sighted.map(|o| o.optics))
+        let optics_ms = optics.as_ref().map(|o| o.ms);
+        let mut report = match (&self.options.render, self.options.model) {
+            (Some(render), ModelChoice::Auto) => {
+                let (optics, heights) = optics.map_or((None, None), |o| (Some(o.optics), o.heights));
+                fit_answered(&ndf, &self.options.fit_options(), render, &path.display().to_string(), optics, heights)
             }
             _ => fit(&ndf, self.options.model, &self.options.fit_options()),
         }
@@ -256,7 +233,8 @@ impl Pipeline {
         report.input = Some(input);
         report.timings.read_ms = Some(read_ms);
         report.timings.ndf_ms = Some(ndf_ms);
-        report.timings.optics_ms = optics_ms;
+        // `fit_answered` times the haze it computed beside the ladder; the shares were timed here.
+        report.timings.optics_ms = optics_ms.map(|m| m + report.timings.optics_ms.unwrap_or(0.0));
         Ok(Outcome { ndf, fit: report })
     }
 }
@@ -346,19 +324,34 @@ pub fn fit(ndf: &EmpiricalNdf, model: ModelChoice, opts: &FitOptions) -> Result<
 }
 
 /// Stage 3 for `auto` with its answer: where light sees a mirror ([`crate::answer::answer_mirror`]), the
-/// ladder's one-lobe rungs by the NDF alone ([`crate::fit::fit_auto_one_lobe`]) and the mirror answer; elsewhere the render choice ([`fit_rendered`]), or the
-/// ladder by the NDF alone with a warning if the renders cannot be made. `optics` goes into the report.
+/// ladder's one-lobe rungs by the NDF alone ([`crate::fit::fit_auto_one_lobe`]) and the mirror answer;
+/// elsewhere the render choice ([`fit_rendered`]), or the
+/// ladder by the NDF alone with a warning if the renders cannot be made. `optics` goes into the report; with
+/// the scan's `heights` ([`crate::answer::optics_and_heights`]) a mirror's haze is computed beside the ladder
+/// (they are independent) and its time is the report's `timings.optics_ms`.
 pub fn fit_answered(
     ndf: &EmpiricalNdf,
     opts: &FitOptions,
     render: &RenderOptions,
     scan: &str,
-    optics: Option<Optics>,
+    mut optics: Option<Optics>,
+    heights: Option<crate::scan::Heightfield>,
 ) -> Result<FitReport> {
     let t0 = Instant::now();
     let mirror = optics.as_ref().is_some_and(|o| o.regime != crate::answer::Regime::Geometric.as_str());
+    let mut haze_ms = None;
     let mut report = if mirror {
-        crate::fit::fit_auto_one_lobe(ndf, opts)?
+        let (report, haze) = rayon::join(
+            || crate::fit::fit_auto_one_lobe(ndf, opts),
+            || {
+                let t = Instant::now();
+                let (o, h) = (optics.as_mut()?, heights?);
+                crate::answer::add_haze(o, h);
+                Some(ms(t))
+            },
+        );
+        haze_ms = haze;
+        report?
     } else {
         match fit_rendered(ndf, opts, render, scan) {
             Ok(r) => r,
@@ -377,6 +370,7 @@ pub fn fit_answered(
         crate::answer::answer_mirror(&mut report, o);
     }
     report.timings.fit_ms = ms(t0);
+    report.timings.optics_ms = haze_ms;
     Ok(report)
 }
 
