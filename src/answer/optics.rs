@@ -149,7 +149,7 @@ pub fn haze(scan: &Scan<'_>, coherence_m: &[f64]) -> Result<Haze> {
     let mut last = None;
     for &c in coherence_m {
         let opts = WaveOptions { wavelengths_nm: vec![MID_NM], incidences_deg: vec![0.0], coherence_m: Some(c), ..WaveOptions::default() };
-        match Diffraction::new(scan, &opts, None) {
+        match Diffraction::propagating(scan, &opts) {
             Ok(d) => return Ok(haze_of(&d.scattered(MID_NM, [0.0, 0.0, 1.0]))),
             Err(e) => last = Some(e),
         }

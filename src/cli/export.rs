@@ -122,6 +122,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                 scenes.join(", ")
             );
         }
+        // Renderers that load a table can have the haze the scan's heights predict instead of its lobe.
+        if answer.haze.is_some() && matches!(target, Target::Mitsuba | Target::Pbrt) {
+            let scan = json.pointer("/input/path").and_then(|v| v.as_str()).unwrap_or("SCAN");
+            eprintln!(
+                "ndfit: {path}: the haze as the scan's heights predict it (wave optics; not a lobe) is a table {} loads: `ndfit wave {scan} --to rgl --with-mirror -o HAZE.bsdf` writes it and prints this blend with it",
+                if target == Target::Mitsuba { "Mitsuba 3 (its spectral variants)" } else { "pbrt-v4" }
+            );
+        }
         let json = || {
             let mut v = out.to_json();
             if let (Some(e), Some(m)) = (&error, v.as_object_mut()) {

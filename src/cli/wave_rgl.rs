@@ -20,6 +20,12 @@ pub struct RglArgs {
     /// the 90-degree node computed at 89.9 degrees.
     #[command(flatten)]
     pub table: TableArgs,
+    /// Write the table as the haze of the whole material, the smooth conductor blended with it: its
+    /// reflectance at 1/w for a blend of weight w (the constant `ndfit export` writes for a mirror
+    /// answer), and the blend printed on standard output for Mitsuba 3 (`blendbsdf`, spectral variants;
+    /// a GGX conductor of alpha 1e-4 stands for the mirror) and pbrt-v4 (`mix`).
+    #[arg(long)]
+    pub with_mirror: bool,
 }
 
 /// Run `ndfit wave --to rgl`.
@@ -45,12 +51,17 @@ pub fn run(a: &super::wave::Args) -> anyhow::Result<ExitCode> {
     let name = a.scan.scan.file_name().map_or(path.clone(), |n| n.to_string_lossy().into_owned());
     let bar = super::wave::patch_bar(a.quiet);
     let progress = |done: usize, total: usize| super::wave::show(&bar, done, total);
-    let t = wave_rgl(&scan, &opts, &format!("the scan {name}"), Some(&progress)).map_err(|e| anyhow!("{path}: {}", e.message()))?;
+    let mut t = wave_rgl(&scan, &opts, &format!("the scan {name}"), Some(&progress)).map_err(|e| anyhow!("{path}: {}", e.message()))?;
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
+    let blend = if a.rgl.with_mirror { Some(t.blend_with_mirror().map_err(|e| anyhow!("{path}: {}", e.message()))?) } else { None };
     let file = out.file_name().map_or(out.display().to_string(), |n| n.to_string_lossy().into_owned());
-    let json = serde_json::to_string_pretty(&t.sidecar(&file))? + "\n";
+    let mut sidecar_json = t.sidecar(&file);
+    if let (Some(b), Some(o)) = (&blend, sidecar_json.as_object_mut()) {
+        o.insert("blend".into(), serde_json::to_value(b)?);
+    }
+    let json = serde_json::to_string_pretty(&sidecar_json)? + "\n";
     let bytes = t.table.tensor.to_bytes();
     // Both or neither: the report first, withdrawn if the table cannot be written.
     ndfit::io::write_atomic(&sidecar, |w| w.write_all(json.as_bytes()).map_err(ndfit::Error::io))?;
@@ -84,7 +95,68 @@ pub fn run(a: &super::wave::Args) -> anyhow::Result<ExitCode> {
             eprintln!("ndfit: wave: note: {w}");
         }
     }
+    if let Some(b) = &blend {
+        print!("{}", blend_snippets(&name, &out.display().to_string(), b, opts.wave.material));
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The roughness of the GGX lobe that stands for the mirror in Mitsuba's blend: Mitsuba 3.9.1's path tracer
+/// over-counts a `blendbsdf` of the delta `conductor` and a `measured` BSDF (2.1x at weight 0.5), not one of
+/// a `roughconductor` (data_formats/rgl.md, "Blended with the mirror"); at 1e-4 the light's image is as sharp.
+const MITSUBA_MIRROR_ALPHA: f64 = 1e-4;
+
+/// The smooth conductor blended with the table at `file` (`--with-mirror`), for Mitsuba 3 and pbrt-v4.
+fn blend_snippets(scan: &str, file: &str, b: &ndfit::wave::MirrorBlend, material: ndfit::export::rgl::Material) -> String {
+    use ndfit::export::rgl::Material;
+    let w = b.weight;
+    let head = format!(
+        "the smooth conductor and the wave optics' haze ({file}), blended: weight w = {w:.6}, the haze's share (the cosine-weighted \
+         hemispherical mean of 1 - s, s(theta) = exp(-b cos^2 theta), b = {:.6}, fitted at 550 nm); the table's reflectance is written at 1/w",
+        b.b
+    );
+    let mitsuba_material = match material {
+        Material::None => String::new(),
+        m => format!("\n        <string name=\"material\" value=\"{}\"/>", m.as_str()),
+    };
+    let alpha = MITSUBA_MIRROR_ALPHA;
+    let (pbrt_eta, pbrt_note) = match material {
+        Material::Al | Material::Ag | Material::Au | Material::Cu => {
+            let m = material.as_str();
+            (format!("\n    \"spectrum eta\" [ \"metal-{m}-eta\" ]\n    \"spectrum k\" [ \"metal-{m}-k\" ]"), String::new())
+        }
+        m => (
+            String::new(),
+            format!(
+                "\n# pbrt-v4 has no named spectra for the conductor {} of the table: its default conductor is written; give --material Al, Ag, Au or Cu for one both parts share",
+                m.as_str()
+            ),
+        ),
+    };
+    format!(
+        "<!-- ndfit wave of {scan}: {head}. Mitsuba 3's spectral variants (the table is spectral); the mirror is a GGX lobe of alpha {alpha}: Mitsuba's path tracer over-counts a blend of the delta conductor and a measured BSDF. -->
+<bsdf type=\"blendbsdf\">
+    <float name=\"weight\" value=\"{w}\"/>
+    <bsdf type=\"roughconductor\">
+        <string name=\"distribution\" value=\"ggx\"/>
+        <float name=\"alpha\" value=\"{alpha}\"/>{mitsuba_material}
+    </bsdf>
+    <bsdf type=\"measured\">
+        <string name=\"filename\" value=\"{file}\"/>
+    </bsdf>
+</bsdf>
+# ndfit wave of {scan}: {head}. pbrt-v4: amount = the probability of the second material, the haze.{pbrt_note}
+MakeNamedMaterial \"ndfit_mirror\"
+    \"string type\" [ \"conductor\" ]
+    \"float roughness\" [ 0 ]{pbrt_eta}
+MakeNamedMaterial \"ndfit_haze\"
+    \"string type\" [ \"measured\" ]
+    \"string filename\" [ \"{file}\" ]
+Material \"mix\"
+    \"string materials\" [ \"ndfit_mirror\" \"ndfit_haze\" ]
+    \"float amount\" [ {w} ]
+"
+    )
 }
 
 /// One line per wavelength: the mirror share (not in the table) at normal incidence, and at the table's

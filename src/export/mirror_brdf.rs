@@ -23,6 +23,8 @@ enum Diffuse {
     Haze(Box<AnalyticBrdf>),
     /// The diffuse wave BRDF's table, as it is (it holds its own energy).
     Wave(Box<Measured>),
+    /// A table written for a blend (`ndfit wave --to rgl --with-mirror`), at its weight `w`.
+    Blend(Box<Measured>, f64),
     /// The wave prediction joined by incidence with the geometric table: `g(theta_i)` of the wave's diffuse
     /// table and mirror, `1 - g` of the geometric table.
     Joined { wave: Box<Measured>, geometric: Box<Measured>, ramp: [f64; 2] },
@@ -57,7 +59,9 @@ impl MirrorBrdf {
     /// from `hi`): `f = g (s F delta + f_wave) + (1 - g) f_geometric`, continuous in the angle.
     pub fn joined(wave: &TensorFile, geometric: &TensorFile, material: Material, ramp: [f64; 2]) -> Result<MirrorBrdf> {
         let MirrorBrdf { shares, diffuse, .. } = MirrorBrdf::wave(wave, material)?;
-        let Diffuse::Wave(w) = diffuse else { unreachable!("MirrorBrdf::wave holds the wave table") };
+        let Diffuse::Wave(w) = diffuse else {
+            return Err(Error::invalid("a table written for a blend with the mirror (--with-mirror) is not the wave prediction"));
+        };
         if !(ramp[0] < ramp[1]) {
             return Err(Error::invalid(format!("the join's ramp {ramp:?} must rise")));
         }
@@ -85,7 +89,9 @@ impl MirrorBrdf {
 
     /// The wave prediction of an `ndfit wave --to rgl` table `t`: its diffuse table and, as a mirror of
     /// the conductor `material` (the table's), the shares of its `mirror_share` field (`[wavelengths,
-    /// theta_i]`). A table without that field is refused.
+    /// theta_i]`). A table without that field is refused. A table written for a blend (its `blend_weight`
+    /// field `w`, `--with-mirror`) is drawn as the renderers' blends draw it: `1 - w` of the mirror at every
+    /// angle and wavelength, `w` of the table.
     pub fn wave(t: &TensorFile, material: Material) -> Result<MirrorBrdf> {
         let bad = |m: &str| Error::new(ErrorKind::Corrupt, format!("not a wave table: {m}"));
         let values = |name: &str| t.field(name).and_then(|f| f.as_f32()).ok_or_else(|| bad(&format!("no {name} field")));
@@ -107,8 +113,15 @@ impl MirrorBrdf {
                 weight: (w as f64).clamp(0.0, 1.0),
             })
             .collect();
-        let diffuse = Diffuse::Wave(Box::new(Measured::new(t)?));
-        Ok(MirrorBrdf { shares: RGB_NM.map(|nm| at_wavelength(&specular, nm)), diffuse, material })
+        let table = Box::new(Measured::new(t)?);
+        if let Some(w) = t.field("blend_weight").and_then(|f| f.as_f32()).and_then(|v| v.first().copied()) {
+            let w = w as f64;
+            if !(w > 0.0 && w <= 1.0) {
+                return Err(bad(&format!("blend_weight {w} is not in (0, 1]")));
+            }
+            return Ok(MirrorBrdf { shares: RGB_NM.map(|_| vec![(0.0, 1.0 - w)]), diffuse: Diffuse::Blend(table, w), material });
+        }
+        Ok(MirrorBrdf { shares: RGB_NM.map(|nm| at_wavelength(&specular, nm)), diffuse: Diffuse::Wave(table), material })
     }
 
     /// The mirror share of channel `c` at incidence `theta_deg`.
@@ -167,6 +180,7 @@ impl Brdf for MirrorBrdf {
                 [0, 1, 2].map(|c| (1.0 - s[c]) * f[c])
             }
             Diffuse::Wave(table) => table.eval(wi, wo),
+            Diffuse::Blend(table, w) => table.eval(wi, wo).map(|v| v * w),
             Diffuse::Joined { wave, geometric, .. } => {
                 let (g, w, t) = (self.wave_weight(wi), wave.eval(wi, wo), geometric.eval(wi, wo));
                 [0, 1, 2].map(|c| g[c] * w[c] + (1.0 - g[c]) * t[c])
@@ -183,6 +197,10 @@ impl Brdf for MirrorBrdf {
                 out.iter_mut().for_each(|o| (0..3).for_each(|c| o[c] *= 1.0 - s[c]));
             }
             Diffuse::Wave(table) => table.eval_many(wi, wos, out),
+            Diffuse::Blend(table, w) => {
+                table.eval_many(wi, wos, out);
+                out.iter_mut().for_each(|o| o.iter_mut().for_each(|v| *v *= w));
+            }
             Diffuse::Joined { .. } => out.iter_mut().zip(wos).for_each(|(o, &wo)| *o = self.eval(wi, wo)),
         }
     }

@@ -106,6 +106,7 @@ pub fn mirror_shares<S: BandSource<T = f64>>(src: &S, wavelengths_nm: &[f64], in
     let bands: Vec<[f64; 2]> = wavelengths_nm.iter().map(|&l| [l * 1e-9 / (2.0 * g.dx), l * 1e-9 / (2.0 * g.dy)]).collect();
     let (wx, wy) = (hann(px), hann(py));
     let zero = || Acc { coherent: vec![0.0; vz.len()], beyond: vec![0.0; bands.len()], ..Acc::default() };
+    let few = rows < rayon::current_num_threads();
     let parts: Vec<Acc> = (0..rows)
         .into_par_iter()
         .map_init(
@@ -126,8 +127,13 @@ pub fn mirror_shares<S: BandSource<T = f64>>(src: &S, wavelengths_nm: &[f64], in
                     acc.weight += c.s1;
                     acc.tilt2 += c.s1 * c.tan2;
                     acc.floor += u.iter().map(|x| x * x).sum::<f64>() / c.s1;
-                    for (a, &v) in acc.coherent.iter_mut().zip(&vz) {
-                        let (cr, ci) = mean_field(r, u, v);
+                    // Too few rows of patches to share out: the levels side by side (each sum as it is).
+                    let fields: Vec<(f64, f64)> = if few {
+                        vz.par_iter().map(|&v| mean_field(r, u, v)).collect()
+                    } else {
+                        vz.iter().map(|&v| mean_field(r, u, v)).collect()
+                    };
+                    for (a, (cr, ci)) in acc.coherent.iter_mut().zip(fields) {
                         *a += (cr * cr + ci * ci) / c.s1;
                     }
                     slopes(r, u, px, py, [g.dx, g.dy], &bands, &mut acc);

@@ -99,7 +99,8 @@ struct Fft2 {
     row: Arc<dyn Fft<f64>>,
     col: Arc<dyn Fft<f64>>,
     buf: Vec<Complex<f64>>,
-    tr: Vec<Complex<f64>>,
+    /// One column.
+    col_buf: Vec<Complex<f64>>,
     scratch: Vec<Complex<f64>>,
 }
 
@@ -111,7 +112,7 @@ impl Fft2 {
         let col = planner.plan_fft_inverse(py);
         let s = row.get_inplace_scratch_len().max(col.get_inplace_scratch_len());
         let n = px * py;
-        Fft2 { row, col, buf: vec![Complex::default(); n], tr: vec![Complex::default(); n], scratch: vec![Complex::default(); s] }
+        Fft2 { row, col, buf: vec![Complex::default(); n], col_buf: vec![Complex::default(); py], scratch: vec![Complex::default(); s] }
     }
 }
 
@@ -129,9 +130,16 @@ impl Patch {
 }
 
 /// Sum every patch of `scan` at every level (rayon over chunks of patches, summed in order; a scan of one
-/// chunk, too few patches to share out, has its levels side by side instead).
-pub(crate) fn accumulate(scan: &Scan<'_>, tiling: Tiling, levels: &Levels, progress: Option<&(dyn Fn(usize, usize) + Sync)>) -> Sums {
-    accumulate_as(scan, tiling, levels, progress, tiling.cols * tiling.rows <= CHUNK)
+/// chunk, too few patches to share out, has its levels side by side instead). Only the x frequencies
+/// `columns` are transformed along y and summed; the other bins stay 0.
+pub(crate) fn accumulate(
+    scan: &Scan<'_>,
+    tiling: Tiling,
+    levels: &Levels,
+    columns: &[usize],
+    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+) -> Sums {
+    accumulate_as(scan, tiling, levels, columns, progress, tiling.cols * tiling.rows <= CHUNK)
 }
 
 /// [`accumulate`], the levels side by side when `by_levels` (a scan of one chunk), else the chunks.
@@ -139,6 +147,7 @@ fn accumulate_as(
     scan: &Scan<'_>,
     tiling: Tiling,
     levels: &Levels,
+    columns: &[usize],
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
     by_levels: bool,
 ) -> Sums {
@@ -150,7 +159,7 @@ fn accumulate_as(
     if by_levels && chunks.len() == 1 {
         // The chunk's sums are the total's: every sum is of non-negative terms, so adding them to zero
         // changes no bit.
-        let part = by_level(scan, tiling, levels, &wx, &wy);
+        let part = by_level(scan, tiling, levels, columns, &wx, &wy);
         if let Some(f) = progress {
             f(n_patches, n_patches);
         }
@@ -166,7 +175,7 @@ fn accumulate_as(
                 for p in c * CHUNK..((c + 1) * CHUNK).min(n_patches) {
                     if let Some(s1) = centre_patch(scan, tiling, p, &wx, &wy, &mut centred, &mut sums) {
                         for (l, &vz) in levels.vz.iter().enumerate() {
-                            level(&mut fft, &centred, s1, vz, &mut sums.coherent[l], &mut sums.spectra[l], tiling);
+                            level(&mut fft, &centred, s1, vz, &mut sums.coherent[l], &mut sums.spectra[l], tiling, columns);
                         }
                     }
                 }
@@ -185,7 +194,7 @@ fn accumulate_as(
 
 /// The sums of every patch of a scan of one chunk, each level's in its own task: a level's sums take the
 /// same values in the same patch order as in [`accumulate`]'s chunks, so the result is theirs to the bit.
-fn by_level(scan: &Scan<'_>, t: Tiling, levels: &Levels, wx: &[f64], wy: &[f64]) -> Sums {
+fn by_level(scan: &Scan<'_>, t: Tiling, levels: &Levels, columns: &[usize], wx: &[f64], wy: &[f64]) -> Sums {
     let bins = t.px * t.py;
     let mut sums = Sums::zero(0, bins);
     let mut patches = Vec::new();
@@ -206,7 +215,7 @@ fn by_level(scan: &Scan<'_>, t: Tiling, levels: &Levels, wx: &[f64], wy: &[f64])
                 .map(|l| {
                     let (mut coherent, mut spectrum) = (0.0, vec![0.0; bins]);
                     for (c, s1) in &patches {
-                        level(&mut fft, c, *s1, levels.vz[l], &mut coherent, &mut spectrum, t);
+                        level(&mut fft, c, *s1, levels.vz[l], &mut coherent, &mut spectrum, t, columns);
                     }
                     (l, coherent, spectrum)
                 })
@@ -237,8 +246,10 @@ fn centre_patch(scan: &Scan<'_>, t: Tiling, p: usize, wx: &[f64], wy: &[f64], c:
     Some(k.s1)
 }
 
-/// Add one centred patch (weight sum `s1`) at level `vz` to that level's `coherent` sum and `spectrum`.
-fn level(f: &mut Fft2, c: &Patch, s1: f64, vz: f64, coherent: &mut f64, spectrum: &mut [f64], t: Tiling) {
+/// Add one centred patch (weight sum `s1`) at level `vz` to that level's `coherent` sum and, at the x
+/// frequencies `columns`, `spectrum`.
+#[allow(clippy::too_many_arguments)]
+fn level(f: &mut Fft2, c: &Patch, s1: f64, vz: f64, coherent: &mut f64, spectrum: &mut [f64], t: Tiling, columns: &[usize]) {
     let (px, py) = (t.px, t.py);
     let n = px * py;
     // The mean field chi and the diffuse field g.
@@ -262,16 +273,16 @@ fn level(f: &mut Fft2, c: &Patch, s1: f64, vz: f64, coherent: &mut f64, spectrum
             f.buf[k] = (f.buf[k] - chi) * w;
         }
     }
-    // Rows, then the transpose's rows (the columns).
+    // The rows, then each wanted column.
     f.row.process_with_scratch(&mut f.buf, &mut f.scratch);
-    for i in 0..py {
-        for j in 0..px {
-            f.tr[j * py + i] = f.buf[i * px + j];
+    for &j in columns {
+        for (i, v) in f.col_buf.iter_mut().enumerate() {
+            *v = f.buf[i * px + j];
         }
-    }
-    f.col.process_with_scratch(&mut f.tr, &mut f.scratch);
-    for (a, v) in spectrum.iter_mut().zip(&f.tr) {
-        *a += v.norm_sqr();
+        f.col.process_with_scratch(&mut f.col_buf, &mut f.scratch);
+        for (a, v) in spectrum[j * py..(j + 1) * py].iter_mut().zip(&f.col_buf) {
+            *a += v.norm_sqr();
+        }
     }
 }
 
@@ -378,11 +389,42 @@ mod tests {
         assert!(levels.len() > 4);
         for (px, py) in [(64, 48), (21, 48), (32, 24)] {
             let t = Tiling::new(nx, ny, px, py);
-            let a = accumulate_as(&scan, t, &levels, None, true);
-            let b = accumulate_as(&scan, t, &levels, None, false);
+            let all: Vec<usize> = (0..px).collect();
+            let a = accumulate_as(&scan, t, &levels, &all, None, true);
+            let b = accumulate_as(&scan, t, &levels, &all, None, false);
             assert!(a.used + a.skipped == t.cols * t.rows && a.used > 0, "{px} x {py}: {} used", a.used);
             assert_eq!(a.skipped, usize::from(t.cols * t.rows > 1), "{px} x {py}");
             assert_eq!(a, b, "{px} x {py}");
+        }
+    }
+
+    /// The sums of some x frequencies alone are the whole transform's at those frequencies, to the bit,
+    /// and 0 elsewhere; every other sum is unchanged.
+    #[test]
+    fn a_few_columns_sum_as_the_whole_transform_does_there() {
+        let (nx, ny) = (60, 40);
+        let z: Vec<f64> = (0..nx * ny).map(|k| 2e-7 * ((k % nx) as f64 * 0.53).sin() + 1e-7 * ((k / nx) as f64 * 0.29).cos()).collect();
+        let scan = Scan::new(nx, ny, 1e-7, 1e-7, z).expect("valid");
+        let levels = Levels::covering(&[(1.1e7, 2.3e7)], 1.1);
+        for (px, py) in [(60, 40), (20, 20)] {
+            let t = Tiling::new(nx, ny, px, py);
+            let all: Vec<usize> = (0..px).collect();
+            let some = [0, 1, 2, 7, px - 2, px - 1];
+            for by_levels in [true, false] {
+                let whole = accumulate_as(&scan, t, &levels, &all, None, by_levels);
+                let part = accumulate_as(&scan, t, &levels, &some, None, by_levels);
+                assert_eq!((part.coherent.clone(), part.weight, part.used), (whole.coherent.clone(), whole.weight, whole.used));
+                for (w, p) in whole.spectra.iter().zip(&part.spectra) {
+                    for kx in 0..px {
+                        let (w, p) = (&w[kx * py..(kx + 1) * py], &p[kx * py..(kx + 1) * py]);
+                        if some.contains(&kx) {
+                            assert!(w.iter().zip(p).all(|(a, b)| a.to_bits() == b.to_bits()), "{px} x {py}, column {kx}");
+                        } else {
+                            assert!(p.iter().all(|&v| v == 0.0) && w.iter().any(|&v| v > 0.0), "{px} x {py}, column {kx}");
+                        }
+                    }
+                }
+            }
         }
     }
 }

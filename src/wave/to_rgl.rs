@@ -65,6 +65,7 @@ use rayon::prelude::*;
 use super::{direction, wave, Diffraction, WaveOptions, WaveRecord, WaveReport, MAX_INCIDENCE_DEG};
 use crate::error::Result;
 use crate::export::rgl::{self, u2dir, u2theta, Field, Flavour, Measured, NdfGrids, RglOptions, SliceWarp, Table};
+use crate::export::{Share, ShareForm, SHARE_WAVELENGTH_NM};
 use crate::scan::Scan;
 
 /// Nodes per axis of the `ndf` grid unless `--ndf-res` says otherwise: the largest the format takes here,
@@ -328,6 +329,66 @@ pub fn wave_rgl(
     table.tensor.fields.push(Field::f32("wave_diffuse", &[nl, nt], &diffuse));
     table.tensor.fields.push(Field::f32("table_albedo", &[nl, nt], &table_albedo));
     Ok(WaveTable { table, report, table_albedo, wave_diffuse: diffuse, warp_ndf })
+}
+
+/// The table as the haze of a blend with the smooth conductor, in the form Mitsuba 3's `blendbsdf` and
+/// pbrt-v4's `MixMaterial` take: `(1 - w) f_mirror + w (f_table / w)`, the table's reflectance written at
+/// `1 / w`. Neither blend follows the angle or the wavelength: `w` is the constant `ndfit export` writes
+/// for a mirror answer, the cosine-weighted hemispherical mean of `1 - s` of the mirror share's form at
+/// 550 nm ([`ShareForm`]), fitted here to the table's records.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct MirrorBlend {
+    /// `w`, the haze's share of the blend.
+    pub weight: f64,
+    /// `1 / w`, the factor on the table's reflectance.
+    pub scale: f64,
+    /// The share's form it came from: `s(theta) = exp(-b cos^2 theta)`.
+    pub b: f64,
+}
+
+/// Smallest blend weight written: below it the haze is a millionth of the light and the table's
+/// reflectance would be scaled past what `f32` holds with room.
+const MIN_BLEND_WEIGHT: f64 = 1e-6;
+
+impl WaveTable {
+    /// Make the table the haze of a blend with the smooth conductor ([`MirrorBlend`]): its `spectra`
+    /// scaled by `1 / w`, a `blend_weight` field and a sentence in its `description`. The mirror too faint
+    /// to give its form (every share below 0.01) blends at `w = 1`; a mirror with no haze is an error.
+    pub fn blend_with_mirror(&mut self) -> Result<MirrorBlend> {
+        let shares: Vec<Share> = self
+            .report
+            .records
+            .iter()
+            .map(|r| Share { theta_deg: r.theta_deg, wavelength_nm: r.wavelength_nm, weight: r.specular })
+            .collect();
+        let (weight, b) = match ShareForm::fit(&shares, SHARE_WAVELENGTH_NM) {
+            Ok(f) => (f.mean_haze(), f.b),
+            // No mirror to blend: the table is the whole material.
+            Err(_) => (1.0, f64::INFINITY),
+        };
+        if !(weight >= MIN_BLEND_WEIGHT) {
+            return Err(crate::Error::invalid(format!(
+                "the haze's share of a blend is {weight:.2e} (the mirror share's form, b = {b:.3e}): the smooth conductor alone is the material"
+            )));
+        }
+        let scale = 1.0 / weight;
+        for f in self.table.tensor.fields.iter_mut() {
+            if f.name == "spectra" || f.name == "rgb" {
+                let v: Vec<f64> = f.as_f32().unwrap_or_default().iter().map(|&x| x as f64 * scale).collect();
+                let shape: Vec<usize> = f.shape.iter().map(|&n| n as usize).collect();
+                *f = Field::f32(&f.name.clone(), &shape, &v);
+            }
+            if f.name == "description" {
+                let text = format!(
+                    "{}; its reflectance written at {scale:.6} times the diffuse BRDF, for a blend that gives it weight {weight:.6} and the smooth conductor the rest",
+                    String::from_utf8_lossy(&f.data)
+                );
+                *f = Field::u8("description", text.as_bytes());
+            }
+        }
+        self.table.tensor.fields.push(Field::f32("blend_weight", &[1], &[weight]));
+        Ok(MirrorBlend { weight, scale, b })
+    }
 }
 
 /// Per record, its diffuse part with the conductor's Fresnel factor: `albedo - F(cos_i) specular`.

@@ -285,3 +285,139 @@ fn the_command_writes_the_table_and_its_report_or_nothing() {
         assert!(!out.exists() && !sidecar.exists(), "{args:?} wrote something");
     }
 }
+
+/// `--with-mirror` (`WaveTable::blend_with_mirror`): the table as the haze of a blend with the smooth
+/// conductor, `(1 - w) mirror + w (table / w)`. Held to: `w` the cosine-weighted hemispherical mean of
+/// `1 - exp(-b cos^2 theta)` by quadrature, `b` the least-squares optimum of the records' `ln s` at the
+/// wavelength nearest 550 nm (no 1% step of it fits better); the renderer's reading of the blended table
+/// times `w` is the plain table's, to the `f32` arithmetic of its reading (1e-5); the file says it.
+#[test]
+fn the_blended_table_is_the_plain_table_at_one_over_its_weight() {
+    let hf = smooth();
+    let mut opts = options();
+    opts.rgl = RglOptions { theta_i: 6, phi_i: 5, warp_res: 16, ndf_res: Some(64), ..opts.rgl };
+    let plain = wave_rgl(&hf, &opts, "s", None).unwrap();
+    let mut blended = plain.clone();
+    let b = blended.blend_with_mirror().unwrap();
+    // The form's b: least squares of -ln s against cos^2 theta (through 0) at 549 nm, shares >= 0.01.
+    let pts: Vec<(f64, f64)> = plain
+        .report
+        .records
+        .iter()
+        .filter(|r| r.wavelength_nm == 549.0 && r.specular >= 0.01)
+        .map(|r| (r.theta_deg.to_radians().cos().powi(2), -r.specular.ln()))
+        .collect();
+    assert!(pts.len() >= 4, "{pts:?}");
+    let sq = |b: f64| pts.iter().map(|(x, y)| (y - b * x).powi(2)).sum::<f64>();
+    assert!(sq(b.b) < sq(b.b * 1.01) && sq(b.b) < sq(b.b * 0.99), "b = {}", b.b);
+    let n = 100_000;
+    let mean: f64 = (0..n).map(|k| (k as f64 + 0.5) / n as f64).map(|mu| (1.0 - (-b.b * mu * mu).exp()) * 2.0 * mu / n as f64).sum();
+    assert!((b.weight - mean).abs() < 1e-8 && (b.scale * b.weight - 1.0).abs() < 1e-12, "{b:?} against {mean}");
+    // The surface's mirror share is 0.54 at normal incidence: a haze of a few tenths.
+    assert!(b.weight > 0.1 && b.weight < 0.9, "{b:?}");
+    let (p, q) = (Measured::new(&plain.table.tensor).unwrap(), Measured::new(&blended.table.tensor).unwrap());
+    let mut compared = 0;
+    for (ti, pi) in [(0.0, 0.0), (20.0, 40.0), (55.0, 200.0), (80.0, 300.0)] {
+        let wi = f32v(direction(ti, pi));
+        for (to, po) in [(5.0, 180.0), (25.0, 200.0), (50.0, 10.0), (70.0, 120.0)] {
+            let wo = f32v(direction(to, po));
+            let (a, c) = (p.eval_cos_at(wi, wo, LAMBDAS.map(|l| l as f32)), q.eval_cos_at(wi, wo, LAMBDAS.map(|l| l as f32)));
+            for k in 0..3 {
+                let want = a[k] as f64;
+                assert!(
+                    (c[k] as f64 * b.weight - want).abs() <= 1e-5 * want.abs() + 1e-30,
+                    "{ti}/{pi} -> {to}/{po}: {} times w {} against {want}",
+                    c[k],
+                    b.weight
+                );
+                compared += usize::from(want > 0.0);
+            }
+        }
+    }
+    assert!(compared > 20, "{compared} positive readings");
+    // ndfit's renderer draws the blended table as the renderers' blends do: the table at w (the plain
+    // table's values) and the mirror at 1 - w, whatever the angle.
+    use ndfit::render::Brdf;
+    let (pw, bw) = (ndfit::export::MirrorBrdf::wave(&plain.table.tensor, Material::None).unwrap(), {
+        ndfit::export::MirrorBrdf::wave(&blended.table.tensor, Material::None).unwrap()
+    });
+    for t in [0.0, 35.0, 70.0] {
+        let wi = nalgebra::Vector3::from(direction(t, 30.0));
+        let wo = nalgebra::Vector3::from(direction(t * 0.5 + 10.0, 200.0));
+        let (x, y) = (pw.eval(wi, wo), bw.eval(wi, wo));
+        assert!((0..3).all(|c| (x[c] - y[c]).abs() <= 1e-5 * x[c].abs()), "{t} deg: {x:?} against {y:?}");
+        assert!(bw.mirror(wi).iter().all(|&m| (m - (1.0 - b.weight)).abs() < 1e-7), "{:?}", bw.mirror(wi));
+    }
+    let t = &blended.table.tensor;
+    assert_eq!(t.field("blend_weight").unwrap().as_f32().unwrap(), vec![b.weight as f32]);
+    let description = String::from_utf8_lossy(&t.field("description").unwrap().data).into_owned();
+    assert!(description.contains("for a blend that gives it weight"), "{description}");
+}
+
+/// `ndfit wave --to rgl --with-mirror` writes the blended table, its weight in the report, and prints
+/// Mitsuba 3's `blendbsdf` (weight w, a GGX conductor of alpha 1e-4 for the mirror, `measured` of the file)
+/// and pbrt-v4's `mix` (amount w).
+#[test]
+fn the_command_prints_the_blend_that_loads_the_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("s.x3p");
+    ndfit::io::write_x3p(&scan, &smooth()).unwrap();
+    let out = dir.path().join("haze.bsdf");
+    let args = ["wave", scan.to_str().unwrap(), "--to", "rgl", "--with-mirror", "-o", out.to_str().unwrap(), "--material", "Al"];
+    let small = ["--coherence", "16", "--theta-i", "6", "--phi-i", "5", "--warp-res", "16", "--ndf-res", "64"];
+    let o = std::process::Command::new(crate::common::ndfit_bin()).args([&args[..], &small].concat()).output().unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert_eq!(o.status.code(), Some(0), "{stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("haze.bsdf.json")).unwrap()).unwrap();
+    let w = v["blend"]["weight"].as_f64().unwrap();
+    assert!(w > 0.0 && w < 1.0 && (v["blend"]["scale"].as_f64().unwrap() * w - 1.0).abs() < 1e-12, "{}", v["blend"]);
+    let t = TensorFile::parse(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!(t.field("blend_weight").unwrap().as_f32().unwrap(), vec![w as f32]);
+    // Mitsuba: the XML element, parsed.
+    let xml = &stdout[stdout.find("<bsdf").unwrap()..stdout.rfind("</bsdf>").unwrap() + "</bsdf>".len()];
+    let mut reader = quick_xml::Reader::from_str(xml);
+    let (mut types, mut weight, mut filename, mut material, mut alpha) = (Vec::new(), None, None, None, None);
+    loop {
+        match reader.read_event().unwrap() {
+            quick_xml::events::Event::Eof => break,
+            quick_xml::events::Event::Start(e) | quick_xml::events::Event::Empty(e) => {
+                let attr = |k: &str| {
+                    e.attributes()
+                        .flatten()
+                        .find(|a| a.key.as_ref() == k)
+                        .map(|a| a.normalized_value(quick_xml::XmlVersion::Implicit1_0).unwrap().into_owned())
+                };
+                match (e.name().as_ref(), attr("name").as_deref()) {
+                    ("bsdf", _) => types.push(attr("type").unwrap()),
+                    ("float", Some("weight")) => weight = attr("value"),
+                    ("string", Some("filename")) => filename = attr("value"),
+                    ("string", Some("material")) => material = attr("value"),
+                    ("float", Some("alpha")) => alpha = attr("value"),
+                    _ => {}
+                }
+            }
+            _ => {}
+        }
+    }
+    // The mirror as a GGX lobe of alpha 1e-4 (Mitsuba over-counts a blend of its delta conductor and `measured`).
+    assert_eq!(types, ["blendbsdf", "roughconductor", "measured"], "{xml}");
+    assert_eq!(alpha.unwrap().parse::<f64>().unwrap(), 1e-4);
+    assert_eq!(weight.unwrap().parse::<f64>().unwrap(), w);
+    assert_eq!(filename.as_deref(), out.to_str());
+    assert_eq!(material.as_deref(), Some("Al"));
+    // pbrt-v4: the mix of the two named materials, amount w, the conductor with aluminium's spectra.
+    let pbrt = &stdout[stdout.find("MakeNamedMaterial").unwrap()..];
+    assert!(pbrt.contains("\"metal-Al-eta\"") && pbrt.contains("\"string type\" [ \"measured\" ]"), "{pbrt}");
+    let amount = pbrt.split("\"float amount\" [ ").nth(1).unwrap().split(' ').next().unwrap();
+    assert_eq!(amount.parse::<f64>().unwrap(), w);
+    // A flat scan has no haze to blend: one line naming the file, exit 2, nothing written.
+    let flat = dir.path().join("flat.x3p");
+    ndfit::io::write_x3p(&flat, &Heightfield::new(128, 128, 2.5e-7, 2.5e-7, vec![0.0; 128 * 128]).unwrap()).unwrap();
+    let none = dir.path().join("none.bsdf");
+    let args = ["wave", flat.to_str().unwrap(), "--to", "rgl", "--with-mirror", "-o", none.to_str().unwrap()];
+    let o = std::process::Command::new(crate::common::ndfit_bin()).args([&args[..], &small].concat()).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.trim_end().lines().count() == 1 && err.contains("flat.x3p") && err.contains("the smooth conductor alone"), "{err}");
+    assert!(!none.exists() && !dir.path().join("none.bsdf.json").exists());
+}
