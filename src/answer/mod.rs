@@ -14,6 +14,6 @@ mod optics;
 
 pub use blend::{blend_render_error, BlendError};
 pub use optics::{
-    add_haze, answer_mirror, haze, optics, optics_and_heights, optics_with_haze, Regime, GEOMETRIC_SHARE, HAZE_VISIBLE, MIRROR_SHARE,
-    TILT_RATIO, UNRESOLVED,
+    add_haze, answer_mirror, haze, haze_visible, optics, optics_and_heights, optics_with_haze, Regime, GEOMETRIC_SHARE, HAZE_VISIBLE,
+    MIRROR_SHARE, TILT_RATIO, UNRESOLVED,
 };

@@ -33,9 +33,40 @@ pub const GEOMETRIC_SHARE: f64 = 0.05;
 pub const UNRESOLVED: f64 = 0.2;
 /// Patches tilted by more than this share of the slopes' RMS angle (as tangents) are facets.
 pub const TILT_RATIO: f64 = 0.5;
-/// A haze carrying less light than this at normal incidence and 550 nm is left out (`mirror` alone): a
-/// smooth conductor with 0.3% of its light in a haze is told from a pure mirror (docs/ANSWER.md).
-pub const HAZE_VISIBLE: f64 = 1e-3;
+/// `(alpha, share)`: a GGX haze of roughness `alpha` carrying at least `share` of a smooth conductor's light
+/// is seen in the choice's broad scene: the mirror with it and the mirror alone score the render tolerance
+/// apart (`examples/haze_visibility.rs`; docs/ANSWER.md, "When the haze is left out").
+pub const HAZE_VISIBLE: [(f64, f64); 11] = [
+    (0.003, 2.41e-2),
+    (0.005, 9.07e-3),
+    (0.01, 2.62e-3),
+    (0.02, 8.71e-4),
+    (0.03, 4.88e-4),
+    (0.05, 2.49e-4),
+    (0.1, 1.09e-4),
+    (0.2, 5.41e-5),
+    (0.4, 3.40e-5),
+    (0.7, 3.17e-5),
+    (1.0, 3.77e-5),
+];
+
+/// The share from which a GGX haze of roughness `alpha` is seen ([`HAZE_VISIBLE`], interpolated in
+/// `ln alpha` and `ln share`, held beyond its ends).
+pub fn haze_visible(alpha: f64) -> f64 {
+    let t = &HAZE_VISIBLE;
+    // A NaN roughness is no haze anyone sees: the largest share of the table.
+    if alpha.is_nan() || alpha <= t[0].0 {
+        return t[0].1;
+    }
+    let last = t[t.len() - 1];
+    if alpha >= last.0 {
+        return last.1;
+    }
+    let k = t.iter().position(|&(a, _)| a >= alpha).unwrap_or(t.len() - 1);
+    let ((a0, s0), (a1, s1)) = (t[k - 1], t[k]);
+    let u = (alpha / a0).ln() / (a1 / a0).ln();
+    (s0.ln() + u * (s1 / s0).ln()).exp()
+}
 /// The wavelength (nm) of the haze lobe's fit and of the one-line summaries.
 const MID_NM: f64 = 550.0;
 
@@ -188,7 +219,8 @@ pub fn answer_mirror(report: &mut FitReport, optics: Optics) -> bool {
         report.optics = Some(optics);
         return false;
     }
-    let visible = optics.haze.as_ref().filter(|h| h.albedo >= HAZE_VISIBLE);
+    let seen_from = |h: &Haze| h.params.get("alpha").map_or(f64::INFINITY, |&a| haze_visible(a));
+    let visible = optics.haze.as_ref().filter(|h| h.albedo >= seen_from(h));
     let id = if visible.is_some() { "mirror+ggx" } else { "mirror" };
     let normal = optics.specular.iter().find(|s| s.theta_deg == 0.0 && s.wavelength_nm == MID_NM).map_or(f64::NAN, |s| s.weight);
     let haze = match (&optics.haze, visible) {
@@ -197,7 +229,11 @@ pub fn answer_mirror(report: &mut FitReport, optics: Optics) -> bool {
             h.albedo * 100.0,
             h.params["alpha"]
         ),
-        (Some(h), None) => format!("; its haze ({:.3}% of the light) is below {}% and left out", h.albedo * 100.0, HAZE_VISIBLE * 100.0),
+        (Some(h), None) => format!(
+            "; its haze ({:.3}% of the light) is below the {:.3}% from which a haze of its roughness shows, and is left out",
+            h.albedo * 100.0,
+            seen_from(h) * 100.0
+        ),
         (None, None) => "; the haze could not be computed (see optics.note)".to_string(),
     };
     let sentence = format!(
@@ -255,7 +291,10 @@ pub fn optics_and_heights<S: BandSource<T = f64>>(src: &S) -> (Optics, Option<He
 /// in `note`.
 pub fn add_haze(o: &mut Optics, heights: Heightfield) {
     let _p = crate::phases::phase("optics.haze");
-    let sides = [o.coherence_m, o.patches["side_x_m"].max(o.patches["side_y_m"]), o.patches["side_x_m"].min(o.patches["side_y_m"])];
+    // An `Optics` read back from a report may lack the patch sides: the coherence patch stands for them.
+    let side = |k: &str| o.patches.get(k).copied().filter(|s| s.is_finite() && *s > 0.0).unwrap_or(o.coherence_m);
+    let (sx, sy) = (side("side_x_m"), side("side_y_m"));
+    let sides = [o.coherence_m, sx.max(sy), sx.min(sy)];
     match haze(&heights, &sides) {
         Ok(h) => o.haze = Some(h),
         Err(e) => note_no_haze(o, e.message()),

@@ -25,8 +25,10 @@ pub struct FitArgs {
 pub struct RenderArgs {
     /// The scenes a lobe must pass, comma-separated: point (the sphere under a point light), broad (under
     /// a 25-degree cap light), each optionally changed by :light=THETA/PHI, :view=THETA/PHI (degrees, the
-    /// sphere's frame, z its pole), :cap=DEG or :size=N (e.g. `point:light=30/0,broad:cap=40`); `none`
-    /// leaves the choice to the NDF error alone (no selection.answer).
+    /// sphere's frame, z its pole), :cap=DEG or :size=N (e.g. `point:light=30/0,broad:cap=40`); window (a
+    /// plate 65 degrees off its normal under a sharp-edged light, only the plate scored; :size=N its
+    /// width), where a mirror differs from a blur; `none` leaves the choice to the NDF error alone (no
+    /// selection.answer).
     #[arg(long, default_value = "point,broad")]
     pub scene: String,
     /// The largest mean FLIP beyond the scan table's own noise floor, in every scene, at which a lobe is

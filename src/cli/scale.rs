@@ -51,7 +51,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// The render rule's scenes (as `ndfit fit --scene`: point, broad, each with :light=, :view=, :cap=,
-    /// :size=): at each footprint every model is rendered against the NDF seen there, and the answer is
+    /// :size=; window): at each footprint every model is rendered against the NDF seen there, and the answer is
     /// the simplest within --render-tolerance at every footprint; `none` keeps the NDF error's rule alone.
     #[arg(long = "render-scene", default_value = "point,broad")]
     pub render_scene: String,

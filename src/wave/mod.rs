@@ -209,11 +209,14 @@ impl Diffraction {
         }
         if px > scan.nx as f64 || py > scan.ny as f64 {
             return Err(Error::invalid(format!(
-                "the coherence patch ({um:.4} um, {px} x {py} samples) is larger than the scan ({} x {} samples, {:.4} x {:.4} um)",
+                "the coherence patch ({um:.4} um, {px} x {py} samples) is larger than the scan ({} x {} samples, {:.4} x {:.4} um); \
+                 --coherence {:.4} takes the whole scan as one patch, as `ndfit fit`'s optics do",
                 scan.nx,
                 scan.ny,
                 scan.nx as f64 * scan.dx * 1e6,
-                scan.ny as f64 * scan.dy * 1e6
+                scan.ny as f64 * scan.dy * 1e6,
+                // Rounded down, so that the patch's samples stay within the scan.
+                ((scan.nx as f64 * scan.dx).min(scan.ny as f64 * scan.dy) * 1e6 * 1e4).floor() / 1e4
             )));
         }
         let tiling = Tiling::new(scan.nx, scan.ny, px as usize, py as usize);

@@ -363,3 +363,39 @@ fn a_mixed_regimes_reference_joins_wave_and_geometric_by_incidence() {
     }
     assert_eq!(seen, [true; 3], "the surface's regime must change with the angle");
 }
+
+/// The haze is kept from the share at which the broad scene shows it: a smooth conductor whose GGX haze
+/// carries a quarter less than `haze_visible(alpha)` renders within the render tolerance of the mirror
+/// alone there, one a third more beyond it (the renders are the check of the table, at its nodes and
+/// between them).
+#[test]
+fn a_haze_is_kept_from_the_share_the_broad_scene_shows() {
+    use ndfit::answer::choice::{flip_mean, DEFAULT_RENDER_TOLERANCE};
+    use ndfit::answer::haze_visible;
+    use ndfit::export::rgl::Material;
+    use ndfit::export::{MirrorAnswer, MirrorBrdf, Share};
+    use ndfit::models::{Ggx, Model};
+    use ndfit::render::Scene;
+    let broad = Scene::broad();
+    let mirror =
+        broad.render(&MirrorBrdf::new(&MirrorAnswer { answer: "mirror".into(), specular: Vec::new(), haze: None }, Material::Al)).unwrap();
+    let score = |alpha: f64, a: f64| {
+        let specular = [450.0, 550.0, 650.0]
+            .iter()
+            .flat_map(|&wavelength_nm| [0.0, 30.0, 45.0, 60.0, 75.0].map(|theta_deg| Share { theta_deg, wavelength_nm, weight: 1.0 - a }))
+            .collect();
+        let haze = Some(Model::Ggx(Ggx::new(alpha, alpha, 0.0).unwrap()));
+        let answer = MirrorAnswer { answer: "mirror+ggx".into(), specular, haze };
+        flip_mean(&broad.render(&MirrorBrdf::new(&answer, Material::Al)).unwrap(), &mirror).unwrap()
+    };
+    for alpha in [0.005, 0.015, 0.03, 0.07, 0.3] {
+        let a = haze_visible(alpha);
+        let (below, above) = (score(alpha, 0.75 * a), score(alpha, 1.33 * a));
+        eprintln!("alpha {alpha}: seen from {a:.3e}; FLIP {below:.4} at 0.75x, {above:.4} at 1.33x");
+        assert!(below < DEFAULT_RENDER_TOLERANCE && above > DEFAULT_RENDER_TOLERANCE, "alpha {alpha}: {below} / {above} around {a}");
+    }
+    // Held beyond the table's ends, and no NaN.
+    assert_eq!(haze_visible(1e-4), haze_visible(0.003));
+    assert_eq!(haze_visible(5.0), haze_visible(1.0));
+    assert!(haze_visible(f64::NAN).is_finite());
+}

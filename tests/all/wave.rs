@@ -347,6 +347,15 @@ fn the_command_refuses_bad_input_in_one_line_and_writes_nothing() {
         assert!(err.contains(what) && err.contains("g.x3p"), "{args:?}: {err}");
         assert!(!out.exists(), "{args:?} wrote {}", out.display());
     }
+    // The refusal of a patch larger than the scan names the coherence that takes the whole scan as one
+    // patch, and that coherence runs.
+    let err = String::from_utf8_lossy(&run(&["--coherence", "100"]).stderr).to_string();
+    let hint = err.split("--coherence ").nth(1).and_then(|t| t.split_whitespace().next()).expect(&err).to_string();
+    let o = run(&["--coherence", &hint]);
+    assert!(o.status.success(), "--coherence {hint}: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!(v["patches"]["used"].as_f64(), Some(1.0), "--coherence {hint}: {}", v["patches"]);
+    std::fs::remove_file(&out).unwrap();
     // A valid run writes the contract's fields.
     let o = run(&["--wavelength", "500,600", "--incidence", "0,30", "--coherence", "16"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
