@@ -35,6 +35,8 @@ pub struct Prepared<'a> {
     form: Option<FormModel>,
     /// Flat indices `i * nx + j` of the points despiking masked, sorted.
     masked: Vec<usize>,
+    /// The points the form was fitted without (the spikes of an earlier search; valid as read).
+    form_without: Vec<usize>,
 }
 
 /// Crop, subsample, fit the form and find the spikes of `hf` as [`super::apply`] does, without making
@@ -73,14 +75,32 @@ pub fn prepare<'a>(hf: Scan<'a>, pre: &Preprocess) -> Result<Prepared<'a>> {
         hf.meta.height_quantum = q;
     }
     let _p = crate::phases::phase("despike");
-    let mut p = Prepared { raw: hf, form, masked: Vec::new() };
-    let raw = p.form.as_ref().map(|form| despike::RawPlane { raw: &p.raw, form });
-    if let Some((masked, report)) = despike::find_spikes_over(&p, raw, pre.despike, p.raw.meta.height_quantum) {
+    let mut p = Prepared { raw: hf, form, masked: Vec::new(), form_without: Vec::new() };
+    let order = match pre.form {
+        FormRemoval::Plane => Some(1),
+        FormRemoval::Polynomial(k) => Some(k),
+        FormRemoval::None | FormRemoval::Cylinder => None,
+    };
+    // The form is fitted again without the spikes it was first fitted with (a few tall spikes tilt a
+    // least-squares plane across the whole scan), and the spikes sought again under it, until they no
+    // longer change.
+    for _ in 0..MAX_FORM_PASSES {
+        // Each search reads every point under the current form (a masked point would read as NaN).
+        p.masked.clear();
+        let raw = p.form.as_ref().map(|form| despike::RawPlane { raw: &p.raw, form });
+        let Some((masked, report)) = despike::find_spikes_over(&p, raw, pre.despike, p.raw.meta.height_quantum) else { break };
         p.masked = masked;
         p.raw.meta.despike = Some(report);
+        let Some(k) = order.filter(|_| p.masked != p.form_without) else { break };
+        p.form = Some(super::form::fit_polynomial(&RawMasked::new(&p.raw, &p.masked), k)?);
+        p.form_without = p.masked.clone();
     }
     Ok(p)
 }
+
+/// The most fits of the form between spike searches ([`prepare`]): the second search finds the spikes
+/// the first plane's tilt hid, and a third rarely changes them.
+const MAX_FORM_PASSES: usize = 3;
 
 impl<'a> Prepared<'a> {
     /// The metadata of the scan (with the height quantum and the despiking report).
@@ -103,8 +123,9 @@ impl<'a> Prepared<'a> {
     pub fn invalid_count(&self) -> usize {
         use rayon::prelude::*;
         if let Some(f) = &self.form {
-            // The form's fit counted the valid heights already (the same grid: crop and subsampling come first).
-            return self.raw.nx * self.raw.ny - f.valid() + self.masked.len();
+            // The form's fit counted the valid heights already (the same grid: crop and subsampling come first),
+            // less those it was fitted without.
+            return self.raw.nx * self.raw.ny - (f.valid() + self.form_without.len()) + self.masked.len();
         }
         let step = self.raw.band_rows();
         let bands: Vec<std::ops::Range<usize>> = bands_of(0..self.raw.ny, step).collect();
@@ -118,7 +139,7 @@ impl<'a> Prepared<'a> {
     /// The scan [`super::apply`] makes: the residual heights with the spikes masked. Heights used as
     /// read with nothing masked stay as they are (a mapped file stays mapped).
     pub fn into_scan(self) -> Scan<'a> {
-        let Prepared { mut raw, form, masked } = self;
+        let Prepared { mut raw, form, masked, .. } = self;
         if let Some(form) = form {
             raw.z = form.residual(&raw).into();
         }

@@ -493,3 +493,34 @@ fn resolution_test_against_exact_slopes() {
         assert_eq!(flagged, ndf.unresolved.iter().sum::<u64>(), "{c:?}");
     }
 }
+
+/// Four spikes a million times the surface's RMS height, all on one side of the scan, tilt a
+/// least-squares plane fitted with them across the whole scan. The form is fitted again without the
+/// spikes it masked: the residual heights equal those of the same scan with the spike sites invalid
+/// (the plane fitted without them) to rounding, and `auto` answers as on that scan.
+#[test]
+fn tall_spikes_do_not_tilt_the_form() {
+    use ndfit::preprocess::{apply, Preprocess};
+    let s = SynthSettings { nx: 256, ny: 256, seed: 5, ..SynthSettings::default() };
+    let (clean, _) = gaussian_surface(&s, &GaussianParams { sigma_x: 0.2, sigma_y: 0.2, ..GaussianParams::default() }).expect("synth");
+    let sq = {
+        let m = clean.z.iter().sum::<f64>() / clean.z.len() as f64;
+        (clean.z.iter().map(|z| (z - m).powi(2)).sum::<f64>() / clean.z.len() as f64).sqrt()
+    };
+    let sites = [40 * 256 + 230, 90 * 256 + 240, 150 * 256 + 220, 200 * 256 + 250];
+    let (mut spiky, mut holes) = (clean.clone(), clean.clone());
+    for &k in &sites {
+        spiky.z[k] += 1e6 * sq;
+        holes.z[k] = f64::NAN;
+    }
+    let (a, b) = (apply(spiky.clone(), &Preprocess::default()).unwrap(), apply(holes.clone(), &Preprocess::default()).unwrap());
+    let worst = a.z.iter().zip(b.z.iter()).filter(|(x, y)| !(x.is_nan() && y.is_nan())).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    assert!(sites.iter().all(|&k| a.z[k].is_nan()), "a spike site was not masked");
+    assert!(worst < 1e-9 * sq, "residuals differ by {worst} (Sq {sq})");
+    let run = |hf: Heightfield| ndfit::Pipeline::new(ndfit::Options::default()).run(hf, "spikes").unwrap().fit;
+    let (fa, fb) = (run(spiky), run(holes));
+    assert_eq!(fa.selection.as_ref().and_then(|s| s.answer.clone()), fb.selection.as_ref().and_then(|s| s.answer.clone()));
+    for (k, v) in &fb.params {
+        assert!((fa.params[k] - v).abs() <= 1e-6 * v.abs().max(1e-3), "{k}: {} against {v}", fa.params[k]);
+    }
+}
