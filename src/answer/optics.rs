@@ -213,22 +213,36 @@ fn haze_of(scattered: &[([f64; 3], f64)]) -> Haze {
 
 /// Write a mirror answer into an `auto` report whose optics are not geometric: `selection.answer`
 /// (`mirror`, or `mirror+ggx` with a visible haze), the verdict `ok` for the reason given, the NDF's own
-/// reasons kept after it. Returns false (nothing written) for the geometric regime.
+/// reasons kept after it; without a diffuse wave BRDF the haze is the slopes' lobe ([`slopes_haze`]).
+/// Returns false (nothing written) for the geometric regime.
 pub fn answer_mirror(report: &mut FitReport, optics: Optics) -> bool {
     if optics.regime == Regime::Geometric.as_str() {
         report.optics = Some(optics);
         return false;
     }
+    let mut optics = optics;
+    let normal = optics.specular.iter().find(|s| s.theta_deg == 0.0 && s.wavelength_nm == MID_NM).map_or(f64::NAN, |s| s.weight);
+    let slopes = optics.haze.is_none().then(|| slopes_haze(report, normal)).flatten();
+    if let Some(h) = &slopes {
+        let line = format!(
+            "the haze is the ladder's ggx (alpha {:.4}, the slopes' lobe) carrying the light the mirror does not",
+            h.params["alpha"]
+        );
+        optics.note = Some(optics.note.take().map_or(line.clone(), |n| format!("{n}; {line}")));
+        optics.haze = Some(h.clone());
+    }
+    let from = if slopes.is_some() {
+        "the ladder's ggx, the slopes' lobe (the diffuse wave BRDF could not be computed)"
+    } else {
+        "fitted to the diffuse wave BRDF"
+    };
     let seen_from = |h: &Haze| h.params.get("alpha").map_or(f64::INFINITY, |&a| haze_visible(a));
     let visible = optics.haze.as_ref().filter(|h| h.albedo >= seen_from(h));
     let id = if visible.is_some() { "mirror+ggx" } else { "mirror" };
-    let normal = optics.specular.iter().find(|s| s.theta_deg == 0.0 && s.wavelength_nm == MID_NM).map_or(f64::NAN, |s| s.weight);
     let haze = match (&optics.haze, visible) {
-        (_, Some(h)) => format!(
-            "; around it a haze of {:.2}% of the light, a GGX lobe of alpha {:.4} fitted to the diffuse wave BRDF",
-            h.albedo * 100.0,
-            h.params["alpha"]
-        ),
+        (_, Some(h)) => {
+            format!("; around it a haze of {:.2}% of the light, a GGX lobe of alpha {:.4}, {from}", h.albedo * 100.0, h.params["alpha"])
+        }
         (Some(h), None) => format!(
             "; its haze ({:.3}% of the light) is below the {:.3}% from which a haze of its roughness shows, and is left out",
             h.albedo * 100.0,
@@ -251,6 +265,20 @@ pub fn answer_mirror(report: &mut FitReport, optics: Optics) -> bool {
     report.warnings.retain(|w| !(w.starts_with("misfit: ") || w.starts_with("unresolved: ")));
     report.optics = Some(optics);
     true
+}
+
+/// Where the diffuse wave BRDF could not be computed (a scan under four samples across), the haze is the
+/// slopes' own lobe, the ladder's `ggx`, carrying what the mirror does not at normal incidence (`1 - s`):
+/// where the mirror carries little, the rest is scattered as geometric optics says. `None` without that
+/// candidate or share.
+fn slopes_haze(report: &FitReport, normal: f64) -> Option<Haze> {
+    let ggx = report.selection.as_ref()?.candidates.iter().find(|c| c.model == ModelId::Ggx)?;
+    let alpha = *ggx.params.get("alpha").filter(|a| a.is_finite() && **a > 0.0)?;
+    (normal >= 0.0 && normal <= 1.0).then(|| Haze {
+        model: ModelId::Ggx,
+        params: BTreeMap::from([("alpha".to_string(), alpha)]),
+        albedo: 1.0 - normal,
+    })
 }
 
 /// [`optics`] of `src` with a mirror's haze ([`haze`] on a copy of the residual heights, only where the

@@ -95,8 +95,11 @@ pub fn summary_line(report: &ndfit::fit::FitReport) -> String {
         if let Some(o) = report.optics.as_ref().filter(|_| a.contains("mirror")) {
             return Some(format!(": answer {a} ({})", mirror_text(o, a.contains('+'))));
         }
-        let worst = s.render_error.as_ref()?.get("worst")?;
-        Some(format!(": answer {a} (worst FLIP {worst:.4} against the scan's table)"))
+        // Without renders (the choice could not run) the answer is the NDF's: the warnings say why.
+        Some(match s.render_error.as_ref().and_then(|e| e.get("worst")) {
+            Some(worst) => format!(": answer {a} (worst FLIP {worst:.4} against the scan's table)"),
+            None => format!(": answer {a} (by the NDF alone)"),
+        })
     });
     let optics = report.optics.as_ref().map_or(String::new(), |o| format!(": optics {}", o.regime));
     format!("{} {}{axis}{chi}{disp}{optics}{}: verdict {}", report.model, params.join(" "), answer.unwrap_or_default(), q.verdict)

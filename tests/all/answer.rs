@@ -163,6 +163,41 @@ fn polished_scans_answer_a_mirror_never_an_error() {
 }
 
 #[test]
+fn a_scan_too_thin_for_the_wave_haze_takes_the_slopes_lobe_for_the_light_its_mirror_leaves() {
+    // Three rows of white Gaussian heights, 0.1 um RMS at 0.1 um: a mirror only toward grazing (mixed), and
+    // too thin (3 < 4 samples) for the diffuse wave BRDF. The mirror keeps exp(-(2 k sigma cos t)^2) of the
+    // light (Beckmann-Kirchhoff); the rest must go to a haze, not vanish.
+    let sq = white(256, 1e-7, 1e-7, 5);
+    let z: Vec<f64> = (0..3 * 256).map(|i| sq.z[i]).collect();
+    let hf = Heightfield::new(256, 3, 1e-7, 1e-7, z).unwrap();
+    let mean = hf.z.iter().sum::<f64>() / hf.z.len() as f64;
+    let sigma = (hf.z.iter().map(|h| (h - mean).powi(2)).sum::<f64>() / hf.z.len() as f64).sqrt();
+    let out = Pipeline::new(Options::default()).run(hf, "thin").unwrap();
+    let (fit, sel) = (&out.fit, out.fit.selection.as_ref().unwrap());
+    let o = fit.optics.as_ref().unwrap();
+    assert_eq!(o.regime, "mixed", "{}", o.why);
+    assert!(o.note.as_deref().is_some_and(|n| n.contains("could not be computed") && n.contains("ladder's ggx")), "{:?}", o.note);
+    assert_eq!(sel.answer.as_deref(), Some("mirror+ggx"));
+    let haze = o.haze.as_ref().expect("a haze");
+    let ggx = sel.candidates.iter().find(|c| c.model == ndfit::models::ModelId::Ggx).expect("the ladder's ggx");
+    assert_eq!(haze.params["alpha"].to_bits(), ggx.params["alpha"].to_bits());
+    // One patch of 256 x 3 samples under the Hann-squared window: |mean field|^2 has an incoherent floor f
+    // (the window's sum u^2 / (sum u)^2 per axis), about which it scatters by about f.
+    let axis = |p: usize| {
+        let w: Vec<f64> = (0..p).map(|j| (PI * (j as f64 + 0.5) / p as f64).sin().powi(2)).collect();
+        w.iter().map(|x| x.powi(4)).sum::<f64>() / w.iter().map(|x| x * x).sum::<f64>().powi(2)
+    };
+    let f = axis(256) * axis(3);
+    let mean_field = (-(2.0 * k_of(550.0) * sigma).powi(2)).exp();
+    let kirchhoff = 1.0 - (mean_field * (1.0 - f) + f);
+    assert!(
+        (haze.albedo - kirchhoff).abs() < 2.0 * f,
+        "haze carries {} where Beckmann-Kirchhoff leaves {kirchhoff} (floor {f})",
+        haze.albedo
+    );
+}
+
+#[test]
 fn real_scans_regimes_and_mirror_answers_needs_shared() {
     const TEST: &str = "real_scans_regimes_and_mirror_answers_needs_shared";
     let Some(dir) = shared_scans(TEST) else { return };
