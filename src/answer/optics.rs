@@ -274,7 +274,7 @@ pub fn answer_mirror(report: &mut FitReport, optics: Optics) -> bool {
 fn slopes_haze(report: &FitReport, normal: f64) -> Option<Haze> {
     let ggx = report.selection.as_ref()?.candidates.iter().find(|c| c.model == ModelId::Ggx)?;
     let alpha = *ggx.params.get("alpha").filter(|a| a.is_finite() && **a > 0.0)?;
-    (normal >= 0.0 && normal <= 1.0).then(|| Haze {
+    (0.0..=1.0).contains(&normal).then(|| Haze {
         model: ModelId::Ggx,
         params: BTreeMap::from([("alpha".to_string(), alpha)]),
         albedo: 1.0 - normal,
