@@ -232,7 +232,7 @@ pub fn answer_mirror(report: &mut FitReport, optics: Optics) -> bool {
         optics.haze = Some(h.clone());
     }
     let from = if slopes.is_some() {
-        "the ladder's ggx, the slopes' lobe (the diffuse wave BRDF could not be computed)"
+        "taken from the ladder's ggx, the slopes' lobe (the diffuse wave BRDF could not be computed)"
     } else {
         "fitted to the diffuse wave BRDF"
     };
@@ -241,7 +241,7 @@ pub fn answer_mirror(report: &mut FitReport, optics: Optics) -> bool {
     let id = if visible.is_some() { "mirror+ggx" } else { "mirror" };
     let haze = match (&optics.haze, visible) {
         (_, Some(h)) => {
-            format!("; around it a haze of {:.2}% of the light, a GGX lobe of alpha {:.4}, {from}", h.albedo * 100.0, h.params["alpha"])
+            format!("; around it a haze of {:.2}% of the light, a GGX lobe of alpha {:.4} {from}", h.albedo * 100.0, h.params["alpha"])
         }
         (Some(h), None) => format!(
             "; its haze ({:.3}% of the light) is below the {:.3}% from which a haze of its roughness shows, and is left out",

@@ -9,6 +9,7 @@
 
 pub mod check;
 pub(crate) mod preset;
+pub mod profile;
 pub mod scale;
 
 use std::path::Path;
@@ -26,6 +27,7 @@ use crate::scan::{Heightfield, InputInfo, Scan};
 pub use check::Spelling;
 pub use preset::Preset;
 pub use preset::PresetKnobs;
+pub use profile::Profile;
 
 /// Everything the pipeline needs besides the scan. `Default` is what `ndfit fit` does without flags:
 /// the mean plane removed, the automatic NDF grid, `auto` model choice, Poisson objective with LM.
@@ -150,10 +152,10 @@ impl Pipeline {
         let scan = read_prepared(path, &self.options.read, &self.options.preprocess())?;
         let ndf_opts = self.ndf_options_of(&scan);
         let read_ms = ms(t0);
-        let (ndf, input, ndf_ms) = self.ndf_timed(&scan, ndf_opts, path)?;
+        let built = self.ndf_timed(&scan, ndf_opts, path)?;
         let optics = self.optics_of(&scan);
         release(scan);
-        self.finish(ndf, input, path, read_ms, ndf_ms, optics)
+        self.finish(built, path, read_ms, optics)
     }
 
     /// [`Pipeline::run_path`] for a scan in memory (preprocessing included); `label` stands for the path
@@ -165,10 +167,10 @@ impl Pipeline {
         let scan = crate::preprocess::prepare(scan, &self.options.preprocess()).map_err(|e| e.with_path(path))?;
         let ndf_opts = self.ndf_options_of(&scan);
         let read_ms = ms(t0);
-        let (ndf, input, ndf_ms) = self.ndf_timed(&scan, ndf_opts, path)?;
+        let built = self.ndf_timed(&scan, ndf_opts, path)?;
         let optics = self.optics_of(&scan);
         drop(scan);
-        self.finish(ndf, input, path, read_ms, ndf_ms, optics)
+        self.finish(built, path, read_ms, optics)
     }
 
     /// Read `path`, preprocess and build the NDF only (`ndfit ndf`); the scan is described by the
@@ -176,7 +178,7 @@ impl Pipeline {
     pub fn ndf_path(&self, path: &Path) -> Result<(InputInfo, EmpiricalNdf)> {
         self.options.validate()?;
         let scan = read_prepared(path, &self.options.read, &self.options.preprocess())?;
-        let ndf = ndf_prepared(&scan, &self.ndf_options_of(&scan)).map_err(|e| e.with_path(path))?;
+        let ndf = ndf_or_profile(&scan, &self.ndf_options_of(&scan)).map_err(|e| e.with_path(path))?.0;
         let input = scan.input_info(path);
         release(scan);
         Ok((input, ndf))
@@ -186,19 +188,20 @@ impl Pipeline {
     pub fn ndf(&self, scan: Scan<'_>) -> Result<EmpiricalNdf> {
         self.options.validate()?;
         let scan = crate::preprocess::prepare(scan, &self.options.preprocess())?;
-        ndf_prepared(&scan, &self.ndf_options_of(&scan))
+        Ok(ndf_or_profile(&scan, &self.ndf_options_of(&scan))?.0)
     }
 
     fn ndf_options_of(&self, scan: &Prepared) -> NdfOptions {
         self.options.ndf_options_with(|| (scan.raw().nx * scan.raw().ny - scan.invalid_count()) as u64)
     }
 
-    /// The NDF of `scan`, its description and the time taken (ms).
-    fn ndf_timed(&self, scan: &Prepared<'_>, ndf_opts: NdfOptions, path: &Path) -> Result<(EmpiricalNdf, InputInfo, f64)> {
+    /// The NDF of `scan` ([`ndf_or_profile`]), its description, the time taken (ms) and its profiles if it is
+    /// one.
+    fn ndf_timed(&self, scan: &Prepared<'_>, ndf_opts: NdfOptions, path: &Path) -> Result<Built> {
         let t1 = Instant::now();
-        let ndf = ndf_prepared(scan, &ndf_opts).map_err(|e| e.with_path(path))?;
-        let ndf_ms = ms(t1);
-        Ok((ndf, scan.input_info(path), ndf_ms))
+        let (ndf, profile) = ndf_or_profile(scan, &ndf_opts).map_err(|e| e.with_path(path))?;
+        let ms = ms(t1);
+        Ok(Built { ndf, input: scan.input_info(path), ms, profile })
     }
 
     /// What light sees of the scan, for `auto` with its answer (`None` otherwise), and the time taken (ms).
@@ -212,15 +215,8 @@ impl Pipeline {
         })
     }
 
-    fn finish(
-        &self,
-        ndf: EmpiricalNdf,
-        input: InputInfo,
-        path: &Path,
-        read_ms: f64,
-        ndf_ms: f64,
-        optics: Option<Sighted>,
-    ) -> Result<Outcome> {
+    fn finish(&self, built: Built, path: &Path, read_ms: f64, optics: Option<Sighted>) -> Result<Outcome> {
+        let Built { ndf, input, ms: ndf_ms, profile } = built;
         let optics_ms = optics.as_ref().map(|o| o.ms);
         let mut report = match (&self.options.render, self.options.model) {
             (Some(render), ModelChoice::Auto) => {
@@ -235,8 +231,19 @@ impl Pipeline {
         report.timings.ndf_ms = Some(ndf_ms);
         // `fit_answered` times the haze it computed beside the ladder; the shares were timed here.
         report.timings.optics_ms = optics_ms.map(|m| m + report.timings.optics_ms.unwrap_or(0.0));
+        if let Some(p) = profile {
+            p.mark(&mut report);
+        }
         Ok(Outcome { ndf, fit: report })
     }
+}
+
+/// A scan's NDF, its description, the time taken (ms) and its profiles if it is one.
+struct Built {
+    ndf: EmpiricalNdf,
+    input: InputInfo,
+    ms: f64,
+    profile: Option<Profile>,
 }
 
 /// What light sees of a scan ([`crate::answer::optics_and_heights`]), the time it took (ms), and the
@@ -308,6 +315,15 @@ pub fn read_prepared(path: &Path, opts: &ReadOptions, pre: &Preprocess) -> Resul
 /// rounding of a cell edge may be counted in the neighbouring cell).
 pub fn ndf_prepared(scan: &Prepared, opts: &NdfOptions) -> Result<EmpiricalNdf> {
     crate::ndf::empirical_ndf_of(scan, opts, || scan.invalid_count())
+}
+
+/// Stage 2 for a [`Prepared`] scan that may be a profile ([`Profile`]): a profile's NDF is that of its
+/// profiles extruded across them, and the profiles come back with it; any other scan's is [`ndf_prepared`].
+pub fn ndf_or_profile(scan: &Prepared, opts: &NdfOptions) -> Result<(EmpiricalNdf, Option<Profile>)> {
+    match Profile::of(scan) {
+        Some(p) => Ok((p.extruded_ndf(scan, opts)?, Some(p))),
+        None => Ok((ndf_prepared(scan, opts)?, None)),
+    }
 }
 
 /// Stage 2: the empirical NDF of a preprocessed scan ([`crate::ndf::empirical_ndf`]).

@@ -352,11 +352,23 @@ pub(crate) fn centre<'r>(
     }
     // The tilt is reported, not removed: a patch tilted by more than the angular resolution reflects
     // its light away from the mirror direction, into the diffuse part.
-    let m = nalgebra::Matrix3::new(sxx, sxy, sx, sxy, syy, sy, sx, sy, s1);
-    let rhs = nalgebra::Vector3::new(sxz, syz, sz);
-    let (a, b) = match m.lu().solve(&rhs) {
-        Some(v) if v.iter().all(|x| x.is_finite()) => (v[0], v[1]),
-        _ => (0.0, 0.0),
+    let (a, b) = if sxx == 0.0 || syy == 0.0 {
+        // A patch one sample across (a profile's) has no plane across it: its tilt is its line's along it.
+        let (s2, sc, s2z) = if syy == 0.0 { (sxx, sx, sxz) } else { (syy, sy, syz) };
+        let det = s1 * s2 - sc * sc;
+        let t = if det > 0.0 { (s1 * s2z - sc * sz) / det } else { 0.0 };
+        if syy == 0.0 {
+            (t, 0.0)
+        } else {
+            (0.0, t)
+        }
+    } else {
+        let m = nalgebra::Matrix3::new(sxx, sxy, sx, sxy, syy, sy, sx, sy, s1);
+        let rhs = nalgebra::Vector3::new(sxz, syz, sz);
+        match m.lu().solve(&rhs) {
+            Some(v) if v.iter().all(|x| x.is_finite()) => (v[0], v[1]),
+            _ => (0.0, 0.0),
+        }
     };
     let mean = sz / s1;
     for (rk, &uk) in r[..px * py].iter_mut().zip(&u[..px * py]) {

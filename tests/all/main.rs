@@ -21,6 +21,7 @@ mod ndf;
 mod ndf_storage;
 mod options;
 mod plane_fold;
+mod profile;
 mod quantized;
 mod readers;
 mod render;

@@ -1,0 +1,118 @@
+//! Profiles (`pipeline::Profile`): a scan under three samples across one axis is fitted as its profiles
+//! extruded across them, held to a second route (the areal scan of that extruded surface), to the closed
+//! form `alpha = sqrt(2) R_dq` of an isotropic Beckmann surface, and to the areal fit of an isotropic
+//! surface its rows were cut from.
+
+use std::f64::consts::PI;
+use std::process::Command;
+
+use ndfit::models::{ModelChoice, ModelId};
+use ndfit::ndf::NdfOptions;
+use ndfit::preprocess::Despike;
+use ndfit::synth::{gaussian_surface, GaussianParams, SynthSettings};
+use ndfit::{Heightfield, Options, Pipeline};
+
+use crate::common::ndfit_bin;
+
+/// A smooth random profile: white noise (a fixed LCG, Box-Muller) filtered by a Gaussian of `corr` samples,
+/// `rms` metres RMS.
+fn profile(n: usize, corr: f64, rms: f64, seed: u64) -> Vec<f64> {
+    let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    let mut uniform = || {
+        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((s >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let half = (4.0 * corr) as usize;
+    let white: Vec<f64> = (0..n + 2 * half).map(|_| (-2.0 * uniform().ln()).sqrt() * (2.0 * PI * uniform()).cos()).collect();
+    let kernel: Vec<f64> = (0..=2 * half).map(|k| (-0.5 * ((k as f64 - half as f64) / corr).powi(2)).exp()).collect();
+    let out: Vec<f64> = (0..n).map(|i| kernel.iter().enumerate().map(|(k, w)| w * white[i + k]).sum()).collect();
+    let sd = (out.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
+    out.iter().map(|x| x * rms / sd).collect()
+}
+
+/// `R_dq`: the RMS of the central-difference slopes of `rows` (each a profile of spacing `dx`).
+fn rdq(rows: &[&[f64]], dx: f64) -> f64 {
+    let s: Vec<f64> = rows.iter().flat_map(|r| r.windows(3).map(|w| (w[2] - w[0]) / (2.0 * dx))).collect();
+    (s.iter().map(|x| x * x).sum::<f64>() / s.len() as f64).sqrt()
+}
+
+fn fixed(model: ModelId) -> Options {
+    let mut o = Options { model: ModelChoice::Model(model), render: None, ..Options::default() };
+    o.ndf = NdfOptions { cells_across: Some(65), ..NdfOptions::default() };
+    o.preprocess.despike = Despike::None;
+    // A profile's tail is not tested for resolution (it takes slopes across): neither is the areal scan's here.
+    o.fit.tail = ndfit::fit::TailRule::All;
+    o
+}
+
+#[test]
+fn a_profile_fits_as_the_areal_scan_of_its_extrusion() {
+    // 1 um heights with 8 um correlation at 1 um spacing, tilted and offset: the form goes as it would from the
+    // areal scan, and the NDF of one row extruded is the areal scan's, every row the same.
+    let (n, dx) = (2048, 1e-6);
+    let p: Vec<f64> = profile(n, 8.0, 1e-6, 1).iter().enumerate().map(|(j, h)| h + 0.05 * j as f64 * dx + 3.0).collect();
+    // The areal scans: 64 rows of the profile, and 64 columns of it.
+    let rows = Heightfield::new(n, 64, dx, dx, (0..64).flat_map(|_| p.iter().copied()).collect()).unwrap();
+    let cols = Heightfield::new(64, n, dx, dx, p.iter().flat_map(|&h| std::iter::repeat_n(h, 64)).collect()).unwrap();
+    let row = Heightfield::new(n, 1, dx, dx, p.clone()).unwrap();
+    let col = Heightfield::new(1, n, dx, dx, p.clone()).unwrap();
+    for (what, areal, scan) in [("row", rows, row), ("column", cols, col)] {
+        let mut opts = fixed(ModelId::GgxAniso);
+        let a = Pipeline::new(opts.clone()).run(areal, "areal").unwrap();
+        // The same bins: the areal scan's frame (a robust one from a strided sample of its normals).
+        opts.ndf.frame = Some(a.ndf.frame);
+        let b = Pipeline::new(opts).run(scan, what).unwrap();
+        let (fa, fb) = (&a.fit, &b.fit);
+        for k in ["alpha_x", "alpha_y", "theta_z"] {
+            let (x, y) = (fa.params[k], fb.params[k]);
+            assert!((x - y).abs() <= 1e-6 * x.abs().max(1e-3), "{what}: {k} {y} against the areal scan's {x}");
+        }
+        assert!(b.fit.warnings.iter().any(|w| w.starts_with("profile: a profile (1 ")), "{what}: {:?}", b.fit.warnings);
+        // Never `ok`: what the profile did not measure is said among the reasons.
+        assert_ne!(b.fit.quality.verdict, ndfit::fit::Verdict::Ok, "{what}");
+        assert!(b.fit.quality.reasons.iter().any(|r| r.starts_with("a profile (1 ")), "{what}: {:?}", b.fit.quality.reasons);
+    }
+}
+
+#[test]
+fn a_profile_says_the_isotropic_beckmann_lobe_its_slopes_give() {
+    // An isotropic Gaussian surface (RMS slope 0.1 per axis, Beckmann's alpha sqrt(2) 0.1): two of its rows,
+    // fitted as a profile, name sqrt(2) R_dq, which the areal scan's Beckmann fit agrees with.
+    let s = SynthSettings { nx: 1024, ny: 1024, seed: 11, ..SynthSettings::default() };
+    let g = GaussianParams { sigma_x: 0.1, sigma_y: 0.1, theta_z: 0.0, corr_length: 8.0 * s.dx };
+    let areal = gaussian_surface(&s, &g).unwrap().0;
+    let (n, dx) = (areal.nx, areal.dx);
+    let z: Vec<f64> = areal.z[300 * n..302 * n].to_vec();
+    let want = std::f64::consts::SQRT_2 * rdq(&[&z[..n], &z[n..]], dx);
+    let two = Heightfield::new(n, 2, dx, areal.dy, z).unwrap();
+    let out = Pipeline::new(Options::default()).run(two, "two rows").unwrap();
+    let line =
+        out.fit.warnings.iter().find(|w| w.starts_with("profile: a profile (2 rows of 1024 samples)")).expect("the profile's warning");
+    let said: f64 = line.rsplit("= ").next().unwrap().split_whitespace().next().unwrap().parse().unwrap();
+    assert!((said - want).abs() <= 5e-5, "said {said}, sqrt(2) R_dq = {want}");
+    assert!(out.fit.selection.as_ref().and_then(|s| s.answer.as_ref()).is_some(), "an answer");
+    let beckmann = Pipeline::new(fixed(ModelId::Beckmann)).run(areal, "areal").unwrap().fit.params["alpha"];
+    eprintln!("two rows: sqrt(2) R_dq {said:.4}; the areal Beckmann fit {beckmann:.4}; the truth {:.4}", std::f64::consts::SQRT_2 * 0.1);
+    assert!((said / beckmann - 1.0).abs() < 0.1, "two rows say {said}, the areal Beckmann fit {beckmann}");
+}
+
+#[test]
+fn the_cli_answers_a_profile_where_it_refused_it() {
+    let dir = std::env::temp_dir().join(format!("ndfit-profile-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = profile(1024, 6.0, 1e-6, 7);
+    let csv = dir.join("profile.csv");
+    std::fs::write(&csv, p.iter().map(|h| format!("{h:e}")).collect::<Vec<_>>().join(",") + "\n").unwrap();
+    let out = dir.join("fit.json");
+    let run = Command::new(ndfit_bin())
+        .args(["fit", csv.to_str().unwrap(), "--dx", "1e-6", "--z-scale", "1", "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(err.contains("profile: a profile (1 row of 1024 samples)") && err.contains("answer "), "{err}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!(v["optics"]["regime"], "geometric", "{}", v["optics"]["why"]);
+    assert!(v["selection"]["answer"].is_string());
+    let _ = std::fs::remove_dir_all(&dir);
+}
