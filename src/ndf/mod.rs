@@ -245,6 +245,9 @@ pub fn empirical_ndf_with(hf: &Scan, opts: &NdfOptions, precision: Precision) ->
     }
 }
 
+/// How the error of a grid without one valid stencil begins (a caller may read its points as profiles).
+pub const NO_STENCIL: &str = "no valid normal stencil";
+
 fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize) -> Result<EmpiricalNdf> {
     let outline = src.outline();
     let hf = &outline;
@@ -253,10 +256,7 @@ fn ndf_of<S: BandSource>(src: &S, opts: &NdfOptions, invalid: impl Fn() -> usize
     let stencils = rows.len() as u64 * scheme.per_row(hf) as u64;
     let no_valid = || {
         let (nx, ny) = (hf.nx(), hf.ny());
-        Error::new(
-            ErrorKind::BadData,
-            format!("no valid normal stencil in the {nx} x {ny} grid ({} of {} points invalid)", invalid(), nx * ny),
-        )
+        Error::new(ErrorKind::BadData, format!("{NO_STENCIL} in the {nx} x {ny} grid ({} of {} points invalid)", invalid(), nx * ny))
     };
     if stencils == 0 {
         return Err(Error::new(ErrorKind::BadData, format!("grid {} x {} is too small for {} normals", hf.nx(), hf.ny(), scheme.as_str())));

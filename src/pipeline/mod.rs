@@ -318,11 +318,20 @@ pub fn ndf_prepared(scan: &Prepared, opts: &NdfOptions) -> Result<EmpiricalNdf> 
 }
 
 /// Stage 2 for a [`Prepared`] scan that may be a profile ([`Profile`]): a profile's NDF is that of its
-/// profiles extruded across them, and the profiles come back with it; any other scan's is [`ndf_prepared`].
+/// profiles extruded across them, and the profiles come back with it; so is a grid's whose valid points form
+/// lines and no areal stencil; any other scan's is [`ndf_prepared`].
 pub fn ndf_or_profile(scan: &Prepared, opts: &NdfOptions) -> Result<(EmpiricalNdf, Option<Profile>)> {
-    match Profile::of(scan) {
-        Some(p) => Ok((p.extruded_ndf(scan, opts)?, Some(p))),
-        None => Ok((ndf_prepared(scan, opts)?, None)),
+    if let Some(p) = Profile::of(scan) {
+        return Ok((p.extruded_ndf(scan, opts)?, Some(p)));
+    }
+    match ndf_prepared(scan, opts) {
+        // Valid points in lines and no areal stencil: a trace stored in an areal grid.
+        Err(e) if e.kind() == crate::ErrorKind::BadData && e.message().starts_with(crate::ndf::NO_STENCIL) => match Profile::in_lines(scan)
+        {
+            Some(p) => Ok((p.extruded_ndf(scan, opts)?, Some(p))),
+            None => Err(e),
+        },
+        r => Ok((r?, None)),
     }
 }
 

@@ -8,44 +8,64 @@ use crate::fit::{FitReport, Verdict};
 use crate::ndf::{EmpiricalNdf, NdfOptions};
 use crate::scan::{BandSource, Heightfield};
 
-/// The profiles of a scan under three samples across one axis.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The profiles of a scan under three samples across one axis, or of a grid whose valid points form lines.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Profile {
     /// `'x'`: the rows are the profiles; `'y'`: the columns.
     pub along: char,
-    /// Profiles (rows or columns).
+    /// Profiles (rows or columns) with at least one slope.
     pub count: usize,
     /// Samples per profile.
     pub samples: usize,
     /// RMS of the central-difference slopes along the profiles (ISO 4287's `R_dq`).
     pub rdq: f64,
+    /// The rows or columns that are the profiles.
+    lines: Vec<usize>,
 }
 
 impl Profile {
     /// The profiles of `scan` (residual heights) when it is under three samples across one axis and at least
-    /// three along the other; `None` otherwise (an areal scan, or one too small for any slope).
+    /// three along the other; `None` otherwise (an areal scan, or one without a slope).
     pub fn of<S: BandSource<T = f64>>(scan: &S) -> Option<Profile> {
         let g = scan.shape();
-        let along = match (g.nx >= 3, g.ny >= 3) {
-            (true, false) => 'x',
-            (false, true) => 'y',
-            _ => return None,
-        };
+        match (g.nx >= 3, g.ny >= 3) {
+            (true, false) => Self::along(scan, 'x').map(|c| c.profile),
+            (false, true) => Self::along(scan, 'y').map(|c| c.profile),
+            _ => None,
+        }
+    }
+
+    /// The profiles of a grid whose valid points form lines and no areal stencil (a trace stored in an areal
+    /// format): its rows or columns, whichever hold more slopes; `None` without a slope.
+    pub fn in_lines<S: BandSource<T = f64>>(scan: &S) -> Option<Profile> {
+        let slopes = |p: &Option<Counted>| p.as_ref().map_or(0, |p| p.slopes);
+        let (x, y) = (Self::along(scan, 'x'), Self::along(scan, 'y'));
+        if slopes(&x) >= slopes(&y) { x } else { y }.map(|p| p.profile)
+    }
+
+    /// The rows (`'x'`) or columns (`'y'`) of `scan` with a valid central slope, and those slopes' count.
+    fn along<S: BandSource<T = f64>>(scan: &S, along: char) -> Option<Counted> {
+        let g = scan.shape();
         let mut buf = Vec::new();
-        let z = scan.band(0, g.ny, &mut buf).values().to_vec();
+        let band = scan.band(0, g.ny, &mut buf);
+        let z = band.values();
         let (count, samples, step) = if along == 'x' { (g.ny, g.nx, g.dx) } else { (g.nx, g.ny, g.dy) };
         let at = |p: usize, k: usize| if along == 'x' { z[p * g.nx + k] } else { z[k * g.nx + p] };
-        let (mut sum, mut n) = (0.0, 0usize);
+        let (mut sum, mut n, mut lines) = (0.0, 0usize, Vec::new());
         for p in 0..count {
-            for k in 1..samples - 1 {
+            let before = n;
+            for k in 1..samples.saturating_sub(1) {
                 let s = (at(p, k + 1) - at(p, k - 1)) / (2.0 * step);
                 if s.is_finite() && at(p, k).is_finite() {
                     sum += s * s;
                     n += 1;
                 }
             }
+            if n > before {
+                lines.push(p);
+            }
         }
-        Some(Profile { along, count, samples, rdq: if n > 0 { (sum / n as f64).sqrt() } else { f64::NAN } })
+        (n > 0).then(|| Counted { profile: Profile { along, count: lines.len(), samples, rdq: (sum / n as f64).sqrt(), lines }, slopes: n })
     }
 
     /// Beckmann's `alpha` of an isotropic surface whose profiles these are: its slope along any axis has the
@@ -82,10 +102,10 @@ impl Profile {
         let width = 4 * self.count - 1;
         let (nx, ny) = if self.along == 'x' { (g.nx, width) } else { (width, g.ny) };
         let mut out = vec![f64::NAN; nx * ny];
-        for p in 0..self.count {
+        for (q, &p) in self.lines.iter().enumerate() {
             for k in 0..self.samples {
                 let h = if self.along == 'x' { z[p * g.nx + k] } else { z[k * g.nx + p] };
-                for c in 4 * p..4 * p + 3 {
+                for c in 4 * q..4 * q + 3 {
                     let at = if self.along == 'x' { c * nx + k } else { k * nx + c };
                     out[at] = h;
                 }
@@ -113,4 +133,10 @@ impl Profile {
             q.reasons.push(sentence);
         }
     }
+}
+
+/// A profile and the count of its slopes.
+struct Counted {
+    profile: Profile,
+    slopes: usize,
 }

@@ -48,7 +48,8 @@ fn fixed(model: ModelId) -> Options {
 #[test]
 fn a_profile_fits_as_the_areal_scan_of_its_extrusion() {
     // 1 um heights with 8 um correlation at 1 um spacing, tilted and offset: the form goes as it would from the
-    // areal scan, and the NDF of one row extruded is the areal scan's, every row the same.
+    // areal scan, and the NDF of one row extruded is the areal scan's, every row the same. So for a column, and
+    // for a column that is a grid's only valid points (no areal stencil).
     let (n, dx) = (2048, 1e-6);
     let p: Vec<f64> = profile(n, 8.0, 1e-6, 1).iter().enumerate().map(|(j, h)| h + 0.05 * j as f64 * dx + 3.0).collect();
     // The areal scans: 64 rows of the profile, and 64 columns of it.
@@ -56,7 +57,11 @@ fn a_profile_fits_as_the_areal_scan_of_its_extrusion() {
     let cols = Heightfield::new(64, n, dx, dx, p.iter().flat_map(|&h| std::iter::repeat_n(h, 64)).collect()).unwrap();
     let row = Heightfield::new(n, 1, dx, dx, p.clone()).unwrap();
     let col = Heightfield::new(1, n, dx, dx, p.clone()).unwrap();
-    for (what, areal, scan) in [("row", rows, row), ("column", cols, col)] {
+    // A trace stored in an areal grid: one valid column of 32, the rest invalid.
+    let grid: Vec<f64> = p.iter().flat_map(|&h| (0..32).map(move |j| if j == 5 { h } else { f64::NAN })).collect();
+    let in_grid = Heightfield::new(32, n, dx, dx, grid).unwrap();
+    let cols2 = Heightfield::new(64, n, dx, dx, p.iter().flat_map(|&h| std::iter::repeat_n(h, 64)).collect()).unwrap();
+    for (what, areal, scan) in [("row", rows, row), ("column", cols, col), ("column in a grid", cols2, in_grid)] {
         let mut opts = fixed(ModelId::GgxAniso);
         let a = Pipeline::new(opts.clone()).run(areal, "areal").unwrap();
         // The same bins: the areal scan's frame (a robust one from a strided sample of its normals).
