@@ -101,3 +101,19 @@ def test_na_and_max_theta_must_agree(synth_dir):
         ndfit.fit(scan, model="ggx", na=0.5, max_theta=45)
     with pytest.raises(ndfit.NdfitError, match="despike"):
         ndfit.fit(scan, model="ggx", despike="mean")
+
+
+def test_a_profile_fits_as_the_cli_fits_it(ndfit_bin, tmp_path):
+    # One row of smooth heights (a profilometer's trace): ndfit.fit answers it as the CLI does, byte for byte,
+    # the profile's warning first.
+    rng = np.random.default_rng(5)
+    kernel = np.exp(-0.5 * (np.arange(-30, 31) / 6.0) ** 2)
+    z = np.convolve(rng.normal(size=1100), kernel, mode="valid")[:1024] * 1e-7
+    npy = tmp_path / "profile.npy"
+    np.save(npy, z[None, :])
+    cli = cli_fit(ndfit_bin, tmp_path, npy, "--z-scale", "1", "--dx", "1e-6")
+    fit = ndfit.fit(str(npy), z_scale=1.0, dx=1e-6)
+    assert_same_fit(cli, fit)
+    doc = json.loads(cli)
+    assert doc["warnings"][0].startswith("profile: a profile (1 row of 1024 samples)")
+    assert fit.answer is not None and fit.quality["verdict"] != "ok"
