@@ -387,8 +387,11 @@ pub fn find_spikes_over<S: BandSource<T = f64>>(
 ) -> Option<(Vec<usize>, DespikeReport)> {
     let shape = src.shape();
     let (nx, ny) = (shape.nx, shape.ny);
-    if how == Despike::None || nx < 3 || ny < 3 {
+    if how == Despike::None {
         return None;
+    }
+    if nx < 3 || ny < 3 {
+        return profile_spikes(src, quantum);
     }
     let raw = raw.filter(|r| r.form.plane_magnitude().is_some() && (r.raw.nx, r.raw.ny) == (nx, ny));
     let bands: Vec<std::ops::Range<usize>> = bands_of(0..ny, src.band_rows()).collect();
@@ -488,6 +491,60 @@ pub fn find_spikes_over<S: BandSource<T = f64>>(
         floor,
     };
     Some((spikes.into_iter().map(|s| s.0).collect(), report))
+}
+
+/// The spikes of a profile (a grid under three samples across one axis; `pipeline::Profile`): the test of
+/// [`find_spikes_over`] along each line, a point against its four nearest neighbours on it (two on each
+/// side, all valid), the same threshold and floors. The median of four is unmoved by one spike among them,
+/// not by two: a pair of adjacent spikes is kept. `None` for lines under five samples.
+fn profile_spikes<S: BandSource<T = f64>>(src: &S, quantum: Option<f64>) -> Option<(Vec<usize>, DespikeReport)> {
+    let g = src.shape();
+    let (along_x, count, samples) = if g.ny < 3 { (true, g.ny, g.nx) } else { (false, g.nx, g.ny) };
+    if samples < 5 {
+        return None;
+    }
+    let mut buf = Vec::new();
+    let band = src.band(0, g.ny, &mut buf);
+    let z = band.values();
+    let at = |p: usize, k: usize| if along_x { p * g.nx + k } else { k * g.nx + p };
+    // (flat index, departure from the neighbours' median, their spread)
+    let mut tests: Vec<(usize, f64, f64)> = Vec::new();
+    for p in 0..count {
+        for k in 2..samples - 2 {
+            let c = z[at(p, k)];
+            let mut nb = [z[at(p, k - 2)], z[at(p, k - 1)], z[at(p, k + 1)], z[at(p, k + 2)]];
+            if !c.is_finite() || !nb.iter().all(|v| v.is_finite()) {
+                continue;
+            }
+            nb.sort_by(f64::total_cmp);
+            let med = 0.5 * (nb[1] + nb[2]);
+            let mut dev = nb.map(|v| (v - med).abs());
+            dev.sort_by(f64::total_cmp);
+            tests.push((at(p, k), c - med, MAD_NORMAL * 0.5 * (dev[1] + dev[2])));
+        }
+    }
+    let mut all: Vec<f64> = tests.iter().map(|t| t.1.abs()).collect();
+    let typical = if all.is_empty() {
+        0.0
+    } else {
+        let mid = all.len() / 2;
+        MAD_NORMAL * *all.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
+    };
+    let floor = typical.max(quantum.unwrap_or_else(|| typical_nonzero(&all)));
+    let spikes: Vec<(usize, bool)> =
+        tests.iter().filter(|t| t.1.abs() > SPIKE_THRESHOLD * t.2.max(floor) && t.1.abs() > 0.0).map(|t| (t.0, t.1 > 0.0)).collect();
+    let report = DespikeReport {
+        method: "median".into(),
+        masked: spikes.len(),
+        masked_high: spikes.iter().filter(|s| s.1).count(),
+        rule: format!(
+            "a height more than {SPIKE_THRESHOLD} times the spread of its 4 neighbours along the profile (1.4826 MAD, at least {floor:.3e} m) from their median"
+        ),
+        floor,
+    };
+    let mut at: Vec<usize> = spikes.into_iter().map(|s| s.0).collect();
+    at.sort_unstable();
+    Some((at, report))
 }
 
 /// The typical nonzero departure (Gaussian-consistent median of the nonzero `|departure|`s; 0 for none):

@@ -121,3 +121,33 @@ fn the_cli_answers_a_profile_where_it_refused_it() {
     assert!(v["selection"]["answer"].is_string());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_profiles_isolated_spikes_are_masked_and_nothing_else() {
+    // 1 um heights of 6 um correlation on a steep tilt (0.3) and a 50 um bow over the trace; three isolated
+    // spikes (60, -40, 60 um) where they are put, found along a row and along a column, and nothing on the
+    // trace without them.
+    let (n, dx) = (4096, 1e-6);
+    let clean: Vec<f64> = profile(n, 6.0, 1e-6, 9)
+        .iter()
+        .enumerate()
+        .map(|(j, h)| {
+            let x = j as f64 * dx;
+            h + 0.3 * x + 50e-6 * (2.0 * x / (n as f64 * dx) - 1.0).powi(2)
+        })
+        .collect();
+    let at = [500usize, 1700, 3001];
+    let mut spiky = clean.clone();
+    for (k, &j) in at.iter().enumerate() {
+        spiky[j] += if k == 1 { -40e-6 } else { 60e-6 };
+    }
+    for (what, z, want) in [("clean", clean, Vec::new()), ("spiky", spiky, at.to_vec())] {
+        for (nx, ny) in [(n, 1), (1, n)] {
+            let hf = Heightfield::new(nx, ny, dx, dx, z.clone()).unwrap();
+            let p = ndfit::preprocess::prepare(hf, &ndfit::preprocess::Preprocess::default()).unwrap();
+            let report = p.meta().despike.clone().expect("a despike report");
+            assert_eq!(p.masked(), &want[..], "{what} {nx} x {ny}: {report:?}");
+            assert_eq!((report.masked, report.masked_high), (want.len(), want.len().saturating_sub(1)), "{what}");
+        }
+    }
+}
