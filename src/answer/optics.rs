@@ -213,7 +213,7 @@ fn haze_of(scattered: &[([f64; 3], f64)]) -> Haze {
 
 /// Write a mirror answer into an `auto` report whose optics are not geometric: `selection.answer`
 /// (`mirror`, or `mirror+ggx` with a visible haze), the verdict `ok` for the reason given, the NDF's own
-/// reasons kept after it; without a diffuse wave BRDF the haze is the slopes' lobe ([`slopes_haze`]).
+/// reasons kept after it; without a diffuse wave BRDF the haze is the slopes' lobe, the ladder's `ggx` carrying `1 - s`.
 /// Returns false (nothing written) for the geometric regime.
 pub fn answer_mirror(report: &mut FitReport, optics: Optics) -> bool {
     if optics.regime == Regime::Geometric.as_str() {

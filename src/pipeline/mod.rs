@@ -9,7 +9,7 @@
 
 pub mod check;
 pub(crate) mod preset;
-pub mod profile;
+mod profile;
 pub mod scale;
 
 use std::path::Path;
