@@ -6,7 +6,7 @@
 use crate::error::Result;
 use crate::fit::{FitReport, Verdict};
 use crate::ndf::{EmpiricalNdf, NdfOptions};
-use crate::scan::{BandSource, Heightfield};
+use crate::scan::{BandSource, GridShape, Heightfield};
 
 /// The profiles of a scan under three samples across one axis, or of a grid whose valid points form lines.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,27 +28,30 @@ impl Profile {
     /// three along the other; `None` otherwise (an areal scan, or one without a slope).
     pub fn of<S: BandSource<T = f64>>(scan: &S) -> Option<Profile> {
         let g = scan.shape();
-        match (g.nx >= 3, g.ny >= 3) {
-            (true, false) => Self::along(scan, 'x').map(|c| c.profile),
-            (false, true) => Self::along(scan, 'y').map(|c| c.profile),
-            _ => None,
-        }
+        let along = match (g.nx >= 3, g.ny >= 3) {
+            (true, false) => 'x',
+            (false, true) => 'y',
+            _ => return None,
+        };
+        let mut buf = Vec::new();
+        let band = scan.band(0, g.ny, &mut buf);
+        Self::along(band.values(), g, along).map(|c| c.profile)
     }
 
     /// The profiles of a grid whose valid points form lines and no areal stencil (a trace stored in an areal
     /// format): its rows or columns, whichever hold more slopes; `None` without a slope.
     pub fn in_lines<S: BandSource<T = f64>>(scan: &S) -> Option<Profile> {
-        let slopes = |p: &Option<Counted>| p.as_ref().map_or(0, |p| p.slopes);
-        let (x, y) = (Self::along(scan, 'x'), Self::along(scan, 'y'));
-        if slopes(&x) >= slopes(&y) { x } else { y }.map(|p| p.profile)
-    }
-
-    /// The rows (`'x'`) or columns (`'y'`) of `scan` with a valid central slope, and those slopes' count.
-    fn along<S: BandSource<T = f64>>(scan: &S, along: char) -> Option<Counted> {
         let g = scan.shape();
         let mut buf = Vec::new();
         let band = scan.band(0, g.ny, &mut buf);
-        let z = band.values();
+        let slopes = |p: &Option<Counted>| p.as_ref().map_or(0, |p| p.slopes);
+        let (x, y) = (Self::along(band.values(), g, 'x'), Self::along(band.values(), g, 'y'));
+        if slopes(&x) >= slopes(&y) { x } else { y }.map(|p| p.profile)
+    }
+
+    /// The rows (`'x'`) or columns (`'y'`) of the heights `z` (shape `g`) with a valid central slope, and those
+    /// slopes' count.
+    fn along(z: &[f64], g: GridShape, along: char) -> Option<Counted> {
         let (count, samples, step) = if along == 'x' { (g.ny, g.nx, g.dx) } else { (g.nx, g.ny, g.dy) };
         let at = |p: usize, k: usize| if along == 'x' { z[p * g.nx + k] } else { z[k * g.nx + p] };
         let (mut sum, mut n, mut lines) = (0.0, 0usize, Vec::new());

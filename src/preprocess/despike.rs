@@ -430,13 +430,7 @@ pub fn find_spikes_over<S: BandSource<T = f64>>(
             })
             .collect(),
     };
-    let typical = if all.is_empty() {
-        0.0
-    } else {
-        let mid = all.len() / 2;
-        MAD_NORMAL * *all.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
-    };
-    let floor = typical.max(quantum.unwrap_or_else(|| typical_nonzero(&all)));
+    let floor = spread_floor(&mut all, quantum);
     let limit = SPIKE_THRESHOLD * floor;
     let spikes: Vec<(usize, bool)> = bands
         .par_iter()
@@ -524,13 +518,7 @@ fn profile_spikes<S: BandSource<T = f64>>(src: &S, quantum: Option<f64>) -> Opti
         }
     }
     let mut all: Vec<f64> = tests.iter().map(|t| t.1.abs()).collect();
-    let typical = if all.is_empty() {
-        0.0
-    } else {
-        let mid = all.len() / 2;
-        MAD_NORMAL * *all.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
-    };
-    let floor = typical.max(quantum.unwrap_or_else(|| typical_nonzero(&all)));
+    let floor = spread_floor(&mut all, quantum);
     let spikes: Vec<(usize, bool)> =
         tests.iter().filter(|t| t.1.abs() > SPIKE_THRESHOLD * t.2.max(floor) && t.1.abs() > 0.0).map(|t| (t.0, t.1 > 0.0)).collect();
     let report = DespikeReport {
@@ -545,6 +533,18 @@ fn profile_spikes<S: BandSource<T = f64>>(src: &S, quantum: Option<f64>) -> Opti
     let mut at: Vec<usize> = spikes.into_iter().map(|s| s.0).collect();
     at.sort_unstable();
     Some((at, report))
+}
+
+/// The floor of the neighbours' spread: the typical departure (Gaussian-consistent median of the `|departure|`s
+/// in `all`, reordered), and the height quantum, or where none is known the typical nonzero departure.
+fn spread_floor(all: &mut [f64], quantum: Option<f64>) -> f64 {
+    let typical = if all.is_empty() {
+        0.0
+    } else {
+        let mid = all.len() / 2;
+        MAD_NORMAL * *all.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
+    };
+    typical.max(quantum.unwrap_or_else(|| typical_nonzero(all)))
 }
 
 /// The typical nonzero departure (Gaussian-consistent median of the nonzero `|departure|`s; 0 for none):

@@ -123,6 +123,28 @@ fn the_cli_answers_a_profile_where_it_refused_it() {
 }
 
 #[test]
+fn a_rough_profile_is_geometric_and_a_polished_one_a_mirror() {
+    // The same trace, 1 um and 1 nm RMS (6 um correlation, 1 um spacing): rough against the wavelength its
+    // coherence patches (one sample across) tilt like its slopes, geometric optics; polished, the mirror keeps
+    // exp(-(2 k sigma cos t)^2) of the light (Beckmann-Kirchhoff: 0.99948 at 0 deg and 450 nm) at every angle.
+    let p = profile(4096, 6.0, 1e-6, 3);
+    for (rms, regime) in [(1e-6, "geometric"), (1e-9, "wave")] {
+        let z: Vec<f64> = p.iter().map(|h| h * rms / 1e-6).collect();
+        let out = Pipeline::new(Options::default()).run(Heightfield::new(z.len(), 1, 1e-6, 1e-6, z).unwrap(), "trace").unwrap();
+        let o = out.fit.optics.as_ref().unwrap();
+        assert_eq!(o.regime, regime, "{rms}: {}", o.why);
+        if regime == "wave" {
+            assert_eq!(out.fit.selection.as_ref().unwrap().answer.as_deref(), Some("mirror"));
+            for s in &o.specular {
+                let k = 2.0 * PI / (s.wavelength_nm * 1e-9);
+                let want = (-(2.0 * k * rms * s.theta_deg.to_radians().cos()).powi(2)).exp();
+                assert!((s.weight - want).abs() < 1e-3, "{s:?} against {want}");
+            }
+        }
+    }
+}
+
+#[test]
 fn a_profiles_isolated_spikes_are_masked_and_nothing_else() {
     // 1 um heights of 6 um correlation on a steep tilt (0.3) and a 50 um bow over the trace; three isolated
     // spikes (60, -40, 60 um) where they are put, found along a row and along a column, and nothing on the
