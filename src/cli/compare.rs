@@ -82,7 +82,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let reported = report.to_model().map_err(fail)?;
     let answer = sel.answer.clone().unwrap_or_else(|| "measured".into());
     let render_error: BTreeMap<String, f64> = sel.render_error.clone().unwrap_or_default();
-    let tables = judge.table_renders().ok_or_else(|| anyhow!("{path}: no table rendered"))?;
+    let tables = judge.table_renders(&reported).map_err(fail)?;
     for ((s, out), table) in render.scenes.iter().zip(&pngs).zip(&tables) {
         let b = s.scene.render(&AnalyticBrdf { model: reported, material: render.material }).map_err(fail)?;
         let title = format!("{}: the scan's table against {} ({} scene)", args.scan.display(), reported.id(), s.name);

@@ -38,7 +38,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 pub use conductor::Material;
-pub use empirical::Regularized;
+pub use empirical::{BinNodes, Regularized};
 pub use measured::{AnalyticBrdf, Measured};
 pub use tensor::{Dtype, Field, TensorFile};
 

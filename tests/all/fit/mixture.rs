@@ -262,10 +262,11 @@ fn the_render_choice_keeps_held_out_truths() {
         );
         assert_eq!(sel.answer.as_deref(), Some(rep.model.as_str()), "{what}: {:?}", sel.candidates);
         assert!(["point", "broad", "worst"].iter().all(|k| err.contains_key(*k)), "{what}: {err:?}");
-        // Held to the tolerance beyond the table's own counting noise, scene by scene.
-        let noise = sel.render_noise.as_ref().expect("render_noise");
+        // Held to the tolerance beyond the table's own counting noise, scene by scene (measured only once a
+        // lobe fails without it).
+        let noise = sel.render_noise.clone().unwrap_or_default();
         for scene in ["point", "broad"] {
-            assert!(err[scene] - noise[scene] <= render.tolerance, "{what}: {err:?} noise {noise:?}");
+            assert!(err[scene] - noise.get(scene).copied().unwrap_or(0.0) <= render.tolerance, "{what}: {err:?} noise {noise:?}");
         }
         assert_eq!(rep.quality.verdict, ndfit::fit::Verdict::Ok, "{what}: {:?}", rep.quality.reasons);
         rep
@@ -284,8 +285,7 @@ fn the_render_choice_keeps_held_out_truths() {
         let rep = check(&empirical_ndf(&hf, &NdfOptions::default()).expect("ndf"), &format!("cap {p:?}"));
         assert!(!rep.model.is_mixture(), "cap {p:?}: {}", rep.model);
     }
-    // 1024^2: on 512^2 the surface's own realization (4096 correlation areas) bends its NDF off Beckmann
-    // by more than the halves' split measures, and a second lobe renders closer.
+    // 1024^2 (fresh 512^2 ones: `auto_answers_one_beckmann_lobe_on_gaussian_surfaces_by_the_render`).
     let settings = SynthSettings { nx: 1024, ny: 1024, seed: 4, ..SynthSettings::default() };
     let (hf, _) = ndfit::synth::gaussian_surface(&settings, &ndfit::synth::GaussianParams::default()).expect("synth");
     let rep = check(&empirical_ndf(&hf, &NdfOptions::default()).expect("ndf"), "gaussian surface");
