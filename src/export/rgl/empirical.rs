@@ -29,6 +29,8 @@ pub struct Regularized<'a> {
     /// bin is empty or the cell has none. Read four per lookup: a renderer reads `D` hundreds of
     /// thousands of times.
     ln_ratio: Vec<f64>,
+    /// The largest blended bin value: with the fit at `m`, the most a value may be.
+    cap: f64,
 }
 
 /// `ln x`, finite for every `x >= 0`: a fit that underflows in a far tail stays a number.
@@ -90,7 +92,7 @@ impl<'a> Regularized<'a> {
     /// node set for every bin `ndf` counts in).
     pub fn with_nodes(ndf: &'a EmpiricalNdf, fit: &'a Model, max_theta_deg: f64, nodes: &BinNodes) -> Regularized<'a> {
         let mut ln_ratio = vec![0.0; ndf.grid.n * ndf.grid.n];
-        let measured: Vec<(usize, f64)> = (0..ndf.bins.len().min(nodes.start.len().saturating_sub(1)))
+        let measured: Vec<(usize, f64, f64)> = (0..ndf.bins.len().min(nodes.start.len().saturating_sub(1)))
             .into_par_iter()
             .filter_map(|k| {
                 let (b, c) = (&ndf.bins[k], ndf.bin_cells[k] as usize);
@@ -101,13 +103,16 @@ impl<'a> Regularized<'a> {
                 let r = b.stderr / (REL_NOISE * b.d);
                 let w = 1.0 / (1.0 + r * r);
                 let mean = nodes.integral(k, |m| fit.d(m)) / b.proj_solid_angle;
-                Some((c, ln0(w * b.d + (1.0 - w) * mean) - ln0(mean)))
+                let v = w * b.d + (1.0 - w) * mean;
+                Some((c, ln0(v) - ln0(mean), v))
             })
             .collect();
-        for (c, v) in measured {
-            ln_ratio[c] = v;
+        let mut cap = 0.0f64;
+        for (c, r, v) in measured {
+            ln_ratio[c] = r;
+            cap = cap.max(v);
         }
-        Regularized { ndf, fit, cos_max: max_theta_deg.to_radians().cos(), ln_ratio }
+        Regularized { ndf, fit, cos_max: max_theta_deg.to_radians().cos(), ln_ratio, cap }
     }
 
     /// `D(m)` (scan frame, `z` up): the fit at `m` times the bins' ratios to it (each the blended bin over
@@ -141,7 +146,9 @@ impl<'a> Regularized<'a> {
         };
         let ln_ratio = (1.0 - ty) * ((1.0 - tx) * value(ix, iy) + tx * value(ix + 1.0, iy))
             + ty * ((1.0 - tx) * value(ix, iy + 1.0) + tx * value(ix + 1.0, iy + 1.0));
-        (ln0(fit) + ln_ratio).exp()
+        // A fit narrower than a bin has a mean there far below the bin (even 0): its ratio is no shape, and
+        // the product is held to the larger of the fit and the data's largest value (not an overflow).
+        (ln0(fit) + ln_ratio).exp().min(fit.max(self.cap))
     }
 
     /// The sentence the file's `description` carries about how the NDF was made.
