@@ -350,6 +350,25 @@ pub fn flip_mean(reference: &Image, test: &Image) -> Result<f64> {
     Ok(hdr(&to_rgb(reference)?, &to_rgb(test)?, DEFAULT_PPD, &exposures(reference)?)?.mean())
 }
 
+/// Whether any pixel of `image` has light.
+fn lit(image: &Image) -> bool {
+    image.data.iter().flatten().any(|&c| c > 0.0)
+}
+
+/// The mean HDR-FLIP of `test` against `reference` where the reference may be black: a lobe narrower
+/// than a scene shows (a mirror under a point light) leaves its own table black there. Against a black
+/// reference a black test is no difference, and a lit one is seen at its own exposures.
+fn flip_black(reference: &Image, test: &Image) -> Result<f64> {
+    match (lit(reference), lit(test)) {
+        (true, _) => prepare(reference)?.mean(&RgbImage::new(test.width, test.height, test.data.clone())?),
+        (false, false) => Ok(0.0),
+        (false, true) => {
+            let to_rgb = |i: &Image| RgbImage::new(i.width, i.height, i.data.clone());
+            HdrReference::new(&to_rgb(reference)?, DEFAULT_PPD, &exposures(test)?)?.mean(&to_rgb(test)?)
+        }
+    }
+}
+
 /// A score with no scene rendered yet.
 fn unscored(scenes: usize) -> Score {
     Score { per_scene: vec![f64::NAN; scenes], worst: 0.0, excess: f64::NEG_INFINITY }
@@ -518,7 +537,7 @@ impl<'a> RenderJudge<'a> {
             }
             let _p = crate::phases::phase("choice.lobe");
             let [t, l] = s.scene.render_set(&set)?;
-            let v = prepare(&t)?.mean(&RgbImage::new(l.width, l.height, l.data)?)?;
+            let v = flip_black(&t, &l)?;
             so_far.per_scene[k] = v;
             so_far.worst = so_far.worst.max(v);
             so_far.excess = so_far.excess.max(v - floors[k]);
@@ -536,7 +555,7 @@ impl<'a> RenderJudge<'a> {
         };
         let (ia, ib) = rayon::join(|| self.images_of(&a, lobe, max_theta_deg), || self.images_of(&b, lobe, max_theta_deg));
         let (ia, ib) = (ia?, ib?);
-        ia.par_iter().zip(&ib).map(|(x, y)| Ok(0.5 * flip_mean(x, y)?)).collect()
+        ia.par_iter().zip(&ib).map(|(x, y)| Ok(0.5 * flip_black(x, y)?)).collect()
     }
 
     /// The noise floors of the last decision's table (`None` before any decision).
@@ -1003,6 +1022,23 @@ mod tests {
             let img = Scene::point().render(&ScanBrdf { reg: &reg, area: &area, material: Material::Al }).unwrap();
             assert!(img.data.iter().flatten().all(|v| v.is_finite()), "alpha {alpha}");
         }
+    }
+
+    /// A lobe narrower than the point scene can show (its own table black there, as a mirror under a point
+    /// light) is judged, not an error that stops the choice: black against black is no difference.
+    #[test]
+    fn a_lobe_too_narrow_for_a_scene_is_judged() {
+        let (ndf, _) = cap_ndf();
+        let judge = RenderJudge::new(&ndf, RenderOptions::default());
+        let narrow = Model::from_params(ModelId::Beckmann, &[1e-4]).unwrap();
+        let d = judge.decide(&[Offered { model: narrow, supported: true, delta_data: Some(0.9) }], 40.0).unwrap();
+        let s = judge.score_of(&narrow).unwrap();
+        assert!(s.per_scene.iter().all(|v| v.is_finite()), "{s:?} {d:?}");
+        let black = Image { width: 4, height: 4, data: vec![[0.0; 3]; 16] };
+        let mut lit = black.clone();
+        lit.data[5] = [1.0; 3];
+        assert_eq!(flip_black(&black, &black).unwrap(), 0.0);
+        assert!(flip_black(&black, &lit).unwrap() > 0.0);
     }
 
     /// Stated scenes change what they name and nothing else; a bad name, key or value is refused naming it.
