@@ -1,9 +1,12 @@
 //! `ndfit bench --answer`: what `auto`'s answer costs against one fit, as whole processes in the same run.
 //!
-//! Per scan, `ndfit fit SCAN` (model `auto`: the optics, the ladder and the render choice) and `ndfit fit
-//! SCAN --model ggx-aniso` run round-robin ([`super::process::interleave`]), medians of `repeats` runs after
-//! one unrecorded run of each; the ratio of the medians is the cost of the answer (the aim:
-//! [`TARGET_RATIO`]). The scans: the shared real scans, and fresh truths written for this run with a seed
+//! Per scan, `ndfit fit SCAN` (model `auto`: the optics, the ladder and the render choice), `ndfit fit SCAN
+//! --scene none` (the same ladder decided by the NDF error alone: what `auto` costs before any render) and
+//! `ndfit fit SCAN --model ggx-aniso` run round-robin ([`super::process::interleave`]), medians of `repeats`
+//! runs after one unrecorded run of each; the ratio of the medians is the cost of the answer (the aim:
+//! [`TARGET_RATIO`]), and where the regime is geometric the ladder's ratio is the part of it no faster
+//! render can remove (elsewhere `auto` fits the one-lobe rungs beside the optics, while `--scene none`, which
+//! skips the optics, fits the whole ladder: no part of `auto`, not reported). The scans: the shared real scans, and fresh truths written for this run with a seed
 //! drawn from the clock (a rough Gaussian surface, an ellipsoid cap, a polished surface of 0.1 nm heights),
 //! so that no figure is met only on scans the bench holds. The `auto` run's own report gives its regime,
 //! its answer and the optics' share of the time (`timings.optics_ms`).
@@ -42,6 +45,11 @@ pub struct AnswerRow {
     pub auto_ms: f64,
     /// Median wall time of `ndfit fit SCAN --model ggx-aniso` (ms).
     pub ggx_aniso_ms: f64,
+    /// Median wall time of `ndfit fit SCAN --scene none` (the ladder without the render choice, ms), where
+    /// the regime is geometric (module docs).
+    pub ladder_ms: Option<f64>,
+    /// `ladder_ms / ggx_aniso_ms`.
+    pub ladder_ratio: Option<f64>,
     /// `auto_ms / ggx_aniso_ms`.
     pub ratio: f64,
     /// The auto run's `timings.optics_ms`.
@@ -115,18 +123,26 @@ fn fit_cmd(plan: &AnswerPlan, label: &str, scan: &Path, dx: Option<f64>, out: &P
 /// Measure `scan` (module docs).
 fn row(plan: &AnswerPlan, work: &Path, name: &str, scan: &Path, dx: Option<f64>) -> Result<AnswerRow> {
     let (auto_out, one_out) = (work.join("auto.json"), work.join("one.json"));
-    let cmds = [fit_cmd(plan, "auto", scan, dx, &auto_out, &[]), fit_cmd(plan, "ggx-aniso", scan, dx, &one_out, &["--model", "ggx-aniso"])];
+    let ladder_out = work.join("ladder.json");
+    let cmds = [
+        fit_cmd(plan, "auto", scan, dx, &auto_out, &[]),
+        fit_cmd(plan, "ggx-aniso", scan, dx, &one_out, &["--model", "ggx-aniso"]),
+        fit_cmd(plan, "ladder", scan, dx, &ladder_out, &["--scene", "none"]),
+    ];
     let m = interleave(&cmds, plan.repeats, 1, |_, _| {})?;
     let doc: serde_json::Value = std::fs::read(&auto_out)
         .ok()
         .and_then(|b| serde_json::from_slice(&b).ok())
         .ok_or_else(|| Error::invalid(format!("{name}: the auto run wrote no report")).with_path(&auto_out))?;
     let text = |p: &str| doc.pointer(p).and_then(|v| v.as_str()).map(str::to_string);
+    let geometric = text("/optics/regime").as_deref() == Some("geometric");
     Ok(AnswerRow {
         scan: name.to_string(),
         auto_ms: m[0].median_ms,
         ggx_aniso_ms: m[1].median_ms,
         ratio: m[0].median_ms / m[1].median_ms,
+        ladder_ms: geometric.then_some(m[2].median_ms),
+        ladder_ratio: geometric.then(|| m[2].median_ms / m[1].median_ms),
         optics_ms: doc.pointer("/timings/optics_ms").and_then(|v| v.as_f64()),
         regime: text("/optics/regime"),
         answer: text("/selection/answer"),
@@ -163,31 +179,36 @@ pub fn run(plan: &AnswerPlan, work: &Path, mut log: impl FnMut(&str)) -> Result<
 
 fn line(r: &AnswerRow) -> String {
     format!(
-        "answer: {}: auto {:.0} ms, ggx-aniso {:.0} ms, {:.1}x ({}, {})",
+        "answer: {}: auto {:.0} ms, ggx-aniso {:.0} ms, {:.1}x{} ({}, {})",
         r.scan,
         r.auto_ms,
         r.ggx_aniso_ms,
         r.ratio,
+        r.ladder_ms.zip(r.ladder_ratio).map_or(String::new(), |(ms, x)| format!("; the ladder alone {ms:.0} ms, {x:.1}x")),
         r.regime.as_deref().unwrap_or("-"),
         r.answer.as_deref().unwrap_or("-")
     )
 }
 
-/// The report as a Markdown table, with the median and worst ratio against [`TARGET_RATIO`].
+/// The report as a Markdown table, with the median and worst ratio against [`TARGET_RATIO`], and how many
+/// scans the ladder alone (no render) already takes beyond it.
 pub fn markdown(b: &AnswerBench) -> String {
     let mut s = String::from(
-        "| scan | regime | answer | auto (ms) | of which optics (ms) | ggx-aniso (ms) | ratio |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+        "| scan | regime | answer | auto (ms) | of which optics (ms) | ggx-aniso (ms) | ratio | the ladder alone (ms) | its ratio |\n\
+         | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
     for r in &b.rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {:.0} | {} | {:.0} | {:.1}x |\n",
+            "| {} | {} | {} | {:.0} | {} | {:.0} | {:.1}x | {} | {} |\n",
             r.scan,
             r.regime.as_deref().unwrap_or("-"),
             r.answer.as_deref().unwrap_or("-"),
             r.auto_ms,
             r.optics_ms.map_or("-".to_string(), |o| format!("{o:.1}")),
             r.ggx_aniso_ms,
-            r.ratio
+            r.ratio,
+            r.ladder_ms.map_or("-".to_string(), |v| format!("{v:.0}")),
+            r.ladder_ratio.map_or("-".to_string(), |v| format!("{v:.1}x"))
         ));
     }
     let mut ratios: Vec<f64> = b.rows.iter().map(|r| r.ratio).collect();
@@ -196,6 +217,14 @@ pub fn markdown(b: &AnswerBench) -> String {
         let median = ratios[ratios.len() / 2];
         let met = if *worst <= TARGET_RATIO { "met" } else { "NOT MET" };
         s.push_str(&format!("\nMedian {median:.1}x, worst {worst:.1}x against the aim of {TARGET_RATIO}x: {met}.\n"));
+        let geometric: Vec<&AnswerRow> = b.rows.iter().filter(|r| r.ladder_ratio.is_some()).collect();
+        let over: Vec<&str> = geometric.iter().filter(|r| r.ladder_ratio > Some(TARGET_RATIO)).map(|r| r.scan.as_str()).collect();
+        s.push_str(&format!(
+            "Where the regime is geometric, the ladder alone, before any render, takes more than {TARGET_RATIO}x on {} of {} scans{}.\n",
+            over.len(),
+            geometric.len(),
+            if over.is_empty() { String::new() } else { format!(" ({})", over.join(", ")) }
+        ));
     }
     for n in &b.notes {
         s.push_str(&format!("\n- {n}"));

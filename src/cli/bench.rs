@@ -86,8 +86,9 @@ pub struct Args {
     #[arg(long)]
     pub wave: bool,
     /// What `auto`'s answer costs (`ndfit::bench::answer`): `ndfit fit SCAN` (auto: optics, ladder, render
-    /// choice) against `ndfit fit SCAN --model ggx-aniso` as whole processes, interleaved, on the shared
-    /// real scans and fresh synthetic truths (seed from the clock); writes answer.json and answer.md
+    /// choice) and `ndfit fit SCAN --scene none` (the ladder alone) against `ndfit fit SCAN --model
+    /// ggx-aniso` as whole processes, interleaved, on the shared real scans and fresh synthetic truths (seed
+    /// from the clock); writes answer.json and answer.md
     #[arg(long)]
     pub answer: bool,
     /// With --answer: side of the fresh truths (default 512, quick 128).

@@ -473,15 +473,22 @@ impl EmpiricalNdf {
     /// grid. With `f = D_model` this is the bin-integrated model, the exact counterpart of the midpoint
     /// value `D_model(m_k) W_k`.
     pub fn bin_integral(&self, k: usize, order: QuadOrder, f: impl Fn(Vector3<f64>) -> f64) -> Option<f64> {
-        let c = *self.bin_cells.get(k)? as usize;
         let mut sum = 0.0;
+        self.bin_nodes(k, order, |m, dw| sum += f(m) * dw)?;
+        Some(sum)
+    }
+
+    /// The quadrature nodes of bin `k` that [`EmpiricalNdf::bin_integral`] sums over: each node's normal
+    /// and its weight `(m.n) dw` (nodes of zero weight left out); `None` without a grid.
+    pub fn bin_nodes(&self, k: usize, order: QuadOrder, mut node: impl FnMut(Vector3<f64>, f64)) -> Option<()> {
+        let c = *self.bin_cells.get(k)? as usize;
         self.grid.quadrature(c, order, &self.frame.rim_shape(), |p, wt| {
             let dw = self.frame.proj_density(p) * wt;
             if dw > 0.0 {
-                sum += f(self.frame.normal_at(p)) * dw;
+                node(self.frame.normal_at(p), dw);
             }
         });
-        Some(sum)
+        Some(())
     }
 
     /// Sum of `d * proj_solid_angle` (1 up to rounding for a computed NDF).

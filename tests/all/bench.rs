@@ -244,6 +244,11 @@ fn answer_bench_on_fresh_truths_measures_both_commands_and_reads_the_regime() {
     for r in &b.rows {
         assert!(r.auto_ms > 0.0 && r.ggx_aniso_ms > 0.0 && (r.ratio - r.auto_ms / r.ggx_aniso_ms).abs() < 1e-12, "{r:?}");
         assert!(r.optics_ms.is_some_and(|o| o >= 0.0 && o <= r.auto_ms), "{r:?}");
+        // The ladder alone is reported where auto renders (the geometric regime) and only there.
+        assert_eq!(r.ladder_ms.is_some(), r.regime.as_deref() == Some("geometric"), "{r:?}");
+        if let (Some(ms), Some(x)) = (r.ladder_ms, r.ladder_ratio) {
+            assert!(ms > 0.0 && (x - ms / r.ggx_aniso_ms).abs() < 1e-12, "{r:?}");
+        }
     }
     let polished = b.rows.iter().find(|r| r.scan.starts_with("polished")).unwrap();
     assert_eq!((polished.regime.as_deref(), polished.answer.as_deref()), (Some("wave"), Some("mirror")));
@@ -251,4 +256,7 @@ fn answer_bench_on_fresh_truths_measures_both_commands_and_reads_the_regime() {
     assert_eq!(rough.regime.as_deref(), Some("geometric"));
     let md = ndfit::bench::answer::markdown(&b);
     assert!(md.contains("| polished (0.1 nm), seed 7 | wave | mirror |") && md.contains("against the aim of 3x"), "{md}");
+    let geometric = b.rows.iter().filter(|r| r.ladder_ratio.is_some()).count();
+    let over = b.rows.iter().filter(|r| r.ladder_ratio.is_some_and(|x| x > 3.0)).count();
+    assert!(geometric >= 1 && md.contains(&format!("takes more than 3x on {over} of {geometric} scans")), "{md}");
 }

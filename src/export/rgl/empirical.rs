@@ -50,18 +50,12 @@ pub struct BinNodes {
 impl BinNodes {
     /// The nodes of every bin of `ndf` with a count.
     pub fn new(ndf: &EmpiricalNdf) -> BinNodes {
-        let rim = ndf.frame.rim_shape();
         let per_bin: Vec<Vec<(Vector3<f64>, f64)>> = (0..ndf.bins.len())
             .into_par_iter()
             .map(|k| {
                 let mut v = Vec::new();
                 if ndf.bins[k].count > 0 {
-                    ndf.grid.quadrature(ndf.bin_cells[k] as usize, QuadOrder::Standard, &rim, |p, wt| {
-                        let dw = ndf.frame.proj_density(p) * wt;
-                        if dw > 0.0 {
-                            v.push((ndf.frame.normal_at(p), dw));
-                        }
-                    });
+                    ndf.bin_nodes(k, QuadOrder::Standard, |m, dw| v.push((m, dw)));
                 }
                 v
             })
