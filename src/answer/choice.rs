@@ -359,14 +359,13 @@ fn lit(image: &Image) -> bool {
 /// than a scene shows (a mirror under a point light) leaves its own table black there. Against a black
 /// reference a black test is no difference, and a lit one is seen at its own exposures.
 fn flip_black(reference: &Image, test: &Image) -> Result<f64> {
-    match (lit(reference), lit(test)) {
-        (true, _) => prepare(reference)?.mean(&RgbImage::new(test.width, test.height, test.data.clone())?),
-        (false, false) => Ok(0.0),
-        (false, true) => {
-            let to_rgb = |i: &Image| RgbImage::new(i.width, i.height, i.data.clone());
-            HdrReference::new(&to_rgb(reference)?, DEFAULT_PPD, &exposures(test)?)?.mean(&to_rgb(test)?)
-        }
-    }
+    let exposed = match (lit(reference), lit(test)) {
+        (true, _) => reference,
+        (false, true) => test,
+        (false, false) => return Ok(0.0),
+    };
+    let to_rgb = |i: &Image| RgbImage::new(i.width, i.height, i.data.clone());
+    HdrReference::new(&to_rgb(reference)?, DEFAULT_PPD, &exposures(exposed)?)?.mean(&to_rgb(test)?)
 }
 
 /// A score with no scene rendered yet.
@@ -520,8 +519,21 @@ impl<'a> RenderJudge<'a> {
 
     /// `so_far` with the scenes it lacks rendered in order, `lobe` against the scan's table filled by
     /// itself (both in one pass, [`TableAndLobe`]), stopping once its excess over the `floors` exceeds
-    /// `stop_above` (the lobe can then be neither the answer nor the closest).
-    fn extend_own(&self, lobe: &Model, max_theta_deg: f64, floors: &[f64], mut so_far: Score, stop_above: f64) -> Result<Score> {
+    /// `stop_above` (the lobe can then be neither the answer nor the closest). Unknown `floors` count as 0
+    /// until the lobe fails the tolerance without them; then, with `measure` (the filling lobe of the noise
+    /// floors' table), they are measured ([`RenderJudge::noise_floors`]), `so_far` is held to them, and the
+    /// scenes left go on against the same table.
+    fn extend_own(
+        &self,
+        lobe: &Model,
+        max_theta_deg: f64,
+        floors: &mut Option<Vec<f64>>,
+        measure: Option<&Model>,
+        mut so_far: Score,
+        stop_above: f64,
+    ) -> Result<Score> {
+        // A score kept from before the floors were dropped (a new filling lobe) may fail already.
+        self.floors_on_failure(&mut so_far, floors, measure, max_theta_deg)?;
         if so_far.complete() || so_far.excess > stop_above {
             return Ok(so_far);
         }
@@ -535,14 +547,36 @@ impl<'a> RenderJudge<'a> {
             if !so_far.per_scene[k].is_nan() {
                 continue;
             }
-            let _p = crate::phases::phase("choice.lobe");
-            let [t, l] = s.scene.render_set(&set)?;
-            let v = flip_black(&t, &l)?;
+            let v = {
+                let _p = crate::phases::phase("choice.lobe");
+                let [t, l] = s.scene.render_set(&set)?;
+                flip_black(&t, &l)?
+            };
             so_far.per_scene[k] = v;
             so_far.worst = so_far.worst.max(v);
-            so_far.excess = so_far.excess.max(v - floors[k]);
+            so_far.excess = so_far.excess.max(v - floors.as_ref().map_or(0.0, |f| f[k]));
+            self.floors_on_failure(&mut so_far, floors, measure, max_theta_deg)?;
         }
         Ok(so_far)
+    }
+
+    /// Where the `floors` are unknown and `so_far` fails the tolerance without them, measure them with the
+    /// filling lobe `measure` (if given) and hold `so_far` to them.
+    fn floors_on_failure(
+        &self,
+        so_far: &mut Score,
+        floors: &mut Option<Vec<f64>>,
+        measure: Option<&Model>,
+        max_theta_deg: f64,
+    ) -> Result<()> {
+        if let (None, Some(filler)) = (floors.as_ref(), measure) {
+            if so_far.excess > self.options.tolerance {
+                let measured = self.noise_floors(filler, max_theta_deg)?;
+                so_far.hold_to(&measured);
+                *floors = Some(measured);
+            }
+        }
+        Ok(())
     }
 
     /// Per scene, the FLIP the table's own counting noise shows: half the FLIP between the tables of the
@@ -587,7 +621,7 @@ impl<'a> RenderJudge<'a> {
         for &model in lobes {
             let at = state.1.iter().position(|(m, _)| *m == model);
             let so_far = at.map_or(unscored(self.options.scenes.len()), |i| state.1[i].1.clone());
-            let s = self.extend_own(&model, max_theta_deg, &floors, so_far, f64::INFINITY)?;
+            let s = self.extend_own(&model, max_theta_deg, &mut Some(floors.clone()), None, so_far, f64::INFINITY)?;
             match at {
                 Some(i) => state.1[i].1 = s.clone(),
                 None => state.1.push((model, s.clone())),
@@ -694,12 +728,10 @@ impl RenderJudge<'_> {
         let (filler, max_theta_deg, known) = (reference.lobe, reference.max_theta_deg, reference.floors.clone());
         let at = state.1.iter().position(|(m, _)| m == lobe);
         let so_far = at.map_or(unscored(opts.scenes.len()), |i| state.1[i].1.clone());
-        let floors = known.clone().unwrap_or(vec![0.0; opts.scenes.len()]);
-        let mut s = self.extend_own(lobe, max_theta_deg, &floors, so_far, f64::INFINITY)?;
-        if known.is_none() && s.excess > opts.tolerance {
-            let floors = self.noise_floors(&filler, max_theta_deg)?;
+        let mut floors = known.clone();
+        let s = self.extend_own(lobe, max_theta_deg, &mut floors, Some(&filler), so_far, f64::INFINITY)?;
+        if let (None, Some(floors)) = (known, floors) {
             state.1.iter_mut().for_each(|(_, sc)| sc.hold_to(&floors));
-            s.hold_to(&floors);
             state.0.as_mut().expect("the table was rendered above").floors = Some(floors);
         }
         match at {
@@ -736,17 +768,14 @@ impl Decide for RenderJudge<'_> {
             let stop_above = opts.tolerance.max(closest.map_or(f64::INFINITY, |(_, w)| w));
             let at = state.1.iter().position(|(m, _)| *m == o.model);
             let so_far = at.map_or(unscored(opts.scenes.len()), |i| state.1[i].1.clone());
+            // The first lobe that fails without the floor makes the floor worth measuring (in its pass, with
+            // its table): every score so far is then held to it.
             let known = state.0.as_ref().expect("set above").floors.clone();
-            let floors = known.clone().unwrap_or(vec![0.0; opts.scenes.len()]);
-            let mut s = self.extend_own(&o.model, max_theta_deg, &floors, so_far, stop_above)?;
-            // The first lobe that fails without the floor makes the floor worth measuring; every score so far
-            // is then held to it, and this lobe's scenes left out are rendered if it still may pass.
-            if known.is_none() && !(s.complete() && s.excess <= opts.tolerance) {
-                let floors = self.noise_floors(&filler, max_theta_deg)?;
+            let mut floors = known.clone();
+            let s = self.extend_own(&o.model, max_theta_deg, &mut floors, Some(&filler), so_far, stop_above)?;
+            if let (None, Some(floors)) = (known, floors) {
                 state.1.iter_mut().for_each(|(_, sc)| sc.hold_to(&floors));
-                s.hold_to(&floors);
-                state.0.as_mut().expect("set above").floors = Some(floors.clone());
-                s = self.extend_own(&o.model, max_theta_deg, &floors, s, stop_above)?;
+                state.0.as_mut().expect("set above").floors = Some(floors);
             }
             match at {
                 Some(i) => state.1[i].1 = s.clone(),
@@ -998,9 +1027,8 @@ mod tests {
     }
 
     /// A lobe far narrower than a bin (its mean over the bins around its peak underflows) fills the table
-    /// with finite values no larger than the fit or the data allow, and the table renders: the ratio to
-    /// such a fit overflowed (a Beckmann lobe of alpha 1e-4 on a cap's bins gave 80 infinite values in a
-    /// grid of 16000 directions).
+    /// with finite values no larger than the fit or the data allow, and the table renders: an unguarded
+    /// ratio to such a fit overflows.
     #[test]
     fn a_fit_narrower_than_a_bin_keeps_the_table_finite() {
         use crate::models::Ndf;

@@ -118,9 +118,8 @@ fn auto_takes_a_model_within_the_tolerance_when_one_is_needs_shared() {
 }
 
 /// Gaussian random surfaces, fresh seeds, through the whole `auto` (optics, ladder and render choice):
-/// the answer is one Beckmann lobe within 2% of the truth. Each lobe is judged against the scan's table
-/// filled by itself; against one table filled by the lobe of the smallest NDF error the truth's own
-/// lobe failed (worst FLIP 0.046-0.060 over floors near 0.02) and all three answered `measured`.
+/// the answer is one Beckmann lobe within 2% of the truth (each lobe judged against the scan's table
+/// filled by itself, not by another lobe's shape: data_formats/render.md, "The choice").
 #[test]
 fn auto_answers_one_beckmann_lobe_on_gaussian_surfaces_by_the_render() {
     for (seed, sx, sy, tz) in [(21, 0.25, 0.15, 0.4), (22, 0.25, 0.15, 0.4), (23, 0.12, 0.2, -0.7)] {
